@@ -1,0 +1,129 @@
+"""Material data sets and the projection onto them (nearest neighbour under the DDCM metric)."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .errors import InputError
+
+#: Data files larger than this are rejected before reading (bytes).
+MAX_DATA_FILE_BYTES = 2 * 1024**3
+
+
+def check_positive(name: str, value: float) -> float:
+    """Return ``value`` as a float, or raise :class:`InputError` unless it is finite and > 0."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v <= 0.0:
+        raise InputError(f"{name} must be finite and positive, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True, eq=False)
+class MaterialDataset:
+    """A material data set ``Z_D = {(strain*_j, stress*_j)}`` with its metric constant ``c``.
+
+    The DDCM distance is ``d^2 = c (eps - eps*)^2 + (sigma - sigma*)^2 / c``.
+
+    Parameters
+    ----------
+    strain, stress : array_like
+        The data points, one per entry. Duplicates and any ordering are accepted.
+    c : float
+        Metric constant (a modulus, Pa).
+    """
+
+    strain: np.ndarray
+    stress: np.ndarray
+    c: float
+    _tree: cKDTree = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        c = check_positive("metric c", self.c)
+        strain = np.asarray(self.strain, dtype=float).ravel()
+        stress = np.asarray(self.stress, dtype=float).ravel()
+        if strain.size == 0:
+            raise InputError("material data set is empty")
+        if strain.shape != stress.shape:
+            raise InputError("material data set: strain and stress have different lengths")
+        if not (np.all(np.isfinite(strain)) and np.all(np.isfinite(stress))):
+            raise InputError("material data set contains NaN or infinite values")
+        object.__setattr__(self, "c", c)
+        object.__setattr__(self, "strain", strain)
+        object.__setattr__(self, "stress", stress)
+        object.__setattr__(self, "_tree", cKDTree(self._scaled(strain, stress)))
+
+    def __len__(self) -> int:
+        return self.strain.size
+
+    def _scaled(self, strain: np.ndarray, stress: np.ndarray) -> np.ndarray:
+        # Euclidean distance in these coordinates is the DDCM metric d.
+        rc = math.sqrt(self.c)
+        return np.column_stack([rc * np.asarray(strain), np.asarray(stress) / rc])
+
+    def distance2(self, strain, stress, index) -> np.ndarray:
+        """Squared DDCM distance ``d^2`` between states and the data points ``index``."""
+        de = np.asarray(strain) - self.strain[index]
+        ds = np.asarray(stress) - self.stress[index]
+        return self.c * de**2 + ds**2 / self.c
+
+    def nearest(self, strain, stress) -> np.ndarray:
+        """Indices of the data points nearest to each state ``(strain, stress)`` (vectorised KD-tree)."""
+        _, idx = self._tree.query(self._scaled(np.atleast_1d(strain), np.atleast_1d(stress)))
+        return np.asarray(idx, dtype=np.intp)
+
+    @classmethod
+    def hookean(cls, youngs_modulus: float, strain_min: float, strain_max: float,
+                n_points: int, *, c: float) -> "MaterialDataset":
+        """Equally spaced points on ``stress = E strain``, as in the paper."""
+        e = check_positive("youngs_modulus", youngs_modulus)
+        n = int(n_points)
+        if n < 1:
+            raise InputError(f"number of data points must be >= 1, got {n_points!r}")
+        if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
+            raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
+        strain = np.linspace(strain_min, strain_max, n)
+        return cls(strain, e * strain, c)
+
+    @classmethod
+    def from_csv(cls, path: str | os.PathLike, *, c: float) -> "MaterialDataset":
+        """Read a CSV file with the header ``strain,stress``.
+
+        Raises
+        ------
+        InputError
+            Missing, empty, huge, one-column or non-numeric file.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"data file not found: {path}")
+        size = path.stat().st_size
+        if size == 0:
+            raise InputError(f"data file is empty: {path}")
+        if size > MAX_DATA_FILE_BYTES:
+            raise InputError(f"data file is too large ({size} bytes > {MAX_DATA_FILE_BYTES}): {path}")
+        with path.open(newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            if header is None or not any(h.strip() for h in header):
+                raise InputError(f"data file is empty: {path}")
+            names = [h.strip().lower() for h in header]
+            if "strain" not in names or "stress" not in names:
+                raise InputError(f"data file {path} needs a header with columns 'strain' and 'stress', got {header!r}")
+            i_e, i_s = names.index("strain"), names.index("stress")
+        try:
+            table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=(i_e, i_s))
+        except ValueError as exc:
+            raise InputError(f"data file {path} is not numeric: {str(exc).splitlines()[0]}") from None
+        if table.size == 0:
+            raise InputError(f"data file has a header but no data rows: {path}")
+        return cls(table[:, 0], table[:, 1], c)

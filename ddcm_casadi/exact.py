@@ -1,0 +1,137 @@
+"""Exact solutions of linear complementarity problems by enumerating branches (active sets).
+
+For a linear model the classical problem is a linear complementarity problem and the ``Z_E``
+projection is a union of convex QPs, one per branch. Every pair is either *free* (``p = 0``),
+*in contact* (``g = 0``) or *grazing* (both). For a convex QP, the optimum on a branch solves the
+equality-constrained QP of its active constraints, so the global projection is the best
+*sign-feasible* solution of these equality-constrained problems over all ``3^nc`` partitions
+(``2^nc`` for the classical problem). Each partition's KKT matrix is factorised once (sparse LU)
+and reused for any number of right-hand sides (load steps, data points).
+
+This is independent of the formulations (no complementarity function, no IPOPT) and serves as the
+reference the tests and the DDCM driver check against. Its cost grows as ``3^nc``: it is meant for
+problems with few contact pairs (``max_pairs``).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .errors import InputError
+from .problem import ComplementarityProblem
+
+FREE, CONTACT, GRAZING = 0, 1, 2
+
+
+@dataclass
+class ExactSolution:
+    """Exact solution(s): one column per parameter vector."""
+
+    x: np.ndarray          # (n_x, k) scaled
+    p: np.ndarray          # (nc, k) scaled
+    objective: np.ndarray  # (k,) scaled (0 for the classical problem)
+    partition: np.ndarray  # (nc, k) FREE / CONTACT / GRAZING
+    found: np.ndarray      # (k,) bool: a sign-feasible branch exists
+
+
+def _const(expr, args) -> sp.csc_matrix:
+    if ca.depends_on(expr, ca.vertcat(*args)):
+        raise InputError("exact enumeration needs a linear model")
+    out = ca.Function("c", args, [expr])(*[np.zeros(a.numel()) for a in args])
+    colind, row = out.sparsity().get_ccs()
+    return sp.csc_matrix((np.asarray(out.nonzeros(), float), row, colind), shape=out.shape)
+
+
+class ExactEnumerator:
+    """Branch enumeration for a linear :class:`ComplementarityProblem` (built once, solves many)."""
+
+    def __init__(self, problem: ComplementarityProblem, *, max_pairs: int = 8, sign_tol: float = 1e-10) -> None:
+        if problem.n_pairs > max_pairs:
+            raise InputError(f"exact enumeration is limited to {max_pairs} contact pairs, got {problem.n_pairs}")
+        self.problem = problem
+        self.sign_tol = sign_tol
+        z = ca.vertcat(problem.x, problem.p)
+        P = problem.params
+        self.nx, self.nc, self.nz = problem.n_x, problem.n_pairs, z.numel()
+        R, g = problem.residual, problem.gap
+        self.Rz = _const(ca.jacobian(R, z), [z, P])
+        self.Gz = _const(ca.jacobian(g, z), [z, P])
+        zero = ca.DM.zeros(self.nz)
+        # Affine parts as functions of the parameters: R(0; P), g(0; P), grad f(0; P), f(0; P).
+        obj = problem.objective if problem.objective is not None else ca.SX(0)
+        grad = ca.gradient(obj, z)
+        self.H = _const(ca.jacobian(grad, z), [z, P]) if problem.kind == "mpcc" else None
+        subs = lambda e: ca.substitute(e, z, zero)  # noqa: E731
+        self._affine = ca.Function("affine", [P], [subs(R), subs(g), subs(grad), subs(obj)])
+        self._factors: dict[tuple, object] = {}
+        self.partitions = list(itertools.product(
+            (FREE, CONTACT) if problem.kind == "mcp" else (FREE, CONTACT, GRAZING), repeat=self.nc))
+
+    def _affine_parts(self, params: np.ndarray):
+        k = params.shape[1]
+        fmap = self._affine.map(k)
+        R0, g0, q, f0 = fmap(params)
+        return (np.asarray(R0).reshape(-1, k), np.asarray(g0).reshape(-1, k),
+                np.asarray(q).reshape(-1, k), np.asarray(f0).reshape(k))
+
+    def _constraints(self, part) -> sp.csc_matrix:
+        part = np.asarray(part)
+        on_gap = np.flatnonzero(part != FREE)
+        on_p = np.flatnonzero(part != CONTACT)
+        Ep = sp.csr_matrix((np.ones(on_p.size), (np.arange(on_p.size), self.nx + on_p)), shape=(on_p.size, self.nz))
+        return sp.vstack([self.Rz, self.Gz[on_gap], Ep]).tocsc(), on_gap, on_p
+
+    def _factor(self, part):
+        if part not in self._factors:
+            C, on_gap, on_p = self._constraints(part)
+            if self.problem.kind == "mcp":
+                M = C
+            else:
+                M = sp.bmat([[self.H, C.T], [C, None]]).tocsc()
+            try:
+                lu = spla.splu(M) if M.shape[0] == M.shape[1] else None
+            except RuntimeError:
+                lu = None  # singular: this partition has no unique solution
+            self._factors[part] = (lu, on_gap, on_p)
+        return self._factors[part]
+
+    def solve(self, params: np.ndarray) -> ExactSolution:
+        """Exact solution for each column of ``params`` (a vector gives one column)."""
+        params = np.asarray(params, float)
+        if params.ndim == 1:
+            params = params[:, None]
+        k = params.shape[1]
+        R0, g0, q, f0 = self._affine_parts(params)
+        best_obj = np.full(k, np.inf)
+        best_z = np.full((self.nz, k), np.nan)
+        best_part = np.zeros((self.nc, k), dtype=int)
+        for part in self.partitions:
+            lu, on_gap, on_p = self._factor(part)
+            if lu is None:
+                continue
+            d = np.vstack([-R0, -g0[on_gap], np.zeros((on_p.size, k))])
+            rhs = d if self.problem.kind == "mcp" else np.vstack([-q, d])
+            sol = lu.solve(rhs)
+            zsol = sol[:self.nz]
+            gap = self.Gz @ zsol + g0
+            p = zsol[self.nx:]
+            ok = np.all(gap >= -self.sign_tol, axis=0) & np.all(p >= -self.sign_tol, axis=0) & np.all(np.isfinite(zsol), axis=0)
+            if self.problem.kind == "mcp":
+                obj = np.zeros(k)
+            else:
+                obj = 0.5 * np.einsum("ik,ik->k", zsol, self.H @ zsol) + np.einsum("ik,ik->k", q, zsol) + f0
+            if self.problem.kind == "mcp":
+                better = ok & ~np.isfinite(best_obj)
+            else:
+                better = ok & (obj < best_obj)
+            best_obj[better] = obj[better]
+            best_z[:, better] = zsol[:, better]
+            best_part[:, better] = np.asarray(part)[:, None]
+        return ExactSolution(x=best_z[:self.nx], p=best_z[self.nx:], objective=best_obj,
+                             partition=best_part, found=np.isfinite(best_obj))

@@ -1,0 +1,285 @@
+"""The model description: what the problem is, independent of how contact is enforced.
+
+A :class:`ContactModel` describes a small-strain, linear structure with ``n`` displacement unknowns
+``u``, ``m`` material points (elements) and ``nc`` unilateral contact pairs:
+
+- kinematics ``strain = B u`` with a sparse ``B`` (m x n) and material-point volumes ``w`` (m);
+- equilibrium ``B^T W stress - G^T (a * p) = f`` with loads ``f``;
+- contact pairs ``gap = G u + gap0 >= 0``, ``p >= 0``, ``gap * p = 0`` with contact areas ``a``;
+- a material law ``stress = E strain`` (classical) and/or a material data set (DDCM).
+
+The load path is a sequence of steps, each with its own ``gap0`` (obstacle positions) and ``f``.
+Both the classical and the data-driven problem are built from this one object
+(see :mod:`ddcm_casadi.problem`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .data import MaterialDataset, check_positive
+from .errors import InputError
+
+
+def _finite(name: str, a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"{name} must be finite (no NaN or infinity)")
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class ContactModel:
+    """A linear small-strain structure with unilateral contact pairs and a load path.
+
+    Parameters
+    ----------
+    strain_operator : sparse (m, n)
+        ``B``: material-point strains from free displacements.
+    volumes : (m,)
+        Material-point volumes ``w`` (area x length for bars).
+    gap_operator : sparse (nc, n)
+        ``G``: gap ``g = G u + gap0``.
+    contact_area : (nc,)
+        Area on which each contact pressure acts.
+    gap_offsets : (n_steps, nc)
+        ``gap0`` per load step.
+    loads : (n_steps, n)
+        External loads ``f`` per load step.
+    load_parameter : (n_steps,)
+        A scalar per step used to label results and plots (obstacle position for the bar).
+    youngs_modulus : (m,) or None
+        Classical material law; needed for the classical variant.
+    dataset : MaterialDataset or None
+        Material data; needed for the data-driven variant.
+    length_scale : float
+        Characteristic length, used only to nondimensionalise.
+    name : str
+        Human-readable name.
+    """
+
+    strain_operator: sp.csr_matrix
+    volumes: np.ndarray
+    gap_operator: sp.csr_matrix
+    contact_area: np.ndarray
+    gap_offsets: np.ndarray
+    loads: np.ndarray
+    load_parameter: np.ndarray
+    youngs_modulus: np.ndarray | None = None
+    dataset: MaterialDataset | None = None
+    length_scale: float = 1.0
+    name: str = "model"
+    load_parameter_name: str = "step"
+    _scales: dict = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        B = sp.csr_matrix(self.strain_operator, dtype=float)
+        G = sp.csr_matrix(self.gap_operator, dtype=float)
+        m, n = B.shape
+        nc = G.shape[0]
+        if G.shape[1] != n:
+            raise InputError(f"gap operator has {G.shape[1]} columns, expected {n}")
+        w = _finite("volumes", np.broadcast_to(self.volumes, (m,)).copy())
+        a = _finite("contact_area", np.broadcast_to(self.contact_area, (nc,)).copy())
+        if np.any(w <= 0):
+            raise InputError("volumes (area x length) must be positive")
+        if np.any(a <= 0):
+            raise InputError("contact_area must be positive")
+        g0 = _finite("obstacle positions", np.atleast_2d(self.gap_offsets))
+        n_steps = g0.shape[0]
+        if n_steps == 0:
+            raise InputError("the load path has no steps")
+        if g0.shape[1] != nc:
+            raise InputError(f"gap offsets have {g0.shape[1]} columns, expected {nc}")
+        f = _finite("loads", np.broadcast_to(self.loads, (n_steps, n)).copy())
+        lp = _finite("load parameter", np.broadcast_to(self.load_parameter, (n_steps,)).copy())
+        E = None
+        if self.youngs_modulus is not None:
+            E = _finite("youngs_modulus", np.broadcast_to(self.youngs_modulus, (m,)).copy())
+            if np.any(E <= 0):
+                raise InputError("youngs_modulus must be positive")
+        if E is None and self.dataset is None:
+            raise InputError("a model needs a Young's modulus, a material data set, or both")
+        L = check_positive("length", self.length_scale)
+        for k, v in dict(strain_operator=B, gap_operator=G, volumes=w, contact_area=a,
+                         gap_offsets=g0, loads=f, load_parameter=lp, youngs_modulus=E,
+                         length_scale=L).items():
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "_scales", self._reference_scales())
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_dofs(self) -> int:
+        return self.strain_operator.shape[1]
+
+    @property
+    def n_points(self) -> int:
+        """Number of material points (elements)."""
+        return self.strain_operator.shape[0]
+
+    @property
+    def n_contacts(self) -> int:
+        return self.gap_operator.shape[0]
+
+    @property
+    def n_steps(self) -> int:
+        return self.gap_offsets.shape[0]
+
+    # ----------------------------------------------------------------- scales
+    @property
+    def metric(self) -> np.ndarray:
+        """DDCM metric constant ``c`` per material point."""
+        if self.dataset is None:
+            raise InputError("this model has no material data set")
+        return np.full(self.n_points, self.dataset.c)
+
+    def _reference_scales(self) -> dict:
+        # Characteristic strain from the load path: obstacle travel over the length.
+        modulus = float(np.max(self.youngs_modulus)) if self.youngs_modulus is not None else self.dataset.c
+        metric = self.dataset.c if self.dataset is not None else modulus
+        travel = float(np.max(np.abs(self.gap_offsets))) if self.gap_offsets.size else 0.0
+        K_diag = (self.strain_operator.T @ sp.diags(self.volumes * modulus) @ self.strain_operator).diagonal()
+        k_ref = float(np.max(K_diag)) if K_diag.size else modulus
+        load = float(np.max(np.abs(self.loads))) if self.loads.size else 0.0
+        strain = max(travel / self.length_scale, load / k_ref / self.length_scale, 1e-12)
+        if travel == 0.0 and load == 0.0:
+            strain = 1e-3
+        area = float(np.mean(self.contact_area)) if self.n_contacts else float(np.mean(self.volumes)) / self.length_scale
+        return dict(
+            length=self.length_scale,
+            displacement=strain * self.length_scale,
+            stress=metric * strain,
+            force=metric * strain * area,
+            energy=float(np.sum(self.volumes)) * metric * strain**2,
+            modulus=modulus,
+            metric=metric,
+        )
+
+    @property
+    def scales(self) -> dict:
+        """Reference magnitudes used to nondimensionalise (displacement, stress, force, energy)."""
+        return dict(self._scales)
+
+    @property
+    def contact_stiffness(self) -> float:
+        """Reference contact stiffness ``E / length`` (Pa/m), the unit of the penalty parameters."""
+        return self._scales["modulus"] / self._scales["length"]
+
+    # -------------------------------------------------------------- mechanics
+    def stiffness(self) -> sp.csr_matrix:
+        """Classical stiffness ``K = B^T W E B`` (sparse)."""
+        if self.youngs_modulus is None:
+            raise InputError("this model has no Young's modulus (classical variant unavailable)")
+        B = self.strain_operator
+        return (B.T @ sp.diags(self.volumes * self.youngs_modulus) @ B).tocsr()
+
+    def gap(self, u: np.ndarray, step: int) -> np.ndarray:
+        return self.gap_operator @ np.asarray(u) + self.gap_offsets[step]
+
+    def strain(self, u: np.ndarray) -> np.ndarray:
+        return self.strain_operator @ np.asarray(u)
+
+    def closed_form(self, step: int):
+        """Exact classical solution ``(u, p)`` if the model knows one in closed form, else ``None``."""
+        return None
+
+
+@dataclass(frozen=True, eq=False)
+class BarModel(ContactModel):
+    """The paper's 1-D bar against a moving rigid obstacle (one unknown: the tip displacement).
+
+    Gap ``g = w - u`` with ``w = h - length``; strain ``u / length``; ``stress = -p``.
+    """
+
+    area: float = 1.0
+    length: float = 1.0
+
+    def closed_form(self, step: int):
+        """``u = min(0, w)``, ``p = -E u / length`` (paper, eq. (1))."""
+        if self.youngs_modulus is None:
+            return None
+        w = self.gap_offsets[step, 0]
+        u = min(0.0, w)
+        return np.array([u]), np.array([-self.youngs_modulus[0] * u / self.length])
+
+    def penalty_closed_form(self, step: int, gamma: float):
+        """Penalty solution: ``u = gamma w / (E/length + gamma)`` for ``w < 0``, else ``u = 0``."""
+        w = self.gap_offsets[step, 0]
+        k = self.youngs_modulus[0] / self.length
+        u = gamma * w / (k + gamma) if w < 0 else 0.0
+        return np.array([u]), np.array([gamma * max(0.0, u - w)])
+
+    def projection_closed_form(self, step: int, strain_star: float, stress_star: float):
+        """Exact projection of one data point onto ``Z_E``: the nearer of the free and contact branches.
+
+        Returns ``(u, p, d2)`` with ``d2`` the squared DDCM distance per unit volume.
+        """
+        c = self.dataset.c
+        w = self.gap_offsets[step, 0]
+        L = self.length
+        u_free, p_free = min(L * strain_star, w), 0.0
+        u_cont, p_cont = w, max(0.0, -stress_star)
+
+        def d2(u, p):
+            return c * (u / L - strain_star) ** 2 + (-p - stress_star) ** 2 / c
+
+        cand = [(d2(u_free, p_free), u_free, p_free), (d2(u_cont, p_cont), u_cont, p_cont)]
+        best = min(cand)
+        return best[1], best[2], best[0]
+
+
+def bar_model(*, length: float, area: float = 1.0, youngs_modulus: float | None = None,
+              positions, dataset: MaterialDataset | None = None, name: str = "bar") -> BarModel:
+    """A 1-D bar of ``length`` fixed at ``x = 0`` and pushed by a rigid obstacle at ``x = h``.
+
+    Parameters
+    ----------
+    length, area : float
+        Undeformed length ``l0`` (m) and cross-section ``A`` (m^2).
+    youngs_modulus : float, optional
+        ``E`` (Pa) for the classical variant.
+    positions : array_like
+        Obstacle positions ``h`` (m), one per load step.
+    dataset : MaterialDataset, optional
+        Material data for the DDCM variant.
+    """
+    L = check_positive("length", length)
+    A = check_positive("area", area)
+    E = None if youngs_modulus is None else check_positive("youngs_modulus", youngs_modulus)
+    h = np.asarray(positions, dtype=float).ravel()
+    if h.size == 0:
+        raise InputError("obstacle positions are empty")
+    if not np.all(np.isfinite(h)):
+        raise InputError("obstacle positions must be finite (no NaN or infinity)")
+    return BarModel(
+        strain_operator=sp.csr_matrix(np.array([[1.0 / L]])),
+        volumes=np.array([A * L]),
+        gap_operator=sp.csr_matrix(np.array([[-1.0]])),
+        contact_area=np.array([A]),
+        gap_offsets=(h - L)[:, None],
+        loads=np.zeros((h.size, 1)),
+        load_parameter=h,
+        youngs_modulus=None if E is None else np.array([E]),
+        dataset=dataset,
+        length_scale=L,
+        name=name,
+        load_parameter_name="h",
+        area=A,
+        length=L,
+    )
+
+
+def paper_bar(*, n_data: int = 500, c: float = 300e9) -> BarModel:
+    """The numerical example of the paper (Section 4).
+
+    ``E = 200 GPa``, ``l0 = 1 m``, ``h`` from 1.01 m down to 0.99 m in 21 steps, 500 Hookean data
+    points with strain in ``[-0.05, 0.01]`` and ``c = 300 GPa``.
+    """
+    E = 200e9
+    data = MaterialDataset.hookean(E, -0.05, 0.01, n_data, c=c)
+    return bar_model(length=1.0, area=1.0, youngs_modulus=E, positions=np.linspace(1.01, 0.99, 21),
+                     dataset=data, name="paper bar")

@@ -1,0 +1,13 @@
+"""Contact formulations: named, registered transformations of complementarity pairs.
+
+>>> import formulations
+>>> formulations.available()
+['penalty', 'augmented_lagrangian', 'fischer_burmeister', 'mpcc']
+>>> fb = formulations.get("fischer_burmeister", tol=1e-10)
+"""
+
+from .base import BuiltFormulation, Formulation, LocalSolution
+from .registry import available, get, register
+from . import penalty, augmented_lagrangian, fischer_burmeister, mpcc  # noqa: F401,E402  (registration)
+
+__all__ = ["BuiltFormulation", "Formulation", "LocalSolution", "available", "get", "register"]

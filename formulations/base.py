@@ -1,0 +1,140 @@
+"""What every contact formulation shares: options, the local-solution record and the metrics.
+
+A formulation is a named transformation of the complementarity pairs ``g(x) >= 0, p >= 0, g p = 0``
+of a :class:`~ddcm_casadi.problem.ComplementarityProblem` into something a solver can take. It is
+built once per problem (:meth:`Formulation.build`) and then solved many times with new parameters.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import casadi as ca
+import numpy as np
+
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.problem import ComplementarityProblem
+
+
+@dataclass
+class LocalSolution:
+    """One solve of a classical step or of one ``Z_E`` projection (scaled unknowns).
+
+    Attributes
+    ----------
+    x, p : ndarray
+        Scaled smooth unknowns and contact pressures.
+    converged : bool
+    iterations : int
+        Inner iterations (Newton steps, or IPOPT iterations).
+    outer_iterations : int
+        Uzawa updates or homotopy steps (0 where there are none).
+    residual : float
+        ``||F||_inf`` (mcp) or ``||h||_inf`` (mpcc), scaled.
+    complementarity : float
+        ``max |min(g, p)|``, scaled.
+    penetration : float
+        ``max(0, -g)``, scaled.
+    objective : float
+        Scaled objective (mpcc) or ``nan``.
+    state : dict
+        Formulation-specific warm-start data (multipliers).
+    """
+
+    x: np.ndarray
+    p: np.ndarray
+    converged: bool
+    iterations: int
+    outer_iterations: int
+    residual: float
+    complementarity: float
+    penetration: float
+    objective: float
+    state: dict = field(default_factory=dict)
+    message: str = ""
+
+
+class Metrics:
+    """Residual, gap and objective evaluation for one problem (one CasADi Function)."""
+
+    def __init__(self, problem: ComplementarityProblem) -> None:
+        obj = problem.objective if problem.objective is not None else ca.SX(0)
+        self._f = ca.Function("metrics", [problem.x, problem.p, problem.params],
+                              [problem.residual, problem.gap, obj])
+
+    def __call__(self, x, p, params) -> tuple[float, float, float, float]:
+        res, gap, obj = self._f(x, p, params)
+        res = np.asarray(res, dtype=float).ravel()
+        gap = np.asarray(gap, dtype=float).ravel()
+        p = np.asarray(p, dtype=float).ravel()
+        residual = float(np.max(np.abs(res))) if res.size else 0.0
+        comp = float(np.max(np.abs(np.minimum(gap, p)))) if gap.size else 0.0
+        pen = float(np.max(np.maximum(0.0, -gap))) if gap.size else 0.0
+        return residual, comp, pen, float(obj)
+
+
+class Formulation(ABC):
+    """Base class of the registered contact formulations.
+
+    Subclasses define a frozen ``Options`` dataclass (documented fields, with their formula) and
+    implement :meth:`build`. Options are keyword-only and copied; unknown names are rejected.
+    """
+
+    name: ClassVar[str]
+    title: ClassVar[str]
+    exact: ClassVar[bool] = True
+
+    @dataclass(frozen=True)
+    class Options:
+        pass
+
+    def __init__(self, **options: Any) -> None:
+        known = {f.name for f in dataclasses.fields(self.Options)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise InputError(f"unknown option {unknown[0]!r} for formulation {self.name!r}; "
+                             f"known: {', '.join(sorted(known)) or 'none'}")
+        self.options = self.Options(**options)
+        self._validate()
+
+    def _validate(self) -> None:
+        for f in dataclasses.fields(self.options):
+            v = getattr(self.options, f.name)
+            if isinstance(v, float) and not np.isfinite(v):
+                raise InputError(f"option {f.name!r} of {self.name!r} must be finite, got {v!r}")
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.options})"
+
+    @abstractmethod
+    def build(self, problem: ComplementarityProblem) -> "BuiltFormulation":
+        """Build the CasADi objects for ``problem`` once; returns an object with ``solve``."""
+
+
+class BuiltFormulation(ABC):
+    """A formulation built for one problem: ``solve`` may be called many times."""
+
+    def __init__(self, problem: ComplementarityProblem) -> None:
+        self.problem = problem
+        self.metrics = Metrics(problem)
+
+    @abstractmethod
+    def solve(self, params: np.ndarray, x0: np.ndarray, p0: np.ndarray,
+              state: dict | None = None) -> LocalSolution:
+        """Solve for ``params`` from the start ``(x0, p0)`` (scaled), with optional warm-start state."""
+
+    def _finish(self, x, p, params, *, converged, iterations, outer=0, state=None, message="") -> LocalSolution:
+        residual, comp, pen, obj = self.metrics(x, p, params)
+        return LocalSolution(x=np.asarray(x, float), p=np.asarray(p, float), converged=bool(converged),
+                             iterations=int(iterations), outer_iterations=int(outer), residual=residual,
+                             complementarity=comp, penetration=pen,
+                             objective=obj if self.problem.kind == "mpcc" else float("nan"),
+                             state=dict(state or {}), message=message)
+
+
+def positive_option(formulation: str, name: str, value: float | None) -> None:
+    if value is not None and (not np.isfinite(value) or value <= 0):
+        raise InputError(f"option {name!r} of {formulation!r} must be finite and positive, got {value!r}")
