@@ -97,14 +97,25 @@ class Formulation(ABC):
         if unknown:
             raise InputError(f"unknown option {unknown[0]!r} for formulation {self.name!r}; "
                              f"known: {', '.join(sorted(known)) or 'none'}")
-        self.options = self.Options(**options)
+        self.options = self.Options(**{k: (tuple(v) if isinstance(v, list) else
+                                             dict(v) if isinstance(v, dict) else v) for k, v in options.items()})
         self._validate()
 
     def _validate(self) -> None:
         for f in dataclasses.fields(self.options):
             v = getattr(self.options, f.name)
-            if isinstance(v, float) and not np.isfinite(v):
-                raise InputError(f"option {f.name!r} of {self.name!r} must be finite, got {v!r}")
+            kind = str(f.type)
+            if v is None and "None" in kind:
+                continue
+            if kind.startswith("float") or kind.startswith("int"):
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                    raise InputError(f"option {f.name!r} of {self.name!r} must be a finite number, got {v!r}")
+                if kind.startswith("int") and (v != int(v) or v < 1):
+                    raise InputError(f"option {f.name!r} of {self.name!r} must be a positive integer, got {v!r}")
+            elif kind.startswith("tuple") and not isinstance(v, (tuple, list)):
+                raise InputError(f"option {f.name!r} of {self.name!r} must be a list, got {v!r}")
+            elif kind.startswith("dict") and not isinstance(v, dict):
+                raise InputError(f"option {f.name!r} of {self.name!r} must be a table, got {v!r}")
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.options})"

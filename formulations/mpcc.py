@@ -176,6 +176,8 @@ class _BuiltMPCC(BuiltFormulation):
         both = (np.abs(gap) <= tol) & (np.abs(p) <= tol)
         iters = 0
         for fix_gap, fix_p in ((on_gap | both, ~on_gap | both), (on_gap, ~on_gap)):
+            if ne + fix_gap.sum() + fix_p.sum() > nx + nc:
+                continue  # over-determined (e.g. a biactive pair of the classical problem)
             inf = np.full(nc, np.inf)
             lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
             ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])

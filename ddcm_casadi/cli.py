@@ -1,0 +1,151 @@
+"""``ddcm-compare``: every contact formulation, classical and DDCM, on one load path.
+
+With no arguments it runs the paper's example (Section 4) and prints a summary table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+from pathlib import Path
+
+import casadi
+import numpy as np
+import scipy
+
+import formulations as registry
+
+from . import __version__
+from .config import Case, default_case, load_case
+from .errors import DDCMError, InputError
+from .harness import VARIANTS, Comparison, compare
+from .io import prepare_output_dir, write_csv_atomic, write_json_atomic
+
+EXIT_INPUT = 2
+EXIT_NOT_CONVERGED = 3
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="ddcm-compare", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--config", metavar="CASE.toml", help="case file (default: the paper's example)")
+    p.add_argument("--formulations", metavar="A,B", help=f"subset of: {','.join(registry.available())}")
+    p.add_argument("--variants", metavar="A,B", default=",".join(VARIANTS), help="classical,ddcm (default: both)")
+    p.add_argument("--out", metavar="DIR", help="write results.csv, results.json and the figures here")
+    p.add_argument("--no-plots", action="store_true", help="do not draw the figures")
+    p.add_argument("--strict", action="store_true",
+                   help=f"exit with status {EXIT_NOT_CONVERGED} if any step did not converge")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    return p
+
+
+def _split(arg: str | None) -> list[str] | None:
+    if arg is None:
+        return None
+    names = [a.strip() for a in arg.split(",") if a.strip()]
+    if not names:
+        raise InputError("empty list")
+    return names
+
+
+class _Progress:
+    """One line per run, updated in place on a terminal."""
+
+    def __init__(self, n_steps: int, enabled: bool) -> None:
+        self.n, self.enabled = n_steps, enabled
+        self.tty = sys.stderr.isatty()
+        self.t0 = time.perf_counter()
+
+    def __call__(self, variant: str, name: str, step) -> None:
+        if not self.enabled:
+            return
+        done = step.step + 1
+        flag = "" if step.converged else "  NOT CONVERGED"
+        msg = f"{variant:>9}/{name:<21} step {done:>3}/{self.n}  {time.perf_counter() - self.t0:7.2f} s{flag}"
+        if self.tty:
+            end = "\n" if done == self.n or flag else ""
+            print("\r" + msg, end=end, file=sys.stderr, flush=True)
+        elif done == self.n or flag:
+            print(msg, file=sys.stderr, flush=True)
+
+
+def parameters(case: Case, cmp: Comparison) -> dict:
+    m = case.model
+    forms = {}
+    for f in cmp.formulations:
+        opts = {k: v for k, v in vars(f.options).items()}
+        if hasattr(f, "gamma") and cmp.problems.classical is not None:
+            opts["gamma_used"] = f.gamma(cmp.problems.classical)
+        forms[f.name] = opts
+    data = None
+    if m.dataset is not None:
+        data = dict(points=len(m.dataset), c=m.dataset.c, strain_min=float(m.dataset.strain.min()),
+                    strain_max=float(m.dataset.strain.max()))
+    return dict(case=case.source, length=m.length, area=m.area,
+                youngs_modulus=None if m.youngs_modulus is None else float(m.youngs_modulus[0]),
+                positions=m.load_parameter.tolist(), data=data, ddcm_max_outer=case.ddcm_max_outer,
+                formulations=forms)
+
+
+def versions() -> dict:
+    return {"ddcm_casadi": __version__, "casadi": casadi.__version__, "numpy": np.__version__,
+            "scipy": scipy.__version__, "python": platform.python_version()}
+
+
+def run(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    case = load_case(args.config) if args.config else default_case()
+    names = _split(args.formulations) or registry.available()
+    for n in names:
+        if n not in registry.available():
+            raise InputError(f"unknown formulation {n!r}; available: {', '.join(registry.available())}")
+    variants = _split(args.variants)
+    for v in variants:
+        if v not in VARIANTS:
+            raise InputError(f"unknown variant {v!r}; choose from {', '.join(VARIANTS)}")
+    out = prepare_output_dir(args.out) if args.out else None
+    selection = {n: case.formulation_options.get(n, {}) for n in names}
+
+    progress = _Progress(case.model.n_steps, not args.quiet)
+    if not args.quiet:
+        print(f"ddcm-compare: {case.source}: {case.model.n_steps} steps, "
+              f"{len(names)} formulations x {len(variants)} variants", file=sys.stderr)
+    cmp = compare(case.model, selection, variants=variants, ddcm_max_outer=case.ddcm_max_outer, progress=progress)
+    print(cmp.table())
+
+    if out is not None:
+        summary = cmp.summary()
+        write_csv_atomic(out / "results.csv", cmp.rows())
+        write_json_atomic(out / "results.json", dict(parameters=parameters(case, cmp), versions=versions(),
+                                                     summary=summary))
+        written = ["results.csv", "results.json"]
+        if not args.no_plots:
+            from .plots import save_fig2  # matplotlib only when a plot is drawn
+
+            written += [p.name for p in save_fig2(cmp, out)]
+        print(f"wrote {', '.join(written)} to {out}", file=sys.stderr)
+    failed = [r for r in cmp.results.values() if not r.converged]
+    if failed:
+        print("WARNING: non-converged steps in " + ", ".join(f"{r.variant}/{r.formulation}" for r in failed),
+              file=sys.stderr)
+        if args.strict:
+            return EXIT_NOT_CONVERGED
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        return run(argv)
+    except DDCMError as exc:
+        print(f"ddcm-compare: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print("ddcm-compare: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

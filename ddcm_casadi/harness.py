@@ -1,0 +1,218 @@
+"""Comparison harness: every formulation x {classical, DDCM} on the same load path.
+
+>>> from ddcm_casadi import paper_bar, compare
+>>> result = compare(paper_bar(), formulations=["fischer_burmeister", "mpcc"])  # doctest: +SKIP
+>>> print(result.table())                                                       # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
+
+import formulations as registry
+from formulations.base import Formulation
+
+from .errors import InputError
+from .model import BarModel, ContactModel
+from .problem import ProblemPair, build_problems
+from .solvers.path import DDCMSolver, PathResult, StepResult, solve_classical
+
+VARIANTS = ("classical", "ddcm")
+_COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "converged", "iterations", "outer_iterations",
+            "residual", "complementarity", "penetration", "strain_star", "stress_star", "data_index",
+            "distance", "global_optimum", "global_distance", "projection_global", "projection_error",
+            "error_u", "error_p", "seconds", "message")
+
+
+def resolve_formulations(formulations: Iterable[str | Formulation] | Mapping[str, Mapping] | None,
+                         ) -> list[Formulation]:
+    """Formulation instances from names, instances, or ``{name: options}`` (options are copied)."""
+    if formulations is None:
+        return [registry.get(name) for name in registry.available()]
+    if isinstance(formulations, Mapping):
+        return [registry.get(name, **dict(opts or {})) for name, opts in formulations.items()]
+    out = []
+    for f in formulations:
+        out.append(f if isinstance(f, Formulation) else registry.get(str(f)))
+    if not out:
+        raise InputError("no formulation selected")
+    return out
+
+
+def _relative_error(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Per-step error relative to the largest reference magnitude along the path."""
+    scale = float(np.max(np.abs(reference))) or 1.0
+    return np.max(np.abs(values - reference), axis=1) / scale
+
+
+@dataclass
+class Comparison:
+    """Results of :func:`compare`: one :class:`PathResult` per variant and formulation."""
+
+    model: ContactModel
+    problems: ProblemPair
+    formulations: list[Formulation]
+    results: dict[tuple[str, str], PathResult] = field(default_factory=dict)
+
+    def __getitem__(self, key: tuple[str, str]) -> PathResult:
+        return self.results[key]
+
+    # ------------------------------------------------------------- references
+    def reference(self, variant: str, formulation: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """Closed-form ``(u, p)`` per step to compare with, where the model has one.
+
+        The exact classical solution for every formulation, except the classical penalty, which is
+        compared with the penalty's own closed form.
+        """
+        m = self.model
+        if m.closed_form(0) is None:
+            return None
+        if variant == "classical" and formulation == "penalty" and isinstance(m, BarModel):
+            gamma = self._formulation(formulation).gamma(self.problems.classical)
+            pairs = [m.penalty_closed_form(k, gamma) for k in range(m.n_steps)]
+        else:
+            pairs = [m.closed_form(k) for k in range(m.n_steps)]
+        return np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
+
+    def _formulation(self, name: str) -> Formulation:
+        return next(f for f in self.formulations if f.name == name)
+
+    def errors(self, variant: str, formulation: str) -> dict[str, np.ndarray] | None:
+        """Per-step relative errors of ``u`` and ``p`` against :meth:`reference`."""
+        ref = self.reference(variant, formulation)
+        if ref is None or (variant, formulation) not in self.results:
+            return None
+        r = self.results[(variant, formulation)]
+        return dict(u=_relative_error(r.array("u"), ref[0]), p=_relative_error(r.array("p"), ref[1]))
+
+    # ---------------------------------------------------------------- outputs
+    def arrays(self, variant: str, formulation: str) -> dict[str, np.ndarray]:
+        """Per-step arrays (``load_parameter``, ``u``, ``p``, ``converged``, ...) of one run."""
+        r = self.results[(variant, formulation)]
+        names = [f.name for f in dataclasses.fields(StepResult)]
+        return {n: r.array(n) for n in names if getattr(r.steps[0], n) is not None}
+
+    def rows(self) -> list[dict]:
+        """One flat record per variant x formulation x step (the rows of ``results.csv``)."""
+        rows = []
+        for (variant, name), r in self.results.items():
+            err = self.errors(variant, name)
+            for s in r.steps:
+                row = dict(variant=variant, formulation=name, step=s.step,
+                           **{self.model.load_parameter_name: s.load_parameter},
+                           u=float(s.u[-1]), p=float(s.p[0]) if s.p.size else float("nan"),
+                           converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
+                           residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,
+                           seconds=s.seconds)
+                if variant == "ddcm":
+                    row.update(strain_star=float(s.strain_star[0]), stress_star=float(s.stress_star[0]),
+                               data_index=int(s.data_index[0]), distance=s.distance,
+                               projection_error=s.projection_error, projection_global=s.projection_global,
+                               global_optimum=s.global_optimum, global_distance=s.global_distance)
+                if err is not None:
+                    row.update(error_u=float(err["u"][s.step]), error_p=float(err["p"][s.step]))
+                row["message"] = s.message
+                rows.append(row)
+        columns = [c for c in _COLUMNS if any(c in r for r in rows)]
+        columns += [c for r in rows for c in r if c not in columns]
+        return [{c: r.get(c) for c in dict.fromkeys(columns)} for r in rows]
+
+    def summary(self) -> list[dict]:
+        """Per variant x formulation: accuracy, iterations, convergence and wall time."""
+        out = []
+        for (variant, name), r in self.results.items():
+            err = self.errors(variant, name)
+            its = r.array("iterations")
+            rec = dict(variant=variant, formulation=name,
+                       steps=len(r.steps), converged_steps=int(sum(s.converged for s in r.steps)),
+                       non_converged_steps=[s.step for s in r.steps if not s.converged],
+                       iterations_mean=float(np.mean(its)), iterations_max=int(np.max(its)),
+                       outer_iterations_mean=float(np.mean(r.array("outer_iterations"))),
+                       build_seconds=r.build_seconds, solve_seconds=r.solve_seconds,
+                       max_error_u=float(np.max(err["u"])) if err else None,
+                       max_error_p=float(np.max(err["p"])) if err else None,
+                       max_complementarity=float(np.max(r.array("complementarity"))),
+                       max_residual=float(np.max(r.array("residual"))))
+            if variant == "ddcm":
+                glob = [s.global_optimum for s in r.steps]
+                rec.update(local_minimum_steps=[s.step for s in r.steps if s.global_optimum is False],
+                           local_minimum_h=[s.load_parameter for s in r.steps if s.global_optimum is False],
+                           global_checked=all(g is not None for g in glob),
+                           projection_not_global_steps=[s.step for s in r.steps if s.projection_global is False],
+                           max_projection_error=float(np.nanmax(r.array("projection_error"))))
+            out.append(rec)
+        return out
+
+    def table(self) -> str:
+        """A readable summary table."""
+        head = f"{'variant':<10} {'formulation':<22} {'conv':>7} {'err u':>9} {'err p':>9} {'its/step':>8} {'outer':>6} {'build s':>8} {'solve s':>8}  notes"
+        lines = [head, "-" * len(head)]
+        for rec in self.summary():
+            e = lambda v: "    -    " if v is None else f"{v:9.1e}"  # noqa: E731
+            notes = []
+            if rec["non_converged_steps"]:
+                notes.append(f"NOT CONVERGED at steps {rec['non_converged_steps']}")
+            if rec.get("local_minimum_h"):
+                notes.append("local minimum at h=" + ", ".join(f"{h:.4g}" for h in rec["local_minimum_h"]))
+            if rec.get("projection_not_global_steps"):
+                notes.append(f"projection not global at {rec['projection_not_global_steps']}")
+            lines.append(f"{rec['variant']:<10} {rec['formulation']:<22} {rec['converged_steps']:>3}/{rec['steps']:<3} "
+                         f"{e(rec['max_error_u'])} {e(rec['max_error_p'])} {rec['iterations_mean']:8.1f} "
+                         f"{rec['outer_iterations_mean']:6.1f} {rec['build_seconds']:8.3f} {rec['solve_seconds']:8.3f}  "
+                         + "; ".join(notes))
+        return "\n".join(lines)
+
+
+def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] = VARIANTS,
+            raise_on_failure: bool = False, ddcm_max_outer: int = 100,
+            progress: Callable[[str, str, StepResult], None] | None = None) -> Comparison:
+    """Run every formulation in every variant along the model's load path.
+
+    Parameters
+    ----------
+    model : ContactModel
+        The model description (classical needs a modulus, DDCM a data set).
+    formulations : list of names or instances, or {name: options}, optional
+        Default: every registered formulation with default options.
+    variants : iterable of {"classical", "ddcm"}
+    raise_on_failure : bool
+        Raise :class:`~ddcm_casadi.errors.ConvergenceError` at the first non-converged step.
+    progress : callable, optional
+        Called as ``progress(variant, formulation, step_result)`` after every step.
+
+    Returns
+    -------
+    Comparison
+    """
+    variants = list(variants)
+    bad = [v for v in variants if v not in VARIANTS]
+    if bad:
+        raise InputError(f"unknown variant {bad[0]!r}; choose from {', '.join(VARIANTS)}")
+    forms = resolve_formulations(formulations)
+    problems = build_problems(model)
+    out = Comparison(model=model, problems=problems, formulations=forms)
+    for variant in variants:
+        if variant == "classical" and problems.classical is None:
+            continue
+        if variant == "ddcm" and problems.projection is None:
+            continue
+        for form in forms:
+            cb = (lambda s, v=variant, n=form.name: progress(v, n, s)) if progress else None
+            t0 = time.perf_counter()
+            if variant == "classical":
+                built = form.build(problems.classical)
+                build = time.perf_counter() - t0
+                r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb)
+            else:
+                built = form.build(problems.projection)
+                solver = DDCMSolver(problems, built, max_outer=ddcm_max_outer)
+                build = time.perf_counter() - t0
+                r = solver.solve(formulation_name=form.name, raise_on_failure=raise_on_failure, progress=cb)
+            r.build_seconds = build
+            out.results[(variant, form.name)] = r
+    return out
