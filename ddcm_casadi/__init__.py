@@ -13,7 +13,6 @@ from importlib.metadata import PackageNotFoundError, version as _version
 
 from .data import MaterialDataset
 from .errors import ConvergenceError, DDCMError, InputError
-from .harness import Comparison, compare
 from .model import BarModel, ContactModel, bar_model, paper_bar
 from .problem import build_problems
 
@@ -21,6 +20,17 @@ try:
     __version__ = _version("ddcm-casadi")
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0+unknown"
+
+
+def __getattr__(name: str):
+    # The harness imports the `formulations` package, which imports this package's core modules:
+    # load it on first use to keep the import graph acyclic.
+    if name in ("compare", "Comparison"):
+        from . import harness
+
+        return getattr(harness, name)
+    raise AttributeError(f"module 'ddcm_casadi' has no attribute {name!r}")
+
 
 __all__ = ["BarModel", "Comparison", "ConvergenceError", "ContactModel", "DDCMError", "InputError",
            "MaterialDataset", "bar_model", "build_problems", "compare", "paper_bar", "__version__"]

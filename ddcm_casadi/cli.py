@@ -10,6 +10,7 @@ import platform
 import sys
 import time
 from pathlib import Path
+from typing import NoReturn
 
 import casadi
 import numpy as np
@@ -27,12 +28,32 @@ EXIT_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, like every other input error."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``prog: error: message`` on one line and exit with :data:`EXIT_INPUT`.
+
+        Parameters
+        ----------
+        message : str
+            The problem found by :mod:`argparse`.
+        """
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {_one_line(message)} (see --help)\n")
+
+
+def _one_line(message: object) -> str:
+    """``message`` as a single line (an error message must not spill over several lines)."""
+    return " ".join(line.strip() for line in str(message).splitlines() if line.strip())
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="ddcm-compare", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = _Parser(prog="ddcm-compare", description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", metavar="CASE.toml", help="case file (default: the paper's example)")
     p.add_argument("--formulations", metavar="A,B", help=f"subset of: {','.join(registry.available())}")
-    p.add_argument("--variants", metavar="A,B", default=",".join(VARIANTS), help="classical,ddcm (default: both)")
+    p.add_argument("--variants", metavar="A,B",
+                   help=f"subset of: {','.join(VARIANTS)} (default: those the case supports)")
     p.add_argument("--out", metavar="DIR", help="write results.csv, results.json and the figures here")
     p.add_argument("--no-plots", action="store_true", help="do not draw the figures")
     p.add_argument("--strict", action="store_true",
@@ -42,12 +63,35 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _split(arg: str | None) -> list[str] | None:
+def _split(arg: str | None, option: str) -> list[str] | None:
+    """The comma-separated names in ``arg`` (``None`` if the option was not given)."""
     if arg is None:
         return None
     names = [a.strip() for a in arg.split(",") if a.strip()]
     if not names:
-        raise InputError("empty list")
+        raise InputError(f"{option} needs a comma-separated list of names, got {arg!r}")
+    return names
+
+
+def _variants(arg: str | None, case: Case) -> list[str]:
+    """The variants to run: the ones named in ``--variants``, or by default every one the case supports.
+
+    Raises
+    ------
+    InputError
+        Unknown variant, or one the case cannot run (``ddcm`` without a data set).
+    """
+    model = case.model
+    needs = {"classical": None if model.youngs_modulus is not None else "a Young's modulus",
+             "ddcm": None if model.dataset is not None else "a material data set ([data] in the case file)"}
+    names = _split(arg, "--variants")
+    if names is None:
+        return [v for v in VARIANTS if needs[v] is None]
+    for v in names:
+        if v not in VARIANTS:
+            raise InputError(f"unknown variant {v!r}; choose from {', '.join(VARIANTS)}")
+        if needs[v] is not None:
+            raise InputError(f"variant {v!r} needs {needs[v]}; {case.source} has none")
     return names
 
 
@@ -98,14 +142,11 @@ def versions() -> dict:
 def run(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     case = load_case(args.config) if args.config else default_case()
-    names = _split(args.formulations) or registry.available()
+    names = _split(args.formulations, "--formulations") or registry.available()
     for n in names:
         if n not in registry.available():
             raise InputError(f"unknown formulation {n!r}; available: {', '.join(registry.available())}")
-    variants = _split(args.variants)
-    for v in variants:
-        if v not in VARIANTS:
-            raise InputError(f"unknown variant {v!r}; choose from {', '.join(VARIANTS)}")
+    variants = _variants(args.variants, case)
     out = prepare_output_dir(args.out) if args.out else None
     selection = {n: case.formulation_options.get(n, {}) for n in names}
 
@@ -117,10 +158,11 @@ def run(argv: list[str] | None = None) -> int:
     print(cmp.table())
 
     if out is not None:
-        summary = cmp.summary()
-        write_csv_atomic(out / "results.csv", cmp.rows())
-        write_json_atomic(out / "results.json", dict(parameters=parameters(case, cmp), versions=versions(),
-                                                     summary=summary))
+        # Build both records before writing either, so a failure here leaves no partial results.
+        rows = cmp.rows()
+        doc = dict(parameters=parameters(case, cmp), versions=versions(), summary=cmp.summary())
+        write_csv_atomic(out / "results.csv", rows)
+        write_json_atomic(out / "results.json", doc)
         written = ["results.csv", "results.json"]
         if not args.no_plots:
             from .plots import save_fig2  # matplotlib only when a plot is drawn
@@ -140,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return run(argv)
     except DDCMError as exc:
-        print(f"ddcm-compare: error: {exc}", file=sys.stderr)
+        print(f"ddcm-compare: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
         print("ddcm-compare: interrupted", file=sys.stderr)

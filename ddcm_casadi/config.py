@@ -94,6 +94,8 @@ def load_case(path: str | Path) -> Case:
         raise InputError(f"malformed TOML in {path}: {exc}") from None
     except UnicodeDecodeError:
         raise InputError(f"config file is not UTF-8 text: {path}") from None
+    except OSError as exc:
+        raise InputError(f"cannot read config file {path}: {exc.strerror or exc}") from None
     return case_from_dict(doc, base_dir=path.parent, source=str(path))
 
 

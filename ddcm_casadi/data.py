@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,6 +16,8 @@ from .errors import InputError
 
 #: Data files larger than this are rejected before reading (bytes).
 MAX_DATA_FILE_BYTES = 2 * 1024**3
+#: Generated (Hookean) data sets larger than this are rejected before allocating them.
+MAX_DATA_POINTS = 10**8
 
 
 def check_positive(name: str, value: float) -> float:
@@ -87,8 +90,8 @@ class MaterialDataset:
         """Equally spaced points on ``stress = E strain``, as in the paper."""
         e = check_positive("youngs_modulus", youngs_modulus)
         n = int(n_points)
-        if n < 1:
-            raise InputError(f"number of data points must be >= 1, got {n_points!r}")
+        if n < 1 or n > MAX_DATA_POINTS:
+            raise InputError(f"number of data points must be between 1 and {MAX_DATA_POINTS}, got {n_points!r}")
         if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
             raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
         strain = np.linspace(strain_min, strain_max, n)
@@ -98,10 +101,12 @@ class MaterialDataset:
     def from_csv(cls, path: str | os.PathLike, *, c: float) -> "MaterialDataset":
         """Read a CSV file with the header ``strain,stress``.
 
+        A UTF-8 byte-order mark (as written by spreadsheets) is accepted.
+
         Raises
         ------
         InputError
-            Missing, empty, huge, one-column or non-numeric file.
+            Missing, unreadable, empty, huge, non-UTF-8, one-column or non-numeric file.
         """
         path = Path(path)
         if not path.is_file():
@@ -111,19 +116,29 @@ class MaterialDataset:
             raise InputError(f"data file is empty: {path}")
         if size > MAX_DATA_FILE_BYTES:
             raise InputError(f"data file is too large ({size} bytes > {MAX_DATA_FILE_BYTES}): {path}")
-        with path.open(newline="", encoding="utf-8") as fh:
-            reader = csv.reader(fh)
-            header = next(reader, None)
-            if header is None or not any(h.strip() for h in header):
-                raise InputError(f"data file is empty: {path}")
-            names = [h.strip().lower() for h in header]
-            if "strain" not in names or "stress" not in names:
-                raise InputError(f"data file {path} needs a header with columns 'strain' and 'stress', got {header!r}")
-            i_e, i_s = names.index("strain"), names.index("stress")
         try:
-            table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=(i_e, i_s))
+            with path.open(newline="", encoding="utf-8-sig") as fh:
+                header = next(csv.reader(fh), None)
+        except UnicodeDecodeError:
+            raise InputError(f"data file is not UTF-8 text: {path}") from None
+        except (OSError, csv.Error) as exc:
+            raise InputError(f"cannot read data file {path}: {getattr(exc, 'strerror', None) or exc}") from None
+        if header is None or not any(h.strip() for h in header):
+            raise InputError(f"data file is empty: {path}")
+        names = [h.strip().lower() for h in header]
+        if "strain" not in names or "stress" not in names:
+            raise InputError(f"data file {path} needs a header with columns 'strain' and 'stress', got {header!r}")
+        i_e, i_s = names.index("strain"), names.index("stress")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+                table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=(i_e, i_s), encoding="utf-8")
+        except UnicodeDecodeError:
+            raise InputError(f"data file is not UTF-8 text: {path}") from None
         except ValueError as exc:
             raise InputError(f"data file {path} is not numeric: {str(exc).splitlines()[0]}") from None
+        except OSError as exc:
+            raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
         if table.size == 0:
             raise InputError(f"data file has a header but no data rows: {path}")
         return cls(table[:, 0], table[:, 1], c)

@@ -138,6 +138,10 @@ class Comparison:
                        max_error_p=float(np.max(err["p"])) if err else None,
                        max_complementarity=float(np.max(r.array("complementarity"))),
                        max_residual=float(np.max(r.array("residual"))))
+            if variant == "classical" and name == "penalty" and err is not None:
+                ref = [self.model.closed_form(k) for k in range(self.model.n_steps)]
+                rec["max_error_u_vs_exact"] = float(np.max(_relative_error(r.array("u"), np.array([a for a, _ in ref]))))
+                rec["max_error_p_vs_exact"] = float(np.max(_relative_error(r.array("p"), np.array([b for _, b in ref]))))
             if variant == "ddcm":
                 glob = [s.global_optimum for s in r.steps]
                 rec.update(local_minimum_steps=[s.step for s in r.steps if s.global_optimum is False],
@@ -155,6 +159,9 @@ class Comparison:
         for rec in self.summary():
             e = lambda v: "    -    " if v is None else f"{v:9.1e}"  # noqa: E731
             notes = []
+            if "max_error_u_vs_exact" in rec:
+                notes.append(f"errors vs own closed form; vs exact: u {rec['max_error_u_vs_exact']:.1e}, "
+                             f"p {rec['max_error_p_vs_exact']:.1e}")
             if rec["non_converged_steps"]:
                 notes.append(f"NOT CONVERGED at steps {rec['non_converged_steps']}")
             if rec.get("local_minimum_h"):
@@ -165,6 +172,9 @@ class Comparison:
                          f"{e(rec['max_error_u'])} {e(rec['max_error_p'])} {rec['iterations_mean']:8.1f} "
                          f"{rec['outer_iterations_mean']:6.1f} {rec['build_seconds']:8.3f} {rec['solve_seconds']:8.3f}  "
                          + "; ".join(notes))
+        if self.model.closed_form(0) is not None:
+            lines.append("errors: max over steps of |value - closed form| / max |closed form|; "
+                         "DDCM against the classical closed form")
         return "\n".join(lines)
 
 

@@ -16,6 +16,8 @@ from .errors import InputError
 def prepare_output_dir(path: str | os.PathLike) -> Path:
     """Create ``path`` if needed and check that it is a writable folder (fails before any work)."""
     out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"output path is not a directory: {out}")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
