@@ -7,18 +7,24 @@ Classical (mcp)
     For the paper's bar the multiplier error contracts by ``(E/l0) / (E/l0 + gamma)`` per update.
 
 DDCM (mpcc)
-    The complementarity is written as the nonsmooth equation (exact for any ``gamma > 0``)
+    The complementarity is written as one nonsmooth equation per pair, exact for any
+    ``gamma > 0``,
 
-    .. math::  c(x, p) = p - \langle p - \gamma\, g(x) \rangle_+ = 0,
+    .. math::  c(x, p) = \Phi(\gamma\, g(x),\, p) = 0, \qquad
+               \Phi(a, b) = \sqrt{a^2 + b^2} - a - b ,
 
-    and handled by the method of multipliers: inner, semismooth Newton on the stationarity of
-    ``f + mu^T c + (rho/2) ||c||^2 + eta^T h`` in ``(x, p, eta)``; outer, ``mu <- mu + rho c``.
-    At convergence ``c = 0`` and the inner stationarity becomes the KKT system of
-    ``min f s.t. h = 0, c = 0``: a stationary point of the exact projection onto ``Z_E`` on the
-    identified branch (not a penalised one), for any ``gamma > 0`` and ``rho > 0``.
+    and handled by the method of multipliers: inner, minimise ``f + lam^T c + (rho/2) ||c||^2``
+    subject to ``h = 0`` (solved in primal-dual form, ``theta = lam + rho c``); outer (Uzawa on the
+    multiplier), ``lam <- lam + rho c``. At convergence ``c = 0`` and the inner stationarity is the
+    KKT system of ``min f s.t. h = 0, c = 0``: a stationary point of the exact projection onto
+    ``Z_E`` (not a penalised one), for any ``gamma > 0`` and ``rho > 0``.
 
-Positive parts use :func:`~ddcm_casadi.solvers.newton.plus`; an inner Newton that cycles at a
-kink is completed by a smoothing continuation ``mu -> 0``.
+    Why ``Phi`` and not the min-function ``p - <p - gamma g>_+`` (same zero set): the inner
+    problems target the level sets ``c = s`` with ``s -> 0``; those of the min-function have a
+    corner, where semismooth Newton cycles, those of ``Phi`` are smooth.
+
+The classical positive part uses :func:`~ddcm_casadi.solvers.newton.plus`; an inner Newton that
+cycles at a kink is completed by a smoothing continuation ``mu -> 0``.
 
 Substituting ``p = <lambda - gamma g>_+`` into the projection (the classical recipe) would not be
 exact: its fixed point lies on ``Z_E`` but is the projection onto a line of slope ``-gamma``
@@ -33,9 +39,10 @@ import casadi as ca
 import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
-from ddcm_casadi.solvers.newton import SparseJacobian, plus, smoothed_newton_solve
+from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .ncp import FBSystem
 from .registry import register
 
 
@@ -58,6 +65,8 @@ class AugmentedLagrangian(Formulation):
             Tolerance on the multiplier update (classical) or on ``||c||_inf`` (DDCM), scaled.
         newton_tol, residual_tol, max_iter :
             Inner Newton tolerances and iteration limit.
+        smoothing : tuple of float
+            Fallback smoothing continuation of the inner Newton.
         max_updates : int
             Maximum Uzawa / multiplier updates.
         """
@@ -69,6 +78,7 @@ class AugmentedLagrangian(Formulation):
         residual_tol: float = 1e-10
         max_iter: int = 50
         max_updates: int = 500
+        smoothing: tuple = SMOOTHING
 
     DEFAULT_GAMMA_FACTOR = 100.0
 
@@ -88,81 +98,75 @@ class _BuiltAL(BuiltFormulation):
     def __init__(self, problem: ComplementarityProblem, opts: AugmentedLagrangian.Options, gamma: float) -> None:
         super().__init__(problem)
         self.opts = opts
-        nx, nc = problem.n_x, problem.n_pairs
-        mult = ca.SX.sym("multiplier", nc)
-        mu = ca.SX.sym("mu")
+        self._nc = problem.n_pairs
         if problem.kind == "mcp":
+            mult = ca.SX.sym("multiplier", problem.n_pairs)
+            mu = ca.SX.sym("mu")
             p_of_x = plus(mult - gamma * problem.gap, mu)
-            z = problem.x
             r = ca.substitute(problem.residual, problem.p, p_of_x)
             P = ca.vertcat(problem.params, mult, mu)
-            self._update = ca.Function("uzawa", [z, P], [p_of_x])
+            self._update = ca.Function("uzawa", [problem.x, P], [p_of_x])
+            self._rj = ca.Function("al_rj", [problem.x, P], [r, ca.jacobian(r, problem.x)])
+            self._r = ca.Function("al_r", [problem.x, P], [r])
+            self._jac = SparseJacobian(self._rj)
         else:
-            ne = problem.residual.numel()
-            eta = ca.SX.sym("eta", ne)
-            rho = ca.SX.sym("rho")
-            c = problem.p - plus(problem.p - gamma * problem.gap, mu)
-            z = ca.vertcat(problem.x, problem.p, eta)
-            lag = problem.objective + ca.dot(mult, c) + 0.5 * rho * ca.dot(c, c) + ca.dot(eta, problem.residual)
-            r = ca.gradient(lag, z)
-            P = ca.vertcat(problem.params, mult, rho, mu)
-            self._c = ca.Function("al_c", [z, P], [c])
-            self._ne = ne
-        self._rj = ca.Function("al_rj", [z, P], [r, ca.jacobian(r, z)])
-        self._r = ca.Function("al_r", [z, P], [r])
-        self._jac = SparseJacobian(self._rj)
-        self._nx, self._nc = nx, nc
+            self.system = FBSystem(problem, gamma, 1.0, proximal=True)
+            # The inner solver reads these names from its options.
+            self._inner = _InnerOptions(opts.newton_tol, opts.residual_tol, opts.max_iter, opts.smoothing)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         if self.problem.kind == "mcp":
             return self._solve_mcp(params, x0, p0)
         return self._solve_mpcc(params, x0, p0, state or {})
 
-    def _newton(self, z, P):
-        o = self.opts
-        res, mu, _ = smoothed_newton_solve(self._rj, self._r, z, P, jacobian=self._jac, tol=o.newton_tol,
-                                           residual_tol=o.residual_tol, max_iter=o.max_iter)
-        return res, np.append(P, mu)
-
     def _solve_mcp(self, params, x0, p0) -> LocalSolution:
+        o = self.opts
         lam = np.maximum(np.asarray(p0, float), 0.0)
         z = np.asarray(x0, float)
         newton_its, converged, message = 0, False, "maximum multiplier updates reached"
-        for k in range(1, self.opts.max_updates + 1):
+        for k in range(1, o.max_updates + 1):
             P = np.concatenate([params, lam])
-            res, Pmu = self._newton(z, P)
+            res, mu, _ = smoothed_newton_solve(self._rj, self._r, z, P, smoothing=o.smoothing, jacobian=self._jac,
+                                               tol=o.newton_tol, residual_tol=o.residual_tol, max_iter=o.max_iter)
             newton_its += res.iterations
             if not res.converged:
                 message = f"inner Newton failed at update {k}: {res.message}"
                 break
             z = res.z
-            lam_new = np.asarray(self._update(z, Pmu), float).ravel()
+            lam_new = np.asarray(self._update(z, np.append(P, 0.0)), float).ravel()
             change = float(np.max(np.abs(lam_new - lam))) if lam.size else 0.0
             lam = lam_new
-            if change <= self.opts.tol * max(1.0, float(np.max(np.abs(lam), initial=0.0))):
+            if change <= o.tol * max(1.0, float(np.max(np.abs(lam), initial=0.0))):
                 converged, message = True, "converged"
                 break
         return self._finish(z, lam, params, converged=converged, iterations=newton_its, outer=k,
                             message=message)
 
     def _solve_mpcc(self, params, x0, p0, state) -> LocalSolution:
-        mu = np.asarray(state.get("mu", np.zeros(self._nc)), float)
-        z = np.concatenate([x0, p0, state.get("eta", np.zeros(self._ne))])
+        o = self.opts
+        lam = np.asarray(state.get("lam", np.zeros(self._nc)), float)
+        z = self.system.start(x0, p0, state)
+        nx, nc, ne = self.problem.n_x, self._nc, self.problem.residual.numel()
         newton_its, converged, message = 0, False, "maximum multiplier updates reached"
-        rho = self.opts.rho
-        for k in range(1, self.opts.max_updates + 1):
-            P = np.concatenate([params, mu, [rho]])
-            res, Pmu = self._newton(z, P)
+        x, p, st = z[:nx], z[nx:nx + nc], {}
+        for k in range(1, o.max_updates + 1):
+            P = np.concatenate([params, lam, [o.rho]])
+            x, p, st, res, mu, _ = self.system.solve(z, P, self._inner)
             newton_its += res.iterations
             if not res.converged:
                 message = f"inner Newton failed at update {k}: {res.message}"
                 break
             z = res.z
-            c = np.asarray(self._c(z, Pmu), float).ravel()
-            mu = mu + rho * c
-            if float(np.max(np.abs(c), initial=0.0)) <= self.opts.tol:
+            c = np.asarray(self.system.phi(z, np.concatenate([P, [0.0], np.zeros(nc)])), float).ravel()
+            lam = np.asarray(st["theta"], float).copy()  # = lam + rho c at the inner solution
+            if float(np.max(np.abs(c), initial=0.0)) <= o.tol:
                 converged, message = True, "converged"
                 break
-        nx, nc = self._nx, self._nc
-        return self._finish(z[:nx], z[nx:nx + nc], params, converged=converged, iterations=newton_its, outer=k,
-                            state=dict(mu=mu, eta=z[nx + nc:]), message=message)
+        st = dict(st, lam=lam)
+        return self._finish(x, p, params, converged=converged, iterations=newton_its, outer=k, state=st,
+                            message=message)
+
+
+class _InnerOptions:
+    def __init__(self, tol, residual_tol, max_iter, smoothing) -> None:
+        self.tol, self.residual_tol, self.max_iter, self.smoothing = tol, residual_tol, max_iter, smoothing

@@ -105,17 +105,23 @@ class Formulation(ABC):
         for f in dataclasses.fields(self.options):
             v = getattr(self.options, f.name)
             kind = str(f.type)
+            where = f"option {f.name!r} of {self.name!r}"
             if v is None and "None" in kind:
                 continue
             if kind.startswith("float") or kind.startswith("int"):
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-                    raise InputError(f"option {f.name!r} of {self.name!r} must be a finite number, got {v!r}")
-                if kind.startswith("int") and (v != int(v) or v < 1):
-                    raise InputError(f"option {f.name!r} of {self.name!r} must be a positive integer, got {v!r}")
-            elif kind.startswith("tuple") and not isinstance(v, (tuple, list)):
-                raise InputError(f"option {f.name!r} of {self.name!r} must be a list, got {v!r}")
+                    raise InputError(f"{where} must be a finite number, got {v!r}")
+                if kind.startswith("int"):
+                    if v != int(v) or v < 1:
+                        raise InputError(f"{where} must be a positive integer, got {v!r}")
+                    object.__setattr__(self.options, f.name, int(v))
+            elif kind.startswith("tuple"):
+                if not isinstance(v, (tuple, list)) or not all(
+                        isinstance(e, (int, float)) and not isinstance(e, bool) and np.isfinite(e) and e >= 0
+                        for e in v):
+                    raise InputError(f"{where} must be a list of finite non-negative numbers, got {v!r}")
             elif kind.startswith("dict") and not isinstance(v, dict):
-                raise InputError(f"option {f.name!r} of {self.name!r} must be a table, got {v!r}")
+                raise InputError(f"{where} must be a table, got {v!r}")
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.options})"

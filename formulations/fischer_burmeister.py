@@ -17,7 +17,9 @@ instead: at ``a^2 + b^2 + 2 mu^2 = 0`` the square root is evaluated as
 ``sqrt(s + 1) - 1`` (same value, 0), whose derivatives are ``dPhi/da = dPhi/db = -1`` and whose
 second derivatives are finite (Facchinei & Pang, the element with ``(xi, zeta) = (0, 0)``). If
 Newton with ``mu = 0`` fails, a smoothing continuation ``mu -> 0`` is run from the last iterate
-(:func:`ddcm_casadi.solvers.newton.smoothed_newton_solve`).
+(:func:`ddcm_casadi.solvers.newton.smoothed_newton_solve`). A projection that lands on the corner
+``g = p = 0`` of ``Z_E`` is finished on the biactive branch and accepted only if B-stationary
+(see :class:`formulations.ncp.FBSystem`).
 Newton is globalised by an Armijo line search on ``0.5 ||r||^2``.
 """
 
@@ -25,21 +27,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import casadi as ca
-import numpy as np
-
 from ddcm_casadi.problem import ComplementarityProblem
-from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, smoothed_newton_solve
+from ddcm_casadi.solvers.newton import SMOOTHING
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .ncp import FBSystem, fischer_burmeister  # noqa: F401  (re-exported)
 from .registry import register
-
-
-def fischer_burmeister(a, b, mu=0.0):
-    """``sqrt(a^2 + b^2 + 2 mu^2) - a - b`` with a finite generalised derivative at the origin."""
-    s = a**2 + b**2 + 2 * mu**2
-    origin = s == 0
-    return ca.sqrt(s + origin) - origin - a - b
 
 
 @register
@@ -66,6 +59,8 @@ class FischerBurmeister(Formulation):
             Newton iterations per solve.
         smoothing : tuple of float
             ``mu`` values of the fallback smoothing continuation (ends with 0).
+        comp_tol : float
+            A solve counts as converged only if ``max |min(g, p)| <= comp_tol`` (scaled) as well.
         """
 
         alpha: float | None = None
@@ -74,10 +69,11 @@ class FischerBurmeister(Formulation):
         residual_tol: float = 1e-9
         max_iter: int = 50
         smoothing: tuple = SMOOTHING
+        comp_tol: float = 1e-9
 
     def _validate(self) -> None:
         super()._validate()
-        for k in ("alpha", "beta", "tol", "residual_tol"):
+        for k in ("alpha", "beta", "tol", "residual_tol", "comp_tol"):
             positive_option(self.name, k, getattr(self.options, k))
 
     def build(self, problem: ComplementarityProblem) -> "_BuiltFB":
@@ -88,41 +84,13 @@ class _BuiltFB(BuiltFormulation):
     def __init__(self, problem: ComplementarityProblem, opts: FischerBurmeister.Options) -> None:
         super().__init__(problem)
         self.opts = opts
-        alpha = (opts.alpha or problem.fb_alpha) * problem.gap_ref
-        beta = (opts.beta or problem.fb_beta) * problem.pressure_ref
-        mu = ca.SX.sym("mu")
-        phi = fischer_burmeister(alpha * problem.gap, beta * problem.p, mu)
-        nx, nc = problem.n_x, problem.n_pairs
-        if problem.kind == "mcp":
-            z = ca.vertcat(problem.x, problem.p)
-            r = ca.vertcat(problem.residual, phi)
-            self._split = lambda z: (z[:nx], z[nx:nx + nc], {})
-        else:
-            eta = ca.SX.sym("eta", problem.residual.numel())
-            theta = ca.SX.sym("theta", nc)
-            z = ca.vertcat(problem.x, problem.p, eta, theta)
-            lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, phi)
-            r = ca.gradient(lag, z)
-            ne = problem.residual.numel()
-            self._split = lambda z: (z[:nx], z[nx:nx + nc],
-                                     dict(eta=z[nx + nc:nx + nc + ne], theta=z[nx + nc + ne:]))
-        P = ca.vertcat(problem.params, mu)
-        self._rj = ca.Function("fb_rj", [z, P], [r, ca.jacobian(r, z)])
-        self._r = ca.Function("fb_r", [z, P], [r])
-        self._jac = SparseJacobian(self._rj)
-        self._nz = z.numel()
+        self.system = FBSystem(problem, (opts.alpha or problem.fb_alpha) * problem.gap_ref,
+                               (opts.beta or problem.fb_beta) * problem.pressure_ref)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
-        state = state or {}
-        if self.problem.kind == "mcp":
-            z0 = np.concatenate([x0, p0])
-        else:
-            eta = state.get("eta", np.zeros(self.problem.residual.numel()))
-            theta = state.get("theta", np.zeros(self.problem.n_pairs))
-            z0 = np.concatenate([x0, p0, eta, theta])
-        o = self.opts
-        kw = dict(jacobian=self._jac, tol=o.tol, residual_tol=o.residual_tol, max_iter=o.max_iter)
-        res, mu, stages = smoothed_newton_solve(self._rj, self._r, z0, params, smoothing=o.smoothing, **kw)
-        x, p, st = self._split(res.z)
-        return self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
-                            state=st, message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
+        x, p, st, res, mu, stages = self.system.solve(self.system.start(x0, p0, state), params, self.opts)
+        sol = self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
+                           state=st, message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
+        if sol.converged and sol.complementarity > self.opts.comp_tol:
+            sol.converged, sol.message = False, f"complementarity {sol.complementarity:.1e} > comp_tol"
+        return sol

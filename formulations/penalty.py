@@ -1,15 +1,20 @@
 r"""Penalty formulation (paper, eq. (3)): the contact pressure is a function of the penetration,
 
-.. math::  p = \gamma \langle -g(x) \rangle_+ ,
+.. math::  p = \gamma \langle -g(x) \rangle_+ .
 
-substituted into the problem, which is then solved by semismooth Newton.
+Classical (mcp)
+    Substituted into equilibrium, ``F(x, gamma <-g(x)>_+) = 0``, solved by semismooth Newton.
 
-- Classical (mcp): ``F(x, gamma <-g(x)>_+) = 0``.
-- DDCM (mpcc): stationarity of ``f(x) + eta^T h(x, gamma <-g(x)>_+)`` in ``(x, eta)``.
+DDCM (mpcc)
+    The projection onto the penalised admissible set. That set has a corner at ``g = p = 0``
+    where the projection of many data points lands, and there the substituted stationarity system
+    has no root (Newton cycles between the two pieces). The penalty law is therefore written as the
+    equivalent *compliant* complementarity
 
-The positive part is written with :func:`~ddcm_casadi.solvers.newton.plus` so that a solution at
-the kink ``g = 0`` (where semismooth Newton cycles between the two pieces) is reached by a
-smoothing continuation ``mu -> 0`` when plain Newton fails.
+    .. math::  p \ge 0, \quad g + p/\gamma \ge 0, \quad p\,(g + p/\gamma) = 0,
+
+    and solved like the Fischer-Burmeister projection (saddle-point Newton on
+    ``f + eta^T h + theta^T Phi(alpha (g + p/gamma), beta p)``), which handles the corner.
 
 Not exact: the penetration is ``O(1/gamma)``; for the paper's bar the tip displacement is
 ``u = gamma w / (E/l0 + gamma)``, a relative error ``(E/l0) / (E/l0 + gamma)``.
@@ -26,6 +31,7 @@ from ddcm_casadi.problem import ComplementarityProblem
 from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .ncp import FBSystem
 from .registry import register
 
 
@@ -45,12 +51,15 @@ class Penalty(Formulation):
             Penalty stiffness ``gamma`` (Pa/m); ``None``: ``1e4 E / l0`` (relative error ~1e-4).
         tol, residual_tol, max_iter :
             Newton tolerances (relative increment, scaled residual) and iteration limit.
+        smoothing : tuple of float
+            Fallback smoothing continuation ``mu -> 0`` (see :mod:`ddcm_casadi.solvers.newton`).
         """
 
         gamma: float | None = None
         tol: float = 1e-9
         residual_tol: float = 1e-9
         max_iter: int = 50
+        smoothing: tuple = SMOOTHING
 
     DEFAULT_GAMMA_FACTOR = 1e4
 
@@ -63,41 +72,56 @@ class Penalty(Formulation):
         """The physical penalty stiffness used for ``problem``."""
         return self.options.gamma or self.DEFAULT_GAMMA_FACTOR * problem.contact_stiffness
 
-    def build(self, problem: ComplementarityProblem) -> "_BuiltPenalty":
-        return _BuiltPenalty(problem, self.options, problem.scaled_penalty(self.gamma(problem)))
+    def build(self, problem: ComplementarityProblem) -> BuiltFormulation:
+        gamma = problem.scaled_penalty(self.gamma(problem))
+        if problem.kind == "mcp":
+            return _BuiltPenalty(problem, self.options, gamma)
+        return _BuiltCompliantProjection(problem, self.options, gamma)
 
 
 class _BuiltPenalty(BuiltFormulation):
+    """Classical: substitution ``p = gamma <-g>_+`` and semismooth Newton in ``x``."""
+
     def __init__(self, problem: ComplementarityProblem, opts: Penalty.Options, gamma: float) -> None:
         super().__init__(problem)
         self.opts = opts
         mu = ca.SX.sym("mu")
         p_of_x = gamma * plus(-problem.gap, mu)
-        residual = ca.substitute(problem.residual, problem.p, p_of_x)
-        nx = problem.n_x
-        if problem.kind == "mcp":
-            z, r = problem.x, residual
-        else:
-            eta = ca.SX.sym("eta", residual.numel())
-            z = ca.vertcat(problem.x, eta)
-            r = ca.gradient(problem.objective + ca.dot(eta, residual), z)
+        r = ca.substitute(problem.residual, problem.p, p_of_x)
         P = ca.vertcat(problem.params, mu)
-        self._rj = ca.Function("penalty_rj", [z, P], [r, ca.jacobian(r, z)])
-        self._r = ca.Function("penalty_r", [z, P], [r])
+        self._rj = ca.Function("penalty_rj", [problem.x, P], [r, ca.jacobian(r, problem.x)])
+        self._r = ca.Function("penalty_r", [problem.x, P], [r])
         self._p = ca.Function("penalty_p", [problem.x, P], [p_of_x])
         self._jac = SparseJacobian(self._rj)
-        self._nx = nx
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
-        state = state or {}
-        z0 = np.asarray(x0, float)
-        if self.problem.kind == "mpcc":
-            z0 = np.concatenate([z0, state.get("eta", np.zeros(self.problem.residual.numel()))])
         o = self.opts
-        res, mu, stages = smoothed_newton_solve(self._rj, self._r, z0, params, jacobian=self._jac, tol=o.tol,
+        res, mu, stages = smoothed_newton_solve(self._rj, self._r, np.asarray(x0, float), params,
+                                                smoothing=o.smoothing, jacobian=self._jac, tol=o.tol,
                                                 residual_tol=o.residual_tol, max_iter=o.max_iter)
-        x = res.z[:self._nx]
-        p = np.asarray(self._p(x, np.append(params, mu)), float).ravel()
-        st = {"eta": res.z[self._nx:]} if self.problem.kind == "mpcc" else {}
-        return self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
-                            state=st, message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
+        p = np.asarray(self._p(res.z, np.append(params, 0.0)), float).ravel()
+        return self._finish(res.z, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
+                            message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
+
+
+class _BuiltCompliantProjection(BuiltFormulation):
+    """DDCM: projection with the compliant pairs ``p ⟂ g + p/gamma`` (Fischer-Burmeister Newton)."""
+
+    def __init__(self, problem: ComplementarityProblem, opts: Penalty.Options, gamma: float) -> None:
+        super().__init__(problem)
+        self.opts = opts
+        compliant_gap = problem.gap + problem.p / gamma
+        self.system = FBSystem(problem, problem.fb_alpha * problem.gap_ref, problem.fb_beta * problem.pressure_ref,
+                               gap=compliant_gap)
+        self._law = ca.Function("penalty_law", [problem.x, problem.p, problem.params],
+                                [problem.p - gamma * ca.fmax(0, -problem.gap)])
+
+    def solve(self, params, x0, p0, state=None) -> LocalSolution:
+        x, p, st, res, mu, stages = self.system.solve(self.system.start(x0, p0, state), params, self.opts)
+        sol = self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
+                           state=st, message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
+        # The penalty law itself must hold (scaled), not just the reformulated system.
+        law = float(np.max(np.abs(np.asarray(self._law(x, p, params), float)), initial=0.0))
+        if sol.converged and law > self.opts.residual_tol * max(1.0, float(np.max(np.abs(p), initial=0.0))) * 10:
+            sol.converged, sol.message = False, f"penalty law violated by {law:.1e}"
+        return sol

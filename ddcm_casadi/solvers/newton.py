@@ -75,6 +75,7 @@ def newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, params: np.nda
     res = np.asarray(res, dtype=float).ravel()
     rnorm = float(np.max(np.abs(res))) if res.size else 0.0
     increment = np.inf
+    history: list[np.ndarray] = []
     for it in range(1, max_iter + 1):
         if not np.all(np.isfinite(res)):
             return NewtonResult(z, False, it - 1, np.inf, increment, "non-finite residual")
@@ -89,8 +90,13 @@ def newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, params: np.nda
                 break
             t *= 0.5
         else:
-            t = 1.0  # no decrease found: take the full step rather than stall
+            t = 1.0  # no decrease: take the full (semismooth) step; cycles are caught below
+        history.append(z)
         z = z + t * dz
+        if len(history) >= 2 and np.max(np.abs(z - history[-2])) <= 1e-13 * (1.0 + np.max(np.abs(z))):
+            # Newton returned to the iterate of two steps ago: it cycles between two pieces
+            # of a nonsmooth residual (a solution at a kink). Let the caller smooth.
+            return NewtonResult(z, False, it, rnorm, increment, "cycling between pieces")
         increment = float(np.max(np.abs(t * dz))) / max(1.0, float(np.max(np.abs(z)))) if z.size else 0.0
         res, J = rj(z, params)
         res = np.asarray(res, dtype=float).ravel()
