@@ -67,18 +67,25 @@ class ExactEnumerator:
         obj = problem.objective if problem.objective is not None else ca.SX(0)
         grad = ca.gradient(obj, z)
         self.H = _const(ca.jacobian(grad, z), [z, P]) if problem.kind == "mpcc" else None
-        subs = lambda e: ca.substitute(e, z, zero)  # noqa: E731
-        self._affine = ca.Function("affine", [P], [subs(R), subs(g), subs(grad), subs(obj)])
+        # Affine in the parameters too: R(0; P) = R_P P + R_0, likewise g and grad f; f(0; P) quadratic.
+        at0 = lambda e: ca.substitute(e, z, zero)  # noqa: E731
+        self._R_P = _const(ca.jacobian(at0(R), P), [z, P])
+        self._g_P = _const(ca.jacobian(at0(g), P), [z, P])
+        self._q_P = _const(ca.jacobian(at0(grad), P), [z, P])
+        f0 = at0(obj)
+        self._f_PP = _const(ca.hessian(f0, P)[0], [z, P])
+        const = ca.Function("const", [P], [at0(R), at0(g), at0(grad), f0, ca.gradient(f0, P)])
+        R0, g0, q0, f00, fP = const(np.zeros(P.numel()))
+        self._R_0, self._g_0, self._q_0 = (np.asarray(v, float).reshape(-1, 1) for v in (R0, g0, q0))
+        self._f_0, self._f_P = float(f00), np.asarray(fP, float).ravel()
         self._factors: dict[tuple, object] = {}
         self.partitions = list(itertools.product(
             (FREE, CONTACT) if problem.kind == "mcp" else (FREE, CONTACT, GRAZING), repeat=self.nc))
 
     def _affine_parts(self, params: np.ndarray):
-        k = params.shape[1]
-        fmap = self._affine.map(k)
-        R0, g0, q, f0 = fmap(params)
-        return (np.asarray(R0).reshape(-1, k), np.asarray(g0).reshape(-1, k),
-                np.asarray(q).reshape(-1, k), np.asarray(f0).reshape(k))
+        f0 = self._f_0 + self._f_P @ params + 0.5 * np.einsum("ik,ik->k", params, self._f_PP @ params)
+        return (self._R_P @ params + self._R_0, self._g_P @ params + self._g_0,
+                self._q_P @ params + self._q_0, f0)
 
     def _constraints(self, part) -> sp.csc_matrix:
         part = np.asarray(part)

@@ -149,7 +149,8 @@ class ContactModel:
         if travel == 0.0 and load == 0.0:
             strain = 1e-3
         area = float(np.mean(self.contact_area)) if self.n_contacts else float(np.mean(self.volumes)) / self.length_scale
-        energy = float(np.sum(self.volumes)) * metric * np.float64(strain) ** 2
+        with np.errstate(over="ignore"):
+            energy = float(np.sum(self.volumes)) * metric * np.float64(strain) ** 2
         if not (np.isfinite(energy) and energy > 0 and np.isfinite(metric * strain * area)):
             raise InputError("obstacle positions, loads or moduli are out of range (scales overflow)")
         return dict(

@@ -97,6 +97,11 @@ class ProblemPair:
         return np.concatenate([self.model.gap_offsets[step], self.model.loads[step]])
 
     def projection_params(self, step: int, strain_star: np.ndarray, stress_star: np.ndarray) -> np.ndarray:
+        """Parameters of the ``Z_E`` projection; with ``(m, k)`` data arrays, a ``(n_params, k)`` matrix."""
+        strain_star, stress_star = np.asarray(strain_star, float), np.asarray(stress_star, float)
+        if strain_star.ndim == 2:
+            k = strain_star.shape[1]
+            return np.vstack([np.repeat(self.step_params(step)[:, None], k, axis=1), strain_star, stress_star])
         return np.concatenate([self.step_params(step), strain_star, stress_star])
 
     def fields(self, kind: str, x: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:

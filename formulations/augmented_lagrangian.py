@@ -60,7 +60,10 @@ class AugmentedLagrangian(Formulation):
         gamma : float or None
             Augmentation ``gamma`` (Pa/m) in ``<lambda - gamma g>_+``; ``None``: ``100 E / l0``.
         rho : float
-            DDCM only: multiplier-method penalty on ``c(x, p)`` (scaled, dimensionless).
+            DDCM only: initial multiplier-method penalty on ``c(x, p)`` (scaled, dimensionless);
+            multiplied by ``rho_growth`` whenever an update fails to reduce ``||c||_inf`` by 4x
+            (the usual safeguard of the method of multipliers), up to ``rho_max``.
+        rho_growth, rho_max : float
         tol : float
             Tolerance on the multiplier update (classical) or on ``||c||_inf`` (DDCM), scaled.
         newton_tol, residual_tol, max_iter :
@@ -73,6 +76,8 @@ class AugmentedLagrangian(Formulation):
 
         gamma: float | None = None
         rho: float = 100.0
+        rho_growth: float = 10.0
+        rho_max: float = 1e10
         tol: float = 1e-11
         newton_tol: float = 1e-10
         residual_tol: float = 1e-10
@@ -84,7 +89,7 @@ class AugmentedLagrangian(Formulation):
 
     def _validate(self) -> None:
         super()._validate()
-        for k in ("gamma", "rho", "tol", "newton_tol", "residual_tol"):
+        for k in ("gamma", "rho", "rho_growth", "rho_max", "tol", "newton_tol", "residual_tol"):
             positive_option(self.name, k, getattr(self.options, k))
 
     def gamma(self, problem: ComplementarityProblem) -> float:
@@ -149,8 +154,9 @@ class _BuiltAL(BuiltFormulation):
         nx, nc, ne = self.problem.n_x, self._nc, self.problem.residual.numel()
         newton_its, converged, message = 0, False, "maximum multiplier updates reached"
         x, p, st = z[:nx], z[nx:nx + nc], {}
+        rho, c_prev = o.rho, np.inf
         for k in range(1, o.max_updates + 1):
-            P = np.concatenate([params, lam, [o.rho]])
+            P = np.concatenate([params, lam, [rho]])
             x, p, st, res, mu, _ = self.system.solve(z, P, self._inner)
             newton_its += res.iterations
             if not res.converged:
@@ -158,11 +164,24 @@ class _BuiltAL(BuiltFormulation):
                 break
             z = res.z
             c = np.asarray(self.system.phi(z, np.concatenate([P, [0.0], np.zeros(nc)])), float).ravel()
+            if float(np.max(np.abs(c), initial=0.0)) > o.tol:
+                # A projection onto the corner g = p = 0 needs an unbounded multiplier: the updates
+                # would only creep. Finish on the biactive branch when it is B-stationary.
+                corner = self.system.polish_corner(z, P, self._inner)
+                if corner is not None:
+                    newton_its += corner.iterations
+                    z = corner.z
+                    x, p, st = self.system.split(z)
+                    c = np.asarray(self.system.phi(z, np.concatenate([P, [0.0], np.zeros(nc)])), float).ravel()
             lam = np.asarray(st["theta"], float).copy()  # = lam + rho c at the inner solution
-            if float(np.max(np.abs(c), initial=0.0)) <= o.tol:
+            c_norm = float(np.max(np.abs(c), initial=0.0))
+            if c_norm <= o.tol:
                 converged, message = True, "converged"
                 break
-        st = dict(st, lam=lam)
+            if c_norm > 0.25 * c_prev:
+                rho = min(rho * o.rho_growth, o.rho_max)
+            c_prev = c_norm
+        st = dict(st, lam=lam, rho=rho)
         return self._finish(x, p, params, converged=converged, iterations=newton_its, outer=k, state=st,
                             message=message)
 

@@ -18,7 +18,7 @@ Interior-point iterates keep ``g`` and ``p`` strictly positive, so at a degenera
 ``g p <= tau`` only gives ``min(g, p) ~ sqrt(tau)``, which stalls near ``1e-9``. When the homotopy
 stalls, the branch is identified (``g_i = 0`` where ``g_i <= p_i``, else ``p_i = 0``) and the
 *branch NLP* (BNLP; as in mpecopt) is solved with those equalities and no bounds; pairs with both
-``g`` and ``p`` below ``100 max_i min(g_i, p_i)`` are tried first as biactive (``g = p = 0``).
+``g`` and ``p`` small are tried first as biactive (``g = p = 0``, accepted only if B-stationary).
 A BNLP solution is accepted only if the dropped signs hold (``g >= 0``, ``p >= 0`` within
 ``comp_tol``). The result is
 a stationary point, not always the global one: the DDCM driver checks the other branches.
@@ -158,7 +158,7 @@ class _BuiltMPCC(BuiltFormulation):
                 break
             tau *= o.tau_factor
         if not converged and last_good_tau is not None:
-            w, iters, ok = self._branch_nlp(w, params)
+            w, iters, ok = self._branch_nlp(w, params, last_good_tau)
             iterations += iters
             steps += 1
             if ok:
@@ -166,13 +166,19 @@ class _BuiltMPCC(BuiltFormulation):
         return self._finish(w[:nx], w[nx:], params, converged=converged, iterations=iterations, outer=steps,
                             message=message)
 
-    def _branch_nlp(self, w, params):
-        """Solve the branch NLP identified at ``w``; returns ``(w, iterations, accepted)``."""
+    def _branch_nlp(self, w, params, tau):
+        """Solve the branch NLP identified at ``w``; returns ``(w, iterations, accepted)``.
+
+        Pairs with both ``g`` and ``p`` below ``10 sqrt(tau) + 100 max_i min(g_i, p_i)`` are first
+        tried as biactive (``g = p = 0``); that branch is accepted only if B-stationary (both
+        multipliers of the lower bounds non-positive in CasADi's sign convention), so a generous
+        identification cannot pin a free or a contact pair to the corner.
+        """
         nx, nc, ne = self._nx, self._nc, self._ne
         gap = np.asarray(self._gap(w, params), float).ravel()
         p = w[nx:]
         on_gap = gap <= p
-        tol = 100.0 * float(np.max(np.minimum(np.abs(gap), np.abs(p)), initial=0.0))
+        tol = 10.0 * np.sqrt(tau) + 100.0 * float(np.max(np.minimum(np.abs(gap), np.abs(p)), initial=0.0))
         both = (np.abs(gap) <= tol) & (np.abs(p) <= tol)
         iters = 0
         for fix_gap, fix_p in ((on_gap | both, ~on_gap | both), (on_gap, ~on_gap)):
@@ -187,9 +193,14 @@ class _BuiltMPCC(BuiltFormulation):
             if stats["return_status"] not in _OK:
                 continue
             w_new = np.asarray(sol["x"], float).ravel()
+            lam = np.asarray(sol["lam_g"], float).ravel()
+            bi = fix_gap & fix_p
+            lam_gap, lam_p = lam[ne:ne + nc][bi], lam[ne + nc:][bi]
+            lam_tol = 1e-8 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
+            b_stationary = not (np.any(lam_gap > lam_tol) or np.any(lam_p > lam_tol))
             residual, comp, pen, _ = self.metrics(w_new[:nx], w_new[nx:], params)
             signs_ok = pen <= self.opts.comp_tol and float(np.min(w_new[nx:], initial=0.0)) >= -self.opts.comp_tol
-            if signs_ok and comp <= self.opts.comp_tol and residual <= self.opts.residual_tol:
+            if b_stationary and signs_ok and comp <= self.opts.comp_tol and residual <= self.opts.residual_tol:
                 return w_new, iters, True
             if not both.any():
                 break

@@ -105,6 +105,12 @@ class FBSystem:
         plain = newton_solve(rj, r, z0, np.append(params, 0.0), **kw)
         iterations, stages = plain.iterations, 0
         best, best_mu = plain, 0.0
+        if plain.converged and self._creeping(plain.z, params, corner_tol):
+            # Converged by the tolerances while still creeping towards a corner: finish it exactly.
+            polished = self._corner(plain.z, params, corner_tol, kw)
+            if polished is not None:
+                polished.iterations += plain.iterations
+                best = polished
         if not plain.converged:
             polished = self._corner(plain.z, params, corner_tol, kw)
             stages += 1
@@ -121,9 +127,20 @@ class FBSystem:
                     if polished is not None:
                         iterations += polished.iterations
                         best, best_mu = polished, 0.0
-        best.iterations = iterations
+        if best is not plain or not plain.converged:
+            best.iterations = iterations
         x, p, st = self.split(best.z)
         return x, p, st, best, best_mu, stages
+
+    def polish_corner(self, z, params, opts, *, corner_tol: float = 1e-3):
+        """The biactive-branch solution near ``z`` if it is B-stationary, else ``None``."""
+        kw = dict(jacobian=self.jacobian, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        return self._corner(z, params, corner_tol, kw) if self.corner else None
+
+    def _creeping(self, z, params, corner_tol) -> bool:
+        a, b = (np.asarray(v, float).ravel() for v in self._ab(z, params[:self.problem.params.numel()]))
+        near = np.maximum(np.abs(a), np.abs(b)) <= corner_tol
+        return bool(np.any(np.minimum(np.abs(a), np.abs(b))[near] > 1e-14))
 
     def _corner(self, z, params, corner_tol, kw):
         """Newton on the biactive branch of the pairs near a corner; ``None`` unless B-stationary."""

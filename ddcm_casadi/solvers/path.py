@@ -210,7 +210,7 @@ class DDCMSolver:
     def _global_optimum(self, k: int, step: StepResult) -> None:
         """One-element problems: the data point whose exact projection is nearest (enumeration)."""
         data, problems = self.problems.model.dataset, self.problems
-        P = np.column_stack([problems.projection_params(k, [e], [s]) for e, s in zip(data.strain, data.stress)])
+        P = problems.projection_params(k, data.strain[None, :], data.stress[None, :])
         ex = self.exact.solve(P)
         energy = problems.model.scales["energy"]
         j = int(np.argmin(ex.objective))
