@@ -117,7 +117,8 @@ def smoothed_newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, param
     First ``mu = 0`` (generalised Jacobian). If that fails (a solution at a kink makes semismooth
     Newton cycle between pieces), a continuation ``mu -> 0`` along ``smoothing`` is run, each
     stage warm-started. Returns ``(result, mu, stages)`` where ``result`` is the last converged
-    stage (or the last attempt) and ``mu`` its smoothing parameter.
+    stage (or the last attempt) and ``mu`` its smoothing parameter; ``result.converged`` is True
+    only if the unsmoothed problem (``mu = 0``) was solved.
     """
     res = newton_solve(rj, r, z0, np.append(params, 0.0), **kw)
     if res.converged:
@@ -131,6 +132,10 @@ def smoothed_newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, param
         iterations += trial.iterations
         if trial.converged:
             z, best, best_mu = trial.z, trial, mu
+    if best_mu > 0:
+        # Only a smoothed problem was solved: say so, the caller decides (e.g. a corner polish).
+        best.converged = False
+        best.message = f"converged only with smoothing mu={best_mu:g}"
     best.iterations = iterations
     return best, best_mu, stages
 
