@@ -75,7 +75,7 @@ class AugmentedLagrangian(Formulation):
         """
 
         gamma: float | None = None
-        rho: float = 100.0
+        rho: float = 1e4
         rho_growth: float = 10.0
         rho_max: float = 1e10
         tol: float = 1e-11
