@@ -9,7 +9,6 @@ import argparse
 import platform
 import sys
 import time
-from pathlib import Path
 from typing import NoReturn
 
 import casadi

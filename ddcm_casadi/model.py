@@ -15,7 +15,6 @@ Both the classical and the data-driven problem are built from this one object
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np

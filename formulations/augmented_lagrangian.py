@@ -151,7 +151,7 @@ class _BuiltAL(BuiltFormulation):
         o = self.opts
         lam = np.asarray(state.get("lam", np.zeros(self._nc)), float)
         z = self.system.start(x0, p0, state)
-        nx, nc, ne = self.problem.n_x, self._nc, self.problem.residual.numel()
+        nx, nc = self.problem.n_x, self._nc
         newton_its, converged, message = 0, False, "maximum multiplier updates reached"
         x, p, st = z[:nx], z[nx:nx + nc], {}
         rho, c_prev = o.rho, np.inf

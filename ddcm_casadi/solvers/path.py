@@ -156,7 +156,6 @@ class DDCMSolver:
               progress: Callable[[StepResult], None] | None = None) -> PathResult:
         problems, model = self.problems, self.problems.model
         data = model.dataset
-        energy = model.scales["energy"]
         out = PathResult("ddcm", formulation_name)
         index = data.nearest(np.zeros(model.n_points), np.zeros(model.n_points))
         x = np.zeros(problems.projection.n_x)
