@@ -65,11 +65,13 @@ class AugmentedLagrangian(Formulation):
             (the usual safeguard of the method of multipliers), up to ``rho_max``.
         rho_growth, rho_max : float
         tol : float
-            Tolerance on the multiplier update (classical) or on ``||c||_inf`` (DDCM), scaled.
+            Stop when ``max |min(g, p)|`` and the penetration are below ``tol`` (scaled).
         newton_tol, residual_tol, max_iter :
             Inner Newton tolerances and iteration limit.
         smoothing : tuple of float
             Fallback smoothing continuation of the inner Newton.
+        anderson : int
+            Classical only: depth of the Anderson acceleration of the Uzawa updates (0: plain Uzawa).
         max_updates : int
             Maximum Uzawa / multiplier updates.
         """
@@ -84,6 +86,7 @@ class AugmentedLagrangian(Formulation):
         max_iter: int = 50
         max_updates: int = 500
         smoothing: tuple = SMOOTHING
+        anderson: int = 5
 
     DEFAULT_GAMMA_FACTOR = 100.0
 
@@ -129,6 +132,7 @@ class _BuiltAL(BuiltFormulation):
         lam = np.maximum(np.asarray(p0, float), 0.0)
         z = np.asarray(x0, float)
         newton_its, converged, message = 0, False, "maximum multiplier updates reached"
+        lams, fs = [], []
         for k in range(1, o.max_updates + 1):
             P = np.concatenate([params, lam])
             res, mu, _ = smoothed_newton_solve(self._rj, self._r, z, P, smoothing=o.smoothing, jacobian=self._jac,
@@ -138,14 +142,33 @@ class _BuiltAL(BuiltFormulation):
                 message = f"inner Newton failed at update {k}: {res.message}"
                 break
             z = res.z
-            lam_new = np.asarray(self._update(z, np.append(P, 0.0)), float).ravel()
-            change = float(np.max(np.abs(lam_new - lam))) if lam.size else 0.0
-            lam = lam_new
-            if change <= o.tol * max(1.0, float(np.max(np.abs(lam), initial=0.0))):
-                converged, message = True, "converged"
+            lam_T = np.asarray(self._update(z, np.append(P, 0.0)), float).ravel()
+            # F(x, lam_T) = 0 holds by construction; stop on the pairs themselves (scale-free in gamma).
+            residual, comp, pen, _ = self.metrics(z, lam_T, params)
+            if comp <= o.tol and pen <= o.tol and residual <= o.residual_tol:
+                lam, converged, message = lam_T, True, "converged"
                 break
+            lam = self._anderson(lams, fs, lam, lam_T)
         return self._finish(z, lam, params, converged=converged, iterations=newton_its, outer=k,
                             message=message)
+
+    def _anderson(self, lams: list, fs: list, lam: np.ndarray, lam_T: np.ndarray) -> np.ndarray:
+        """Next multiplier: the Uzawa update ``lam_T``, Anderson-accelerated (depth ``anderson``).
+
+        Uzawa contracts by about ``(E/l0) / (E/l0 + gamma)`` per update, so small ``gamma`` needs
+        thousands of plain updates; Anderson mixing of the last iterates restores a few.
+        """
+        depth = self.opts.anderson
+        lams.append(lam)
+        fs.append(lam_T - lam)
+        if depth == 0 or len(lams) < 2:
+            return lam_T
+        del lams[:-depth - 1], fs[:-depth - 1]
+        dF = np.diff(np.array(fs), axis=0).T
+        dL = np.diff(np.array(lams), axis=0).T
+        coef = np.linalg.lstsq(dF, fs[-1], rcond=None)[0]
+        candidate = lam_T - (dL + dF) @ coef
+        return np.maximum(candidate, 0.0) if np.all(np.isfinite(candidate)) else lam_T
 
     def _solve_mpcc(self, params, x0, p0, state) -> LocalSolution:
         o = self.opts
@@ -175,7 +198,8 @@ class _BuiltAL(BuiltFormulation):
                     c = np.asarray(self.system.phi(z, np.concatenate([P, [0.0], np.zeros(nc)])), float).ravel()
             lam = np.asarray(st["theta"], float).copy()  # = lam + rho c at the inner solution
             c_norm = float(np.max(np.abs(c), initial=0.0))
-            if c_norm <= o.tol:
+            _, comp, pen, _ = self.metrics(x, p, params)
+            if comp <= o.tol and pen <= o.tol:  # on the pairs: c's scale depends on gamma
                 converged, message = True, "converged"
                 break
             if c_norm > 0.25 * c_prev:

@@ -112,8 +112,8 @@ class Formulation(ABC):
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
                     raise InputError(f"{where} must be a finite number, got {v!r}")
                 if kind.startswith("int"):
-                    if v != int(v) or v < 1:
-                        raise InputError(f"{where} must be a positive integer, got {v!r}")
+                    if v != int(v) or v < 0:
+                        raise InputError(f"{where} must be a non-negative integer, got {v!r}")
                     object.__setattr__(self.options, f.name, int(v))
             elif kind.startswith("tuple"):
                 if not isinstance(v, (tuple, list)) or not all(
