@@ -154,7 +154,8 @@ class Comparison:
 
     def table(self) -> str:
         """A readable summary table."""
-        head = f"{'variant':<10} {'formulation':<22} {'conv':>7} {'err u':>9} {'err p':>9} {'its/step':>8} {'outer':>6} {'build s':>8} {'solve s':>8}  notes"
+        head = (f"{'variant':<10} {'formulation':<22} {'conv':>7} {'err u':>9} {'err p':>9} {'its/step':>8} {'outer':>6} "
+                f"{'max res':>8} {'max comp':>8} {'build s':>8} {'solve s':>8}  notes")
         lines = [head, "-" * len(head)]
         for rec in self.summary():
             e = lambda v: "    -    " if v is None else f"{v:9.1e}"  # noqa: E731
@@ -170,11 +171,13 @@ class Comparison:
                 notes.append(f"projection not global at {rec['projection_not_global_steps']}")
             lines.append(f"{rec['variant']:<10} {rec['formulation']:<22} {rec['converged_steps']:>3}/{rec['steps']:<3} "
                          f"{e(rec['max_error_u'])} {e(rec['max_error_p'])} {rec['iterations_mean']:8.1f} "
-                         f"{rec['outer_iterations_mean']:6.1f} {rec['build_seconds']:8.3f} {rec['solve_seconds']:8.3f}  "
+                         f"{rec['outer_iterations_mean']:6.1f} {rec['max_residual']:8.1e} {rec['max_complementarity']:8.1e} "
+                         f"{rec['build_seconds']:8.3f} {rec['solve_seconds']:8.3f}  "
                          + "; ".join(notes))
         if self.model.closed_form(0) is not None:
             lines.append("errors: max over steps of |value - closed form| / max |closed form|; "
                          "DDCM against the classical closed form")
+        lines.append("max res / max comp: scaled equilibrium residual and max |min(g, p)| over all steps")
         return "\n".join(lines)
 
 

@@ -316,3 +316,35 @@ def test_data_file_accepted(tmp_path: Path, capsys, content: str) -> None:
     n_rows = len(content.strip().splitlines()) - 1
     assert doc["parameters"]["data"]["points"] == n_rows
     assert doc["parameters"]["data"]["strain_min"] == -0.05
+
+
+def test_huge_data_file_is_rejected_before_reading(tmp_path, capsys, monkeypatch):
+    """A file over the size cap is refused with one line, without reading it."""
+    import ddcm_casadi.data as data_module
+
+    data = tmp_path / "big.csv"
+    data.write_text("strain,stress\n" + "0.0,0.0\n" * 1000)
+    monkeypatch.setattr(data_module, "MAX_DATA_FILE_BYTES", 100)
+    case = tmp_path / "case.toml"
+    case.write_text('[bar]\nlength = 1.0\nyoungs_modulus = 2e11\n[obstacle]\npositions = [1.0]\n'
+                    '[data]\npath = "big.csv"\n[ddcm]\nc = 3e11\n')
+    out = tmp_path / "out"
+    assert main(["-q", "--config", str(case), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "too large" in err[0]
+    assert not out.exists()
+
+
+def test_unwritable_output_directory_simulated(tmp_path, capsys, monkeypatch):
+    """Running as root, simulate the permission error the write test would raise."""
+    import tempfile
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "NamedTemporaryFile", refuse)
+    out = tmp_path / "out"
+    assert main(["-q", "--formulations", "fischer_burmeister", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not writable" in err[0]
+    assert not any(out.iterdir())

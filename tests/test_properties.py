@@ -58,3 +58,28 @@ def test_projection_is_exact(name, w, eps, sig):
         close = abs(f["u"][0] - u_ex) <= 1e-8 * 0.02 and abs(f["p"][0] - p_ex) <= 1e-8 * 6e9
         assert close or d2 >= d2_ex * (1 - 1e-9)
         assert sol.complementarity <= 1e-9 and sol.residual <= 1e-9
+
+
+@pytest.mark.parametrize("name", formulations.available())
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(log_E=st.floats(6, 12), log_L=st.floats(-3, 2), travel=st.floats(1e-4, 2e-2))
+def test_any_units_classical_exact_and_ddcm_fixed_points(name, log_E, log_L, travel):
+    """Moduli 1e6..1e12 Pa, lengths 1e-3..1e2 m: classical matches the closed form to 1e-8 and every
+    DDCM step is a converged, valid fixed point (KKT within the reported tolerance)."""
+    from ddcm_casadi import compare
+    from ddcm_casadi.validate import check_fixed_points
+
+    E, L = 10.0**log_E, 10.0**log_L
+    h = L * (1.0 + travel * np.array([1.0, 0.5, 0.0, -0.5, -1.0, 0.0]))
+    data = MaterialDataset.hookean(E, -2 * travel, travel, 200, c=1.5 * E)
+    model = bar_model(length=L, youngs_modulus=E, positions=h, dataset=data)
+    cmp = compare(model, [name])
+    classical, ddcm = cmp["classical", name], cmp["ddcm", name]
+    assert classical.converged and ddcm.converged
+    err = cmp.errors("classical", name)
+    assert max(err["u"].max(), err["p"].max()) <= 1e-8
+    report = check_fixed_points(cmp.problems, ddcm)
+    tol = 1e-8 if formulations.get(name).exact else \
+        data.c / (formulations.get(name).gamma(cmp.problems.classical) * L)
+    assert report.projection_error_u.max() <= tol and report.projection_error_p.max() <= tol
+    assert report.nearest.all()
