@@ -33,6 +33,8 @@ CASES = {
     "sparse_20_points": lambda: _case(data=MaterialDataset.hookean(200e9, -0.05, 0.01, 20, c=300e9)),
     "noisy_data": lambda: _case(data=MaterialDataset(STRAINS, 200e9 * STRAINS + RNG.normal(0, 2e8, 500), 300e9)),
     "nonlinear_data": lambda: _case(data=MaterialDataset(STRAINS, 4e9 * np.tanh(STRAINS / 0.02), 300e9)),
+    "dense_1e5_points": lambda: _case(h=1.0 + 0.01 * np.linspace(1, -1, 7),
+                                      data=MaterialDataset.hookean(200e9, -0.05, 0.01, 100_000, c=300e9)),
 }
 
 
@@ -52,8 +54,12 @@ def test_classical_matches_closed_form(case, name):
 
 
 @pytest.mark.parametrize("name", ALL)
-def test_ddcm_steps_are_converged_fixed_points(case, name):
-    _, model, cmp = case
+def test_ddcm_steps_are_converged_fixed_points(case, name, request):
+    label, model, cmp = case
+    if label == "dense_1e5_points" and name == "augmented_lagrangian":
+        # Known open problem (issue 3): after a large obstacle jump onto 1e5 points, the inner
+        # Newton of the multiplier method only converges with smoothing. Flagged, never hidden.
+        request.applymarker(pytest.mark.xfail(strict=True, reason="AL inner Newton, dense data, large jump"))
     r = cmp["ddcm", name]
     assert r.converged, [(s.step, s.message) for s in r.steps if not s.converged]
     report = check_fixed_points(cmp.problems, r)
@@ -78,13 +84,19 @@ def test_results_are_deterministic(paper):
 
 
 @pytest.mark.parametrize("name", ALL)
-def test_no_nan_from_any_start(paper, name):
-    """Grazing step h = l0 from far-away starts: never NaN, converged or flagged."""
+def test_converges_from_any_start(paper, name):
+    """Grazing (h = l0), the corner just after it, and a step deep in contact, from far-away starts:
+    never NaN, always converged (merit line search, smoothing, corner polish)."""
     problems = build_problems(paper)
     built = formulations.get(name).build(problems.projection)
+    classical = formulations.get(name).build(problems.classical)
     data = paper.dataset
-    params = problems.projection_params(10, data.strain[[416]], data.stress[[416]])
-    for x0 in ([0.0, 0.0], [5.0, -3.0], [-5.0, 7.0], [1e3, 1e3]):
-        sol = built.solve(params, np.array(x0), np.array([2.0]))
-        assert np.all(np.isfinite(sol.x)) and np.all(np.isfinite(sol.p))
-        assert np.isfinite(sol.residual) and np.isfinite(sol.complementarity)
+    for step, j in ((10, 416), (11, 416), (15, 374)):
+        params = problems.projection_params(step, data.strain[[j]], data.stress[[j]])
+        for x0 in ([0.0, 0.0], [5.0, -3.0], [-5.0, 7.0], [1e3, 1e3]):
+            sol = built.solve(params, np.array(x0), np.array([2.0]))
+            assert np.all(np.isfinite(sol.x)) and np.all(np.isfinite(sol.p))
+            assert np.isfinite(sol.residual) and np.isfinite(sol.complementarity)
+            assert sol.converged, (step, x0, sol.message)
+            c = classical.solve(problems.step_params(step), np.array(x0[:1]), np.array([2.0]))
+            assert c.converged and np.all(np.isfinite(c.x)), (step, x0, c.message)
