@@ -102,35 +102,24 @@ class FBSystem:
         # smoothed_newton_solve appends mu last; the selector follows it, so wrap the Functions.
         rj = lambda z, P: self.rj(z, np.concatenate([P, none]))  # noqa: E731
         r = lambda z, P: self.r(z, np.concatenate([P, none]))  # noqa: E731
-        plain = newton_solve(rj, r, z0, np.append(params, 0.0), **kw)
-        iterations, stages = plain.iterations, 0
-        best, best_mu = plain, 0.0
-        if plain.converged and self._creeping(plain.z, params, corner_tol):
-            # Converged by the tolerances while still creeping towards a corner: finish it exactly.
-            polished = self._corner(plain.z, params, corner_tol, kw)
+        best = newton_solve(rj, r, z0, np.append(params, 0.0), **kw)
+        total, mu, stages = best.iterations, 0.0, 0
+        if not best.converged or self._creeping(best.z, params, corner_tol):
+            polished = self._corner(best.z, params, corner_tol, kw)
             if polished is not None:
-                polished.iterations += plain.iterations
+                total += polished.iterations
                 best = polished
-        if not plain.converged:
-            polished = self._corner(plain.z, params, corner_tol, kw)
-            stages += 1
+        if not best.converged:
+            best, mu, stages = smoothed_newton_solve(rj, r, z0, params, smoothing=opts.smoothing,
+                                                     try_plain=False, **kw)
+            total += best.iterations
+            polished = self._corner(best.z, params, corner_tol, kw)
             if polished is not None:
-                iterations += polished.iterations
-                best = polished
-            else:
-                res, best_mu, more = smoothed_newton_solve(rj, r, z0, params, smoothing=opts.smoothing, **kw)
-                iterations += res.iterations
-                stages += more
-                best = res
-                if not res.converged or best_mu > 0:
-                    polished = self._corner(res.z, params, corner_tol, kw)
-                    if polished is not None:
-                        iterations += polished.iterations
-                        best, best_mu = polished, 0.0
-        if best is not plain or not plain.converged:
-            best.iterations = iterations
+                total += polished.iterations
+                best, mu = polished, 0.0
+        best.iterations = total
         x, p, st = self.split(best.z)
-        return x, p, st, best, best_mu, stages
+        return x, p, st, best, mu, stages
 
     def polish_corner(self, z, params, opts, *, corner_tol: float = 1e-3):
         """The biactive-branch solution near ``z`` if it is B-stationary, else ``None``."""

@@ -111,7 +111,8 @@ SMOOTHING = (1e-2, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 0.0)
 
 
 def smoothed_newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, params: np.ndarray, *,
-                          smoothing: tuple = SMOOTHING, **kw) -> tuple[NewtonResult, float, int]:
+                          smoothing: tuple = SMOOTHING, try_plain: bool = True,
+                          **kw) -> tuple[NewtonResult, float, int]:
     """Newton on a nonsmooth system whose smoothing parameter ``mu`` is the last parameter.
 
     First ``mu = 0`` (generalised Jacobian). If that fails (a solution at a kink makes semismooth
@@ -120,9 +121,12 @@ def smoothed_newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, param
     stage (or the last attempt) and ``mu`` its smoothing parameter; ``result.converged`` is True
     only if the unsmoothed problem (``mu = 0``) was solved.
     """
-    res = newton_solve(rj, r, z0, np.append(params, 0.0), **kw)
-    if res.converged:
-        return res, 0.0, 0
+    if try_plain:
+        res = newton_solve(rj, r, z0, np.append(params, 0.0), **kw)
+        if res.converged:
+            return res, 0.0, 0
+    else:  # the caller has already tried mu = 0
+        res = NewtonResult(np.array(z0, dtype=float), False, 0, np.inf, np.inf, "not started")
     iterations = res.iterations
     z = z0
     best, best_mu, stages = res, 0.0, 0
