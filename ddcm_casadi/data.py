@@ -84,6 +84,14 @@ class MaterialDataset:
         _, idx = self._tree.query(self._scaled(np.atleast_1d(strain), np.atleast_1d(stress)))
         return np.asarray(idx, dtype=np.intp)
 
+    def point_metric(self, n_points: int) -> np.ndarray:
+        """Metric constant ``c`` of each of ``n_points`` material points (all share this set)."""
+        return np.full(n_points, self.c)
+
+    @property
+    def max_metric(self) -> float:
+        return self.c
+
     @classmethod
     def hookean(cls, youngs_modulus: float, strain_min: float, strain_max: float,
                 n_points: int, *, c: float) -> "MaterialDataset":
@@ -142,3 +150,62 @@ class MaterialDataset:
         if table.size == 0:
             raise InputError(f"data file has a header but no data rows: {path}")
         return cls(table[:, 0], table[:, 1], c)
+
+
+class PointData:
+    """Per-point material data: each material point draws from one of several data sets.
+
+    The data sets are concatenated, so a data assignment is one global index per point, exactly
+    as with a single :class:`MaterialDataset`; the search is one vectorised KD-tree query per
+    data set (never a loop over points).
+
+    Parameters
+    ----------
+    datasets : sequence of MaterialDataset
+        One data set per material, each with its own metric ``c``.
+    material : array_like of int, shape (m,)
+        The data set of each material point.
+    """
+
+    def __init__(self, datasets, material) -> None:
+        self.datasets = tuple(datasets)
+        if not self.datasets or not all(isinstance(d, MaterialDataset) for d in self.datasets):
+            raise InputError("per-point data needs at least one MaterialDataset")
+        material = np.asarray(material)
+        if material.ndim != 1 or material.size == 0 or not np.issubdtype(material.dtype, np.integer):
+            raise InputError("material must be a non-empty list of integer data-set indices, one per point")
+        if material.min() < 0 or material.max() >= len(self.datasets):
+            raise InputError(f"material index out of range: data sets are numbered 0..{len(self.datasets) - 1}")
+        self.material = material.astype(np.intp)
+        sizes = np.array([len(d) for d in self.datasets])
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+        self.strain = np.concatenate([d.strain for d in self.datasets])
+        self.stress = np.concatenate([d.stress for d in self.datasets])
+        self._c = np.array([d.c for d in self.datasets])
+        self._groups = [np.flatnonzero(self.material == k) for k in range(len(self.datasets))]
+
+    def __len__(self) -> int:
+        return self.strain.size
+
+    @property
+    def max_metric(self) -> float:
+        return float(self._c[np.unique(self.material)].max())
+
+    def point_metric(self, n_points: int) -> np.ndarray:
+        if n_points != self.material.size:
+            raise InputError(f"material list has {self.material.size} entries, the model has {n_points} points")
+        return self._c[self.material]
+
+    def nearest(self, strain, stress) -> np.ndarray:
+        strain, stress = np.atleast_1d(strain), np.atleast_1d(stress)
+        out = np.empty(strain.size, dtype=np.intp)
+        for k, pts in enumerate(self._groups):
+            if pts.size:
+                out[pts] = self.datasets[k].nearest(strain[pts], stress[pts]) + self.offsets[k]
+        return out
+
+    def distance2(self, strain, stress, index) -> np.ndarray:
+        c = self._c[self.material]
+        de = np.asarray(strain) - self.strain[index]
+        ds = np.asarray(stress) - self.stress[index]
+        return c * de**2 + ds**2 / c

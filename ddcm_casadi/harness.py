@@ -23,7 +23,8 @@ from .problem import ProblemPair, build_problems
 from .solvers.path import DDCMSolver, PathResult, StepResult, solve_classical
 
 VARIANTS = ("classical", "ddcm")
-_COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "converged", "iterations", "outer_iterations",
+_COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "max_abs_u", "total_contact_force",
+            "active_contacts", "converged", "iterations", "outer_iterations",
             "residual", "complementarity", "penetration", "strain_star", "stress_star", "data_index",
             "distance", "global_optimum", "global_distance", "projection_global", "projection_error",
             "error_u", "error_p", "seconds", "message")
@@ -42,6 +43,11 @@ def resolve_formulations(formulations: Iterable[str | Formulation] | Mapping[str
     if not out:
         raise InputError("no formulation selected")
     return out
+
+
+def _nanmax(a: np.ndarray) -> float:
+    a = np.asarray(a, float)
+    return float(np.nanmax(a)) if np.any(np.isfinite(a)) else float("nan")
 
 
 def _relative_error(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -97,21 +103,59 @@ class Comparison:
         names = [f.name for f in dataclasses.fields(StepResult)]
         return {n: r.array(n) for n in names if getattr(r.steps[0], n) is not None}
 
+    def fields(self, variant: str, formulation: str) -> dict[str, np.ndarray]:
+        """Per-step fields of one run (physical units), stacked over steps.
+
+        ``u`` (n_steps, n_dofs) free displacements, ``contact_pressure`` and ``contact_force``
+        (n_steps, n_contacts), ``strain`` and ``stress`` (n_steps, n_points); for trusses also
+        ``nodal_displacement`` (n_steps, n_nodes, dim) and ``member_force``; for DDCM the assigned
+        ``strain_star``, ``stress_star`` and ``data_index``.
+        """
+        r, m = self.results[(variant, formulation)], self.model
+        p = r.array("p")
+        out = dict(load_parameter=r.array("load_parameter"), u=r.array("u"), contact_pressure=p,
+                   contact_force=p * m.contact_area[None, :], strain=r.array("strain"), stress=r.array("stress"),
+                   converged=r.array("converged"))
+        if hasattr(m, "nodal_displacements"):
+            out["nodal_displacement"] = np.array([m.nodal_displacements(u) for u in out["u"]])
+            out["member_force"] = out["stress"] * m.member_area[None, :]
+        if variant == "ddcm":
+            for k in ("strain_star", "stress_star", "data_index"):
+                out[k] = r.array(k)
+        return out
+
+    def _scalar(self) -> bool:
+        """One unknown and one pair (the paper's bar): the CSV holds ``u`` and ``p`` themselves."""
+        return self.model.n_dofs == 1 and self.model.n_contacts <= 1 and self.model.n_points == 1
+
     def rows(self) -> list[dict]:
-        """One flat record per variant x formulation x step (the rows of ``results.csv``)."""
+        """One flat record per variant x formulation x step (the rows of ``results.csv``).
+
+        For the paper's bar ``u`` and ``p`` are the tip displacement and the contact pressure; for
+        larger models the columns summarise the step (``max_abs_u``, ``total_contact_force``,
+        ``active_contacts``) and :meth:`fields` holds the full per-step fields.
+        """
         rows = []
+        m = self.model
+        active_tol = 1e-8 * m.scales["stress"]
         for (variant, name), r in self.results.items():
             err = self.errors(variant, name)
             for s in r.steps:
-                row = dict(variant=variant, formulation=name, step=s.step,
-                           **{self.model.load_parameter_name: s.load_parameter},
-                           u=float(s.u[-1]), p=float(s.p[0]) if s.p.size else float("nan"),
-                           converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
+                row = dict(variant=variant, formulation=name, step=s.step, **{m.load_parameter_name: s.load_parameter})
+                if self._scalar():
+                    row.update(u=float(s.u[-1]), p=float(s.p[0]) if s.p.size else float("nan"))
+                else:
+                    row.update(max_abs_u=float(np.max(np.abs(s.u))),
+                               total_contact_force=float(np.sum(m.contact_area * s.p)),
+                               active_contacts=int(np.sum(s.p > active_tol)))
+                row.update(converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
                            residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,
                            seconds=s.seconds)
                 if variant == "ddcm":
-                    row.update(strain_star=float(s.strain_star[0]), stress_star=float(s.stress_star[0]),
-                               data_index=int(s.data_index[0]), distance=s.distance,
+                    if self._scalar():
+                        row.update(strain_star=float(s.strain_star[0]), stress_star=float(s.stress_star[0]),
+                                   data_index=int(s.data_index[0]))
+                    row.update(distance=s.distance,
                                projection_error=s.projection_error, projection_global=s.projection_global,
                                global_optimum=s.global_optimum, global_distance=s.global_distance)
                 if err is not None:
@@ -138,7 +182,7 @@ class Comparison:
                        max_error_p=float(np.max(err["p"])) if err else None,
                        max_complementarity=float(np.max(r.array("complementarity"))),
                        max_residual=float(np.max(r.array("residual"))))
-            if variant == "classical" and name == "penalty" and err is not None:
+            if variant == "classical" and name == "penalty" and err is not None and isinstance(self.model, BarModel):
                 ref = [self.model.closed_form(k) for k in range(self.model.n_steps)]
                 rec["max_error_u_vs_exact"] = float(np.max(_relative_error(r.array("u"), np.array([a for a, _ in ref]))))
                 rec["max_error_p_vs_exact"] = float(np.max(_relative_error(r.array("p"), np.array([b for _, b in ref]))))
@@ -148,7 +192,7 @@ class Comparison:
                            local_minimum_h=[s.load_parameter for s in r.steps if s.global_optimum is False],
                            global_checked=all(g is not None for g in glob),
                            projection_not_global_steps=[s.step for s in r.steps if s.projection_global is False],
-                           max_projection_error=float(np.nanmax(r.array("projection_error"))))
+                           max_projection_error=_nanmax(r.array("projection_error")))
             out.append(rec)
         return out
 
@@ -166,7 +210,7 @@ class Comparison:
             if rec["non_converged_steps"]:
                 notes.append(f"NOT CONVERGED at steps {rec['non_converged_steps']}")
             if rec.get("local_minimum_h"):
-                notes.append("local minimum at h=" + ", ".join(f"{h:.4g}" for h in rec["local_minimum_h"]))
+                notes.append(f"local minimum at {self.model.load_parameter_name}=" + ", ".join(f"{h:.4g}" for h in rec["local_minimum_h"]))
             if rec.get("projection_not_global_steps"):
                 notes.append(f"projection not global at {rec['projection_not_global_steps']}")
             lines.append(f"{rec['variant']:<10} {rec['formulation']:<22} {rec['converged_steps']:>3}/{rec['steps']:<3} "

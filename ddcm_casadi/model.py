@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .data import MaterialDataset, check_positive
+from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
 
 
@@ -53,8 +53,9 @@ class ContactModel:
         A scalar per step used to label results and plots (obstacle position for the bar).
     youngs_modulus : (m,) or None
         Classical material law; needed for the classical variant.
-    dataset : MaterialDataset or None
-        Material data; needed for the data-driven variant.
+    dataset : MaterialDataset, PointData or None
+        Material data; needed for the data-driven variant. One :class:`MaterialDataset` is shared
+        by every material point; :class:`PointData` gives each point its own data set and metric.
     length_scale : float
         Characteristic length, used only to nondimensionalise.
     name : str
@@ -69,7 +70,7 @@ class ContactModel:
     loads: np.ndarray
     load_parameter: np.ndarray
     youngs_modulus: np.ndarray | None = None
-    dataset: MaterialDataset | None = None
+    dataset: MaterialDataset | PointData | None = None
     length_scale: float = 1.0
     name: str = "model"
     load_parameter_name: str = "step"
@@ -104,6 +105,10 @@ class ContactModel:
         if E is None and self.dataset is None:
             raise InputError("a model needs a Young's modulus, a material data set, or both")
         L = check_positive("length", self.length_scale)
+        if self.dataset is not None:
+            if not isinstance(self.dataset, (MaterialDataset, PointData)):
+                raise InputError("dataset must be a MaterialDataset or PointData")
+            self.dataset.point_metric(m)  # checks a per-point material list against the model
         for k, v in dict(strain_operator=B, gap_operator=G, volumes=w, contact_area=a,
                          gap_offsets=g0, loads=f, load_parameter=lp, youngs_modulus=E,
                          length_scale=L).items():
@@ -134,12 +139,12 @@ class ContactModel:
         """DDCM metric constant ``c`` per material point."""
         if self.dataset is None:
             raise InputError("this model has no material data set")
-        return np.full(self.n_points, self.dataset.c)
+        return self.dataset.point_metric(self.n_points)
 
     def _reference_scales(self) -> dict:
         # Characteristic strain from the load path: obstacle travel over the length.
-        modulus = float(np.max(self.youngs_modulus)) if self.youngs_modulus is not None else self.dataset.c
-        metric = self.dataset.c if self.dataset is not None else modulus
+        modulus = float(np.max(self.youngs_modulus)) if self.youngs_modulus is not None else self.dataset.max_metric
+        metric = self.dataset.max_metric if self.dataset is not None else modulus
         travel = float(np.max(np.abs(self.gap_offsets))) if self.gap_offsets.size else 0.0
         K_diag = (self.strain_operator.T @ sp.diags(self.volumes * modulus) @ self.strain_operator).diagonal()
         k_ref = float(np.max(K_diag)) if K_diag.size else modulus

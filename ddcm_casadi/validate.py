@@ -26,6 +26,24 @@ class FixedPointReport:
     nearest: np.ndarray
 
 
+def _nearest_by_brute_force(data, metric: np.ndarray, step) -> bool:
+    """Is each assigned datum the nearest one of its material's set (no KD-tree involved)?"""
+    sets = getattr(data, "datasets", None)
+    ok = True
+    for i, (e, q, j) in enumerate(zip(step.strain, step.stress, step.data_index)):
+        if sets is None:
+            strain, stress, jj = data.strain, data.stress, j
+        else:
+            k = data.material[i]
+            strain, stress, jj = sets[k].strain, sets[k].stress, j - data.offsets[k]
+            if not 0 <= jj < strain.size:
+                return False  # assigned a datum of another material
+        c = metric[i]
+        d2 = c * (e - strain) ** 2 + (q - stress) ** 2 / c
+        ok &= bool(d2[jj] <= d2.min() * (1 + 1e-12) + 1e-300)
+    return ok
+
+
 def check_fixed_points(problems: ProblemPair, result: PathResult) -> FixedPointReport:
     model = problems.model
     data = model.dataset
@@ -38,9 +56,5 @@ def check_fixed_points(problems: ProblemPair, result: PathResult) -> FixedPointR
         f = problems.fields("mpcc", ex.x[:, 0], ex.p[:, 0])
         err_u.append(float(np.max(np.abs(step.u - f["u"]), initial=0.0)) / s["displacement"])
         err_p.append(float(np.max(np.abs(step.p - f["p"]), initial=0.0)) / s["stress"])
-        ok = True
-        for e, q, j in zip(step.strain, step.stress, step.data_index):
-            d2 = data.c * (e - data.strain) ** 2 + (q - data.stress) ** 2 / data.c
-            ok &= bool(d2[j] <= d2.min() * (1 + 1e-12) + 1e-300)
-        nearest.append(ok)
+        nearest.append(_nearest_by_brute_force(data, model.metric, step))
     return FixedPointReport(np.array(err_u), np.array(err_p), np.array(nearest))

@@ -117,7 +117,7 @@ def solve_classical(problems: ProblemPair, built, formulation_name: str, *, rais
 class DDCMSolver:
     """Alternating projections for one model and one built projection formulation."""
 
-    def __init__(self, problems: ProblemPair, built, *, max_outer: int = 100, enumerate_pairs: int = 8,
+    def __init__(self, problems: ProblemPair, built, *, max_outer: int = 100, enumerate_pairs: int = 4,
                  global_search: bool = True) -> None:
         if problems.projection is None:
             raise InputError("the DDCM variant needs a material data set")

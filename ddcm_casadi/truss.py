@@ -1,0 +1,357 @@
+"""Pin-jointed trusses in 1-D, 2-D and 3-D with rigid planar obstacles (small strain).
+
+A truss is ``nodes`` (nn x d), ``members`` (ne x 2 node indices) with a cross-section and a
+material each, ``supports`` (fixed nodal directions), nodal and distributed loads scaled by a load
+factor per step, and rigid planes, each acting on chosen nodes with the gap
+
+.. math::  g = n \\cdot (X + u) - d \\;\\ge 0 ,
+
+``n`` the unit normal pointing away from the obstacle and ``d`` its offset (possibly moving, one
+value per step). Every member is one material point with strain ``e . (u_j - u_i) / L`` (``e``
+the unit vector from node ``i`` to ``j``). The result is a plain
+:class:`~ddcm_casadi.model.ContactModel` (sparse ``B`` and ``G``, built without a loop over
+members), so every formulation and both variants apply unchanged.
+
+A contact pair's pressure acts on the mean cross-section of the members at its node, so pressures
+are stress-like (well scaled); :meth:`TrussModel.contact_force` gives forces in newtons.
+A bar of N elements is a 1-D truss (:func:`bar_chain`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from .data import MaterialDataset, PointData, check_positive
+from .errors import InputError
+from .model import ContactModel
+
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A rigid plane ``n . x = d`` acting on ``nodes``; the admissible side is ``n . x >= d``.
+
+    Parameters
+    ----------
+    normal : sequence of float
+        Outward normal of the obstacle (normalised here).
+    offset : float or sequence of float
+        ``d`` (m): a constant, or one value per load step (a moving obstacle).
+    nodes : sequence of int
+        Nodes that may touch this obstacle (one contact pair each).
+    """
+
+    normal: Sequence[float]
+    offset: float | Sequence[float]
+    nodes: Sequence[int]
+
+
+def _as_per_member(name: str, value, ne: int) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 0:
+        a = np.full(ne, float(a))
+    if a.shape != (ne,):
+        raise InputError(f"{name} must be one number or one per member ({ne}), got {a.size}")
+    if not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise InputError(f"{name} must be finite and positive for every member")
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class TrussModel(ContactModel):
+    """A :class:`ContactModel` that remembers its truss geometry (for results and plots)."""
+
+    nodes: np.ndarray | None = None
+    members: np.ndarray | None = None
+    free_dofs: np.ndarray | None = None
+    contact_nodes: np.ndarray | None = None
+    contact_normals: np.ndarray | None = None
+    member_area: np.ndarray | None = None
+
+    @property
+    def dimension(self) -> int:
+        return self.nodes.shape[1]
+
+    def nodal_displacements(self, u: np.ndarray) -> np.ndarray:
+        """``(nn, d)`` nodal displacements from the free unknowns ``u`` (fixed ones are 0)."""
+        full = np.zeros(self.nodes.size)
+        full[self.free_dofs] = u
+        return full.reshape(self.nodes.shape)
+
+    def contact_force(self, p: np.ndarray) -> np.ndarray:
+        """Contact forces (N) from contact pressures: ``area * p``, one per pair."""
+        return self.contact_area * np.asarray(p)
+
+    def member_force(self, stress: np.ndarray) -> np.ndarray:
+        return self.member_area * np.asarray(stress)
+
+
+def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=None,
+                distributed_loads=None, obstacles: Sequence[Obstacle] = (), load_factors=None,
+                dataset: MaterialDataset | Sequence[MaterialDataset] | None = None, material=None,
+                name: str = "truss") -> TrussModel:
+    """Build a truss contact model.
+
+    Parameters
+    ----------
+    nodes : (nn, d) array_like
+        Node coordinates (m), ``d`` in {1, 2, 3}.
+    members : (ne, 2) array_like of int
+        Node pairs.
+    area, youngs_modulus : float or (ne,)
+        Cross-sections (m^2) and moduli (Pa; omit for a data-only model).
+    supports : (nn, d) array_like of bool, or sequence of (node, axes)
+        Fixed directions, e.g. ``[(0, "xy"), (4, "y")]``.
+    loads : (nn, d) array_like, optional
+        Reference nodal forces (N), multiplied by the load factor of each step.
+    distributed_loads : (ne, d) array_like, optional
+        Reference load per unit length on each member (N/m), lumped half to each end node.
+    obstacles : sequence of Obstacle
+    load_factors : (n_steps,) array_like, optional
+        Load factor per step. Default: ones, as many steps as the obstacle offsets have (or one).
+    dataset : MaterialDataset or sequence of MaterialDataset, optional
+        Data for the DDCM variant: one set for all members, or one per material.
+    material : (ne,) array_like of int, optional
+        Data set of each member when several are given.
+    """
+    X = np.asarray(nodes, dtype=float)
+    if X.ndim == 1:
+        X = X[:, None]
+    if X.ndim != 2 or X.shape[1] not in (1, 2, 3) or X.shape[0] < 2:
+        raise InputError("nodes must be a list of at least two points with 1, 2 or 3 coordinates each")
+    if not np.all(np.isfinite(X)):
+        raise InputError("node coordinates must be finite")
+    nn, d = X.shape
+    M = np.asarray(members)
+    if M.ndim != 2 or M.shape[1] != 2 or M.shape[0] == 0 or not np.issubdtype(M.dtype, np.integer):
+        raise InputError("members must be a non-empty list of [node_i, node_j] integer pairs")
+    if M.min() < 0 or M.max() >= nn:
+        raise InputError(f"member refers to a node outside 0..{nn - 1}")
+    ne = M.shape[0]
+    vec = X[M[:, 1]] - X[M[:, 0]]
+    length = np.linalg.norm(vec, axis=1)
+    if np.any(length <= 0):
+        raise InputError(f"member {int(np.argmin(length))} has zero length")
+    e = vec / length[:, None]
+    A = _as_per_member("area", area, ne)
+    E = None if youngs_modulus is None else _as_per_member("youngs_modulus", youngs_modulus, ne)
+
+    fixed = _supports(supports, nn, d)
+    free = np.flatnonzero(~fixed.ravel())
+    if free.size == 0:
+        raise InputError("every degree of freedom is fixed")
+    # B (ne x nn d): -e/L at node i, +e/L at node j; then keep the free columns.
+    rows = np.repeat(np.arange(ne), 2 * d)
+    cols = np.concatenate([M[:, [0]] * d + np.arange(d), M[:, [1]] * d + np.arange(d)], axis=1).ravel()
+    vals = np.concatenate([-e / length[:, None], e / length[:, None]], axis=1).ravel()
+    B = sp.csr_matrix((vals, (rows, cols)), shape=(ne, nn * d))[:, free]
+
+    f_ref = np.zeros((nn, d))
+    if loads is not None:
+        f_ref += _nodal_array("loads", loads, nn, d)
+    if distributed_loads is not None:
+        q = np.asarray(distributed_loads, dtype=float)
+        if q.shape != (ne, d) or not np.all(np.isfinite(q)):
+            raise InputError(f"distributed_loads must be finite, one {d}-vector per member")
+        half = 0.5 * q * length[:, None]
+        np.add.at(f_ref, M[:, 0], half)
+        np.add.at(f_ref, M[:, 1], half)
+
+    # Contact pairs: one per (obstacle, node).
+    normals, pair_nodes, offsets = [], [], []
+    steps_from_obstacles = None
+    for k, ob in enumerate(obstacles):
+        n = np.asarray(ob.normal, dtype=float).ravel()
+        if n.size != d or not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
+            raise InputError(f"obstacle {k}: normal must be a non-zero {d}-vector")
+        n = n / np.linalg.norm(n)
+        nodes_k = np.asarray(ob.nodes).ravel()
+        if nodes_k.size == 0 or not np.issubdtype(nodes_k.dtype, np.integer) or nodes_k.min() < 0 or nodes_k.max() >= nn:
+            raise InputError(f"obstacle {k}: nodes must be a non-empty list of node indices 0..{nn - 1}")
+        off = np.asarray(ob.offset, dtype=float).ravel()
+        if not np.all(np.isfinite(off)) or off.size == 0:
+            raise InputError(f"obstacle {k}: offset must be finite")
+        if off.size > 1:
+            if steps_from_obstacles not in (None, off.size):
+                raise InputError("obstacles with offsets per step must all have the same number of steps")
+            steps_from_obstacles = off.size
+        for node in nodes_k:
+            normals.append(n)
+            pair_nodes.append(int(node))
+            offsets.append(off)
+    nc = len(pair_nodes)
+    lf = None if load_factors is None else np.asarray(load_factors, dtype=float).ravel()
+    if lf is not None and (lf.size == 0 or not np.all(np.isfinite(lf))):
+        raise InputError("load_factors must be a non-empty list of finite numbers")
+    n_steps = lf.size if lf is not None else (steps_from_obstacles or 1)
+    if steps_from_obstacles is not None and steps_from_obstacles != n_steps:
+        raise InputError(f"{n_steps} load factors but obstacle offsets for {steps_from_obstacles} steps")
+    if lf is None:
+        lf = np.ones(n_steps)
+    dof = (np.asarray(pair_nodes, dtype=np.intp)[:, None] * d + np.arange(d)).ravel() if nc else np.zeros(0, np.intp)
+    G_full = sp.csr_matrix((np.asarray(normals).ravel() if nc else np.zeros(0),
+                            (np.repeat(np.arange(nc), d), dof)), shape=(nc, nn * d))
+    G = G_full[:, free]
+    if nc:
+        base = np.array([normals[i] @ X[pair_nodes[i]] for i in range(nc)])
+        off = np.column_stack([np.broadcast_to(o, (n_steps,)) for o in offsets])
+        gap0 = base[None, :] - off
+    else:
+        gap0 = np.zeros((n_steps, 0))
+    # Contact area: mean section of the members at the node (pressures stay stress-like).
+    section_sum = np.bincount(M.ravel(), weights=np.repeat(A, 2), minlength=nn)
+    member_count = np.bincount(M.ravel(), minlength=nn)
+    node_area = section_sum / np.maximum(member_count, 1)
+    contact_area = node_area[np.asarray(pair_nodes, dtype=np.intp)] if nc else np.zeros(0)
+
+    data = _data(dataset, material, ne)
+    size = float(np.max(np.ptp(X, axis=0))) or float(np.max(length))
+    return TrussModel(
+        strain_operator=B, volumes=A * length, gap_operator=G, contact_area=contact_area,
+        gap_offsets=gap0, loads=lf[:, None] * f_ref.ravel()[free][None, :], load_parameter=np.arange(n_steps, dtype=float)
+        if load_factors is None else lf, youngs_modulus=E, dataset=data, length_scale=size, name=name,
+        load_parameter_name="step" if load_factors is None else "load factor",
+        nodes=X, members=M.astype(np.intp), free_dofs=free, contact_nodes=np.asarray(pair_nodes, dtype=np.intp),
+        contact_normals=np.asarray(normals).reshape(nc, d), member_area=A)
+
+
+def _supports(supports, nn: int, d: int) -> np.ndarray:
+    arr = np.asarray(supports, dtype=object)
+    if arr.shape == (nn, d) and all(isinstance(v, (bool, np.bool_)) for v in arr.ravel()):
+        return arr.astype(bool)
+    fixed = np.zeros((nn, d), dtype=bool)
+    for entry in supports:
+        try:
+            node, axes = entry
+            node = int(node)
+        except (TypeError, ValueError):
+            raise InputError(f"support {entry!r} must be (node, axes) such as (0, 'xy')") from None
+        if not 0 <= node < nn:
+            raise InputError(f"support at node {node}: nodes are numbered 0..{nn - 1}")
+        axes = str(axes).lower()
+        bad = [a for a in axes if a not in AXES[:d]]
+        if bad or not axes:
+            raise InputError(f"support at node {node}: axes must be letters from {AXES[:d]!r}, got {axes!r}")
+        for a in axes:
+            fixed[node, AXES.index(a)] = True
+    return fixed
+
+
+def _nodal_array(name: str, value, nn: int, d: int) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 1 and d == 1:
+        a = a[:, None]
+    if a.shape != (nn, d) or not np.all(np.isfinite(a)):
+        raise InputError(f"{name} must be finite, one {d}-vector per node")
+    return a
+
+
+def _data(dataset, material, ne: int):
+    if dataset is None:
+        return None
+    if isinstance(dataset, (MaterialDataset, PointData)):
+        if material is not None and not isinstance(dataset, PointData):
+            return PointData([dataset], material)
+        return dataset
+    sets = list(dataset)
+    if len(sets) == 1 and material is None:
+        return sets[0]
+    if material is None:
+        raise InputError("several data sets need a 'material' index per member")
+    return PointData(sets, material)
+
+
+class StoppedBarModel(TrussModel):
+    """A bar fixed at ``x = 0``, pushed at its tip by a moving obstacle, with fixed stops behind
+    interior nodes. It has a closed form (see :meth:`closed_form`)."""
+
+    def closed_form(self, step: int):
+        """The classical solution by the 1-D obstacle problem's upper concave envelope.
+
+        With no loads and a uniform bar, the displacement minimises the Dirichlet energy with
+        ``u(0) = 0``, ``u(L) <= w`` and ``u(x_j) >= -s_j``: for ``w >= 0`` it is 0, otherwise the
+        least concave majorant of the points ``(0, 0)``, ``(x_j, -s_j)`` and ``(L, w)`` (linear
+        between touching nodes). Pressures are the jumps of the stress ``E u'``.
+        """
+        if self.youngs_modulus is None:
+            return None
+        x = self.nodes[:, 0]
+        E = float(self.youngs_modulus[0])
+        w = self.gap_offsets[step, 0]  # tip pair first: g = w - u_N, so gap0 = w = h - l0
+        stops = self.gap_offsets[step, 1:]  # g_j = u_j + s_j
+        n_free = x.size - 1
+        if w >= 0:
+            return np.zeros(n_free), np.zeros(self.n_contacts)
+        pts_x = np.concatenate([[x[0]], x[self.contact_nodes[1:]], [x[-1]]])
+        pts_y = np.concatenate([[0.0], -stops, [w]])
+        order = np.argsort(pts_x, kind="stable")
+        hull = _upper_hull(pts_x[order], pts_y[order])
+        hx, hy = pts_x[order][hull], pts_y[order][hull]
+        u = np.interp(x, hx, hy)
+        slope = np.diff(u) / np.diff(x)
+        stress = E * slope
+        p = np.empty(self.n_contacts)
+        p[0] = -stress[-1]
+        for i, node in enumerate(self.contact_nodes[1:], start=1):
+            p[i] = stress[node - 1] - stress[node]  # jump of the normal force / A
+        return u[1:], p
+
+
+def _upper_hull(x: np.ndarray, y: np.ndarray) -> list[int]:
+    """Indices of the upper concave envelope of points sorted by ``x`` (monotone chain)."""
+    hull: list[int] = []
+    for i in range(x.size):
+        while len(hull) >= 2:
+            a, b = hull[-2], hull[-1]
+            if (x[b] - x[a]) * (y[i] - y[a]) - (y[b] - y[a]) * (x[i] - x[a]) >= 0:
+                hull.pop()  # b lies on or below the chord a-i
+            else:
+                break
+        hull.append(i)
+    return hull
+
+
+def bar_chain(*, length: float, elements: int, area: float = 1.0, youngs_modulus: float | None = None,
+              tip_positions, stops: dict[int, float] | None = None,
+              dataset: MaterialDataset | None = None, name: str = "bar with stops") -> StoppedBarModel:
+    """An N-element bar fixed at ``x = 0``, pushed by a rigid obstacle at ``x = h`` (as in the
+    paper), with fixed stops behind interior nodes that close one after another.
+
+    Parameters
+    ----------
+    length : float
+        ``l0`` (m).
+    elements : int
+        Number of equal elements ``N``.
+    tip_positions : array_like
+        Obstacle position ``h`` per step (m).
+    stops : {node: clearance}, optional
+        A rigid stop at ``x_j - s_j`` behind node ``j`` (``0 < j < N``): ``u_j >= -s_j``.
+    """
+    L = check_positive("length", length)
+    if isinstance(elements, bool) or int(elements) != elements or elements < 1:
+        raise InputError(f"elements must be a positive integer, got {elements!r}")
+    N = int(elements)
+    x = np.linspace(0.0, L, N + 1)
+    h = np.asarray(tip_positions, dtype=float).ravel()
+    if h.size == 0 or not np.all(np.isfinite(h)):
+        raise InputError("tip positions must be a non-empty list of finite numbers")
+    obstacles = [Obstacle(normal=[-1.0], offset=-h, nodes=[N])]
+    for node, s in (stops or {}).items():
+        if not 0 < int(node) < N:
+            raise InputError(f"stop at node {node}: interior nodes are 1..{N - 1}")
+        s = float(s)
+        if not np.isfinite(s) or s < 0:
+            raise InputError(f"stop at node {node}: clearance must be finite and >= 0")
+        obstacles.append(Obstacle(normal=[1.0], offset=x[int(node)] - s, nodes=[int(node)]))
+    base = truss_model(nodes=x[:, None], members=np.column_stack([np.arange(N), np.arange(1, N + 1)]),
+                       area=area, youngs_modulus=youngs_modulus, supports=[(0, "x")], obstacles=obstacles,
+                       load_factors=None, dataset=dataset, name=name)
+    kw = {f: getattr(base, f) for f in base.__dataclass_fields__ if not f.startswith("_")}
+    kw.update(load_parameter=h, load_parameter_name="h", length_scale=L)
+    return StoppedBarModel(**kw)
