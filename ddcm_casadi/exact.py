@@ -38,6 +38,18 @@ class ExactSolution:
     objective: np.ndarray  # (k,) scaled (0 for the classical problem)
     partition: np.ndarray  # (nc, k) FREE / CONTACT / GRAZING
     found: np.ndarray      # (k,) bool: a sign-feasible branch exists
+    n_feasible: np.ndarray  # (k,) number of sign-feasible partitions (mcp: solutions of the LCP)
+
+
+@dataclass
+class Branch:
+    """One sign-feasible partition's solution (scaled), with the multipliers of its active pairs."""
+
+    partition: tuple
+    z: np.ndarray
+    objective: float
+    gap_multiplier: np.ndarray  # per pair; 0 where g = 0 is not imposed
+    pressure_multiplier: np.ndarray  # per pair; 0 where p = 0 is not imposed
 
 
 def _const(expr, args) -> sp.csc_matrix:
@@ -118,6 +130,7 @@ class ExactEnumerator:
         best_obj = np.full(k, np.inf)
         best_z = np.full((self.nz, k), np.nan)
         best_part = np.zeros((self.nc, k), dtype=int)
+        n_feasible = np.zeros(k, dtype=int)
         for part in self.partitions:
             lu, on_gap, on_p = self._factor(part)
             if lu is None:
@@ -129,6 +142,7 @@ class ExactEnumerator:
             gap = self.Gz @ zsol + g0
             p = zsol[self.nx:]
             ok = np.all(gap >= -self.sign_tol, axis=0) & np.all(p >= -self.sign_tol, axis=0) & np.all(np.isfinite(zsol), axis=0)
+            n_feasible += ok
             if self.problem.kind == "mcp":
                 obj = np.zeros(k)
             else:
@@ -141,4 +155,67 @@ class ExactEnumerator:
             best_z[:, better] = zsol[:, better]
             best_part[:, better] = np.asarray(part)[:, None]
         return ExactSolution(x=best_z[:self.nx], p=best_z[self.nx:], objective=best_obj,
-                             partition=best_part, found=np.isfinite(best_obj))
+                             partition=best_part, found=np.isfinite(best_obj), n_feasible=n_feasible)
+
+    def branches(self, params: np.ndarray) -> list[Branch]:
+        """Every sign-feasible partition's solution for one parameter vector.
+
+        For a projection (``mpcc``) with the multipliers of the imposed ``g = 0`` and ``p = 0``;
+        for a classical problem (``mcp``) these are the solutions of the LCP (a solution with a
+        biactive pair appears once per partition that admits it: see :meth:`solutions`).
+        """
+        P = np.asarray(params, float).reshape(-1, 1)
+        R0, g0, q, f0 = self._affine_parts(P)
+        mpcc = self.problem.kind == "mpcc"
+        out = []
+        for part in self.partitions:
+            lu, on_gap, on_p = self._factor(part)
+            if lu is None:
+                continue
+            d = np.vstack([-R0, -g0[on_gap], np.zeros((on_p.size, 1))])
+            sol = lu.solve(np.vstack([-q, d]) if mpcc else d)[:, 0]
+            z = sol[:self.nz]
+            gap = (self.Gz @ z + g0[:, 0])
+            if not (np.all(np.isfinite(z)) and np.all(gap >= -self.sign_tol) and np.all(z[self.nx:] >= -self.sign_tol)):
+                continue
+            mg, mp = np.zeros(self.nc), np.zeros(self.nc)
+            obj = 0.0
+            if mpcc:
+                lam = sol[self.nz:]
+                ne = self.Rz.shape[0]
+                mg[on_gap] = lam[ne:ne + on_gap.size]
+                mp[on_p] = lam[ne + on_gap.size:]
+                obj = float(0.5 * z @ (self.H @ z) + q[:, 0] @ z + f0[0])
+            out.append(Branch(tuple(part), z, obj, mg, mp))
+        return out
+
+    @staticmethod
+    def _distinct(branches: list[Branch], tol: float) -> list[Branch]:
+        out: list[Branch] = []
+        for b in branches:
+            if not any(np.max(np.abs(b.z - o.z), initial=0.0) <= tol * max(1.0, float(np.max(np.abs(o.z), initial=0.0)))
+                       for o in out):
+                out.append(b)
+        return out
+
+    def solutions(self, params: np.ndarray, *, tol: float = 1e-8) -> list[Branch]:
+        """The distinct sign-feasible branch solutions (classical: every solution of the LCP)."""
+        return self._distinct(self.branches(params), tol)
+
+    def local_minima(self, params: np.ndarray, *, tol: float = 1e-8) -> list[Branch]:
+        """The distinct local minima of the projection (B-stationary branch solutions), best first.
+
+        A branch solution is a local minimum of the MPCC when it is optimal on every piece of
+        ``Z_E`` that contains it; the pieces differ only at biactive pairs (``g = p = 0``), so it is
+        enough that the multipliers of both ``g >= 0`` and ``p >= 0`` there have the sign of an
+        active inequality (here ``<= 0``: the Lagrangian is ``f + lambda^T c``).
+        """
+        minima: list[Branch] = []
+        for b in self.solutions(params, tol=tol):
+            scale = tol * max(1.0, float(np.max(np.abs(np.concatenate([b.gap_multiplier, b.pressure_multiplier])),
+                                                initial=0.0)))
+            both = np.array(b.partition) == GRAZING
+            if np.any(b.gap_multiplier[both] > scale) or np.any(b.pressure_multiplier[both] > scale):
+                continue
+            minima.append(b)
+        return sorted(minima, key=lambda b: b.objective)
