@@ -89,7 +89,7 @@ class ContactQP:
             raise InputError(f"QP solver {solver!r} is not available in this CasADi build")
         self.model = model
         s = model.scales
-        U, S, F = s["displacement"], s["stress"], s["force"]
+        U, F = s["displacement"], s["force"]
         self._U = U
         n, nc = model.n_dofs, model.n_contacts
         K = model.stiffness() * (U / F)

@@ -173,6 +173,8 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
         nodes_k = np.asarray(ob.nodes).ravel()
         if nodes_k.size == 0 or not np.issubdtype(nodes_k.dtype, np.integer) or nodes_k.min() < 0 or nodes_k.max() >= nn:
             raise InputError(f"obstacle {k}: nodes must be a non-empty list of node indices 0..{nn - 1}")
+        if np.unique(nodes_k).size != nodes_k.size:
+            raise InputError(f"obstacle {k}: a node is listed twice")
         off = np.asarray(ob.offset, dtype=float).ravel()
         if not np.all(np.isfinite(off)) or off.size == 0:
             raise InputError(f"obstacle {k}: offset must be finite")
@@ -206,6 +208,9 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
     # Contact area: mean section of the members at the node (pressures stay stress-like).
     section_sum = np.bincount(M.ravel(), weights=np.repeat(A, 2), minlength=nn)
     member_count = np.bincount(M.ravel(), minlength=nn)
+    loose = [node for node in pair_nodes if member_count[node] == 0]
+    if loose:
+        raise InputError(f"contact node {loose[0]} belongs to no member")
     node_area = section_sum / np.maximum(member_count, 1)
     contact_area = node_area[np.asarray(pair_nodes, dtype=np.intp)] if nc else np.zeros(0)
 
@@ -343,7 +348,7 @@ def bar_chain(*, length: float, elements: int, area: float = 1.0, youngs_modulus
         raise InputError("tip positions must be a non-empty list of finite numbers")
     obstacles = [Obstacle(normal=[-1.0], offset=-h, nodes=[N])]
     for node, s in (stops or {}).items():
-        if not 0 < int(node) < N:
+        if isinstance(node, bool) or not isinstance(node, (int, np.integer)) or not 0 < node < N:
             raise InputError(f"stop at node {node}: interior nodes are 1..{N - 1}")
         s = float(s)
         if not np.isfinite(s) or s < 0:
