@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
+import formulations
 from ddcm_casadi import compare
+from ddcm_casadi.problem import build_problems
 from ddcm_casadi.validate import check_fixed_points
 
 FACTORS = [1e-3, 1e-1, 1e1, 1e3, 1e6]
@@ -37,3 +39,27 @@ def test_plain_uzawa_follows_its_contraction_rate(paper):
     predicted = np.log(1e-11) / np.log(k / (k + gamma))  # from a unit initial multiplier error
     assert 0.5 * predicted <= plain.array("outer_iterations").max() <= 1.5 * predicted
     assert fast.array("outer_iterations").max() <= 10
+
+
+def test_ddcm_projection_onto_a_tiny_contact_pressure(paper):
+    """Dense data: deep in contact, the assigned datum has a tiny stress (the one nearest the origin
+    of 1e5 Hookean points). ``Phi`` rounds its corner at the scale of that pressure, so the inner
+    Newton stalls above its tolerance after the first multiplier update; the update is finished on
+    the contact branch. The result is the exact projection and a fixed point of the multiplier
+    update (``lam = theta``, ``Phi = 0``)."""
+    problems = build_problems(paper)
+    built = formulations.get("augmented_lagrangian").build(problems.projection)
+    eps, sig = -3.00003e-7, -6.00006e4
+    free = built.solve(problems.projection_params(0, [eps], [sig]), np.zeros(2), np.zeros(1))
+    assert free.converged, free.message
+    last = paper.n_steps - 1
+    params = problems.projection_params(last, [eps], [sig])
+    sol = built.solve(params, free.x, free.p, free.state)
+    assert sol.converged, sol.message
+    f = problems.fields("mpcc", sol.x, sol.p)
+    w = paper.load_parameter[last] - paper.length  # the contact branch is the nearer: u = w, p = -sig
+    assert abs(f["u"][0] - w) <= 1e-12 and abs(f["p"][0] + sig) <= 1e-8 * abs(sig)
+    assert np.array_equal(sol.state["lam"], sol.state["theta"])
+    z = np.concatenate([sol.x, sol.p, sol.state["eta"], sol.state["theta"], np.zeros(1)])
+    phi = built.system.phi(z, np.concatenate([params, sol.state["lam"], [sol.state["rho"], 0.0, 0.0]]))
+    assert abs(float(phi)) <= 1e-12
