@@ -1,6 +1,10 @@
 """``ddcm-compare``: every contact formulation, classical and DDCM, on one load path.
 
-With no arguments it runs the paper's example (Section 4) and prints a summary table.
+With no arguments it runs the paper's example (Section 4) and prints a summary table;
+--config CASE runs a case file instead (TOML or JSON: the paper's bar, an N-element bar with
+stops, or a 1-D/2-D/3-D truss; the format is described in ddcm_casadi/config.py). --out DIR
+writes results.csv, results.json (for models other than the one-unknown bar with the per-step
+fields of every run: nodal displacements, contact forces, ...) and the figures.
 """
 
 from __future__ import annotations
@@ -19,9 +23,11 @@ import formulations as registry
 
 from . import __version__
 from .config import Case, default_case, load_case
+from .data import MaterialDataset, PointData
 from .errors import DDCMError, InputError
 from .harness import VARIANTS, Comparison, compare
 from .io import prepare_output_dir, write_csv_atomic, write_json_atomic
+from .model import BarModel
 
 EXIT_INPUT = 2
 EXIT_NOT_CONVERGED = 3
@@ -49,7 +55,7 @@ def _one_line(message: object) -> str:
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="ddcm-compare", description=__doc__,
                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", metavar="CASE.toml", help="case file (default: the paper's example)")
+    p.add_argument("--config", metavar="CASE", help="case file, .toml or .json (default: the paper's example)")
     p.add_argument("--formulations", metavar="A,B", help=f"subset of: {','.join(registry.available())}")
     p.add_argument("--variants", metavar="A,B",
                    help=f"subset of: {','.join(VARIANTS)} (default: those the case supports)")
@@ -115,7 +121,31 @@ class _Progress:
             print(msg, file=sys.stderr, flush=True)
 
 
+def _dataset_info(dataset: MaterialDataset) -> dict:
+    """Size, metric and strain range of one data set."""
+    return dict(points=len(dataset), c=dataset.c, strain_min=float(dataset.strain.min()),
+                strain_max=float(dataset.strain.max()))
+
+
 def parameters(case: Case, cmp: Comparison) -> dict:
+    """The ``parameters`` record of ``results.json``: model, data and resolved formulation options.
+
+    Parameters
+    ----------
+    case : Case
+        The case that was run.
+    cmp : Comparison
+        Its results (for the formulations' resolved options).
+
+    Returns
+    -------
+    dict
+        For the paper's bar (:class:`~ddcm_casadi.model.BarModel`): ``length``, ``area``,
+        ``youngs_modulus``, ``positions``; for any other model its ``name``, sizes (``n_dofs``,
+        ``n_points``, ``n_contacts``, ``n_steps``), ``load_parameter_name`` and values, and the
+        moduli; ``data`` describes the data set (``sets``, one entry per material, when there are
+        several). Always ``case``, ``ddcm_max_outer`` and ``formulations``.
+    """
     m = case.model
     forms = {}
     for f in cmp.formulations:
@@ -124,13 +154,51 @@ def parameters(case: Case, cmp: Comparison) -> dict:
             opts["gamma_used"] = f.gamma(cmp.problems.classical)
         forms[f.name] = opts
     data = None
-    if m.dataset is not None:
-        data = dict(points=len(m.dataset), c=m.dataset.c, strain_min=float(m.dataset.strain.min()),
-                    strain_max=float(m.dataset.strain.max()))
-    return dict(case=case.source, length=m.length, area=m.area,
-                youngs_modulus=None if m.youngs_modulus is None else float(m.youngs_modulus[0]),
-                positions=m.load_parameter.tolist(), data=data, ddcm_max_outer=case.ddcm_max_outer,
-                formulations=forms)
+    if isinstance(m.dataset, MaterialDataset):
+        data = _dataset_info(m.dataset)
+    elif isinstance(m.dataset, PointData):
+        data = dict(points=len(m.dataset), sets=[_dataset_info(d) for d in m.dataset.datasets],
+                    material=m.dataset.material.tolist())
+    if isinstance(m, BarModel):
+        return dict(case=case.source, length=m.length, area=m.area,
+                    youngs_modulus=None if m.youngs_modulus is None else float(m.youngs_modulus[0]),
+                    positions=m.load_parameter.tolist(), data=data, ddcm_max_outer=case.ddcm_max_outer,
+                    formulations=forms)
+    E = None
+    if m.youngs_modulus is not None:
+        moduli = np.unique(m.youngs_modulus)
+        E = float(moduli[0]) if moduli.size == 1 else m.youngs_modulus.tolist()
+    model = dict(name=m.name, type=type(m).__name__, n_dofs=m.n_dofs, n_points=m.n_points,
+                 n_contacts=m.n_contacts, n_steps=m.n_steps, load_parameter_name=m.load_parameter_name,
+                 load_parameter=m.load_parameter.tolist(), youngs_modulus=E)
+    if getattr(m, "nodes", None) is not None:
+        model.update(dimension=int(m.nodes.shape[1]), n_nodes=int(m.nodes.shape[0]),
+                     n_members=int(m.members.shape[0]))
+    return dict(case=case.source, **model, data=data, ddcm_max_outer=case.ddcm_max_outer, formulations=forms)
+
+
+def _json_array(a: np.ndarray) -> list:
+    """``a`` as nested lists, with ``None`` for NaN and infinities (results.json stays strict JSON)."""
+    a = np.asarray(a)
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        obj = a.astype(object)
+        obj[~np.isfinite(a)] = None
+        return obj.tolist()
+    return a.tolist()
+
+
+def fields(cmp: Comparison) -> dict[str, dict[str, list]] | None:
+    """Per-step fields of every run, keyed ``"variant/formulation"`` (``None`` for the paper's bar).
+
+    Each run maps the names of :meth:`~ddcm_casadi.harness.Comparison.fields` (``u``,
+    ``contact_pressure``, ``contact_force``, ``strain``, ``stress``, for trusses
+    ``nodal_displacement`` and ``member_force``, for DDCM the assigned data) to nested lists,
+    steps first. The one-unknown bar has none: its CSV rows already hold ``u`` and ``p``.
+    """
+    if cmp._scalar():
+        return None
+    return {f"{variant}/{name}": {k: _json_array(v) for k, v in cmp.fields(variant, name).items()}
+            for (variant, name) in cmp.results}
 
 
 def versions() -> dict:
@@ -147,6 +215,9 @@ def run(argv: list[str] | None = None) -> int:
             raise InputError(f"unknown formulation {n!r}; available: {', '.join(registry.available())}")
     variants = _variants(args.variants, case)
     out = prepare_output_dir(args.out) if args.out else None
+    save_figures = None
+    if out is not None and not args.no_plots:
+        from .plots import save_figures  # matplotlib only when a plot is drawn; before any result is written
     selection = {n: case.formulation_options.get(n, {}) for n in names}
 
     progress = _Progress(case.model.n_steps, not args.quiet)
@@ -160,13 +231,14 @@ def run(argv: list[str] | None = None) -> int:
         # Build both records before writing either, so a failure here leaves no partial results.
         rows = cmp.rows()
         doc = dict(parameters=parameters(case, cmp), versions=versions(), summary=cmp.summary())
+        per_step = fields(cmp)
+        if per_step is not None:
+            doc["fields"] = per_step
         write_csv_atomic(out / "results.csv", rows)
         write_json_atomic(out / "results.json", doc)
         written = ["results.csv", "results.json"]
-        if not args.no_plots:
-            from .plots import save_fig2  # matplotlib only when a plot is drawn
-
-            written += [p.name for p in save_fig2(cmp, out)]
+        if save_figures is not None:
+            written += [p.name for p in save_figures(cmp, out)]
         print(f"wrote {', '.join(written)} to {out}", file=sys.stderr)
     failed = [r for r in cmp.results.values() if not r.converged]
     if failed:

@@ -124,6 +124,12 @@ class Comparison:
                 out[k] = r.array(k)
         return out
 
+    def max_abs_strain(self, points=None) -> float:
+        """Largest ``|strain|`` over every run and step, of all material points or of ``points``
+        (an index or boolean mask): compare it with the data range."""
+        keep = slice(None) if points is None else points
+        return max(float(np.max(np.abs(self.fields(v, f)["strain"][:, keep]))) for v, f in self.results)
+
     def _scalar(self) -> bool:
         """One unknown and one pair (the paper's bar): the CSV holds ``u`` and ``p`` themselves."""
         return self.model.n_dofs == 1 and self.model.n_contacts <= 1 and self.model.n_points == 1
@@ -273,3 +279,14 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
             r.build_seconds = build
             out.results[(variant, form.name)] = r
     return out
+
+
+def compare_and_plot(model: ContactModel, out_dir=None, formulations=None, **options) -> Comparison:
+    """:func:`compare`, then the figures of :func:`ddcm_casadi.plots.save_figures` in ``out_dir``
+    (if given; matplotlib is imported only then)."""
+    cmp = compare(model, formulations, **options)
+    if out_dir is not None:
+        from .plots import save_figures
+
+        save_figures(cmp, out_dir)
+    return cmp
