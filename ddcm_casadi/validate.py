@@ -26,7 +26,7 @@ class FixedPointReport:
     nearest: np.ndarray
 
 
-def _nearest_by_brute_force(data, metric: np.ndarray, step) -> bool:
+def nearest_by_brute_force(data, metric: np.ndarray, step) -> bool:
     """Is each assigned datum the nearest one of its material's set (no KD-tree involved)?"""
     sets = getattr(data, "datasets", None)
     ok = True
@@ -56,5 +56,5 @@ def check_fixed_points(problems: ProblemPair, result: PathResult) -> FixedPointR
         f = problems.fields("mpcc", ex.x[:, 0], ex.p[:, 0])
         err_u.append(float(np.max(np.abs(step.u - f["u"]), initial=0.0)) / s["displacement"])
         err_p.append(float(np.max(np.abs(step.p - f["p"]), initial=0.0)) / s["stress"])
-        nearest.append(_nearest_by_brute_force(data, model.metric, step))
+        nearest.append(nearest_by_brute_force(data, model.metric, step))
     return FixedPointReport(np.array(err_u), np.array(err_p), np.array(nearest))

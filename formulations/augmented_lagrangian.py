@@ -34,8 +34,9 @@ after a multiplier update although the full Newton step converges, and (ii) the 
 cannot be evaluated below ``|Hessian| * eps * |x|`` (3e-10 with ``|x| = 1``), above the inner
 ``residual_tol``. When the inner Newton fails, the update is therefore finished on the branch
 the iterate lies on (``a_i = 0`` where ``a_i <= b_i``, else ``b_i = 0``): Newton on that smooth
-system (same tolerances), accepted only if strictly complementary (``b_i > 0``, resp.
-``a_i > 0``). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
+system (same tolerances), with pairs whose sign fails switching branch, accepted only if strictly
+complementary (``b_i > 0``, resp. ``a_i > 0``) or a B-stationary corner
+(:meth:`formulations.ncp.FBSystem.branch_finish`). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
 ``-grad b_i``), so the branch KKT point with its multiplier ``theta`` solves the ``Phi``-KKT
 system exactly, and ``lam = theta`` is a fixed point of the multiplier update (``c = 0``): the
 result is the exact projection, as at ordinary convergence.
@@ -53,7 +54,7 @@ import casadi as ca
 import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
-from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, newton_solve, plus, smoothed_newton_solve
+from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
@@ -133,7 +134,6 @@ class _BuiltAL(BuiltFormulation):
             self._jac = SparseJacobian(self._rj)
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)
-            self.branch = _BranchSystem(problem, gamma, 1.0)
             # The inner solver reads these names from its options.
             self._inner = _InnerOptions(opts.newton_tol, opts.residual_tol, opts.max_iter, opts.smoothing)
 
@@ -199,7 +199,7 @@ class _BuiltAL(BuiltFormulation):
             newton_its += res.iterations
             if not res.converged:
                 # Finish on the branch of the failed iterate, else of the start (see the module notes).
-                finish = self.branch.solve((res.z, z), params, self._inner)
+                finish = self.system.branch_finish((res.z, z), P, self._inner)
                 if finish is None:
                     message = f"inner Newton failed at update {k}: {res.message}"
                     break
@@ -229,51 +229,6 @@ class _BuiltAL(BuiltFormulation):
         st = dict(st, lam=lam, rho=rho)
         return self._finish(x, p, params, converged=converged, iterations=newton_its, outer=k, state=st,
                             message=message)
-
-
-class _BranchSystem:
-    """The projection's KKT system with each pair on one branch of its complementarity.
-
-    Same unknowns as the DDCM :class:`~formulations.ncp.FBSystem` ``(x, p, eta, theta, nu)``;
-    a selector ``s_i`` (a parameter) picks the piece ``-a_i = 0`` (contact, ``s_i = 1``) or
-    ``-b_i = 0`` (free, ``s_i = 0``), with multiplier ``theta_i``, and ``nu = 0``. The sign makes
-    ``theta`` the multiplier of ``Phi``: at ``a_i = 0 < b_i`` the gradient of ``Phi`` is ``-grad a_i``.
-    """
-
-    def __init__(self, problem: ComplementarityProblem, a_scale: float, b_scale: float) -> None:
-        nc, ne = problem.n_pairs, problem.residual.numel()
-        eta, theta, nu = ca.SX.sym("eta", ne), ca.SX.sym("theta", nc), ca.SX.sym("nu", nc)
-        sel = ca.SX.sym("branch", nc)
-        a, b = a_scale * problem.gap, b_scale * problem.p
-        piece = -(sel * a + (1 - sel) * b)
-        z = ca.vertcat(problem.x, problem.p, eta, theta, nu)
-        lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, piece)
-        r = ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, piece, nu)
-        P = ca.vertcat(problem.params, sel)
-        self.rj = ca.Function("branch_rj", [z, P], [r, ca.jacobian(r, z)])
-        self.r = ca.Function("branch_r", [z, P], [r])
-        self.ab = ca.Function("branch_ab", [z, problem.params], [a, b])
-        self.jacobian = SparseJacobian(self.rj)
-
-    def _ab(self, z, params):
-        return (np.asarray(v, float).ravel() for v in self.ab(z, params))
-
-    def solve(self, starts, params, opts):
-        """Newton on the branch of the first start that gives a strictly complementary solution."""
-        for z0 in starts:
-            if not np.all(np.isfinite(z0)):
-                continue
-            a, b = self._ab(z0, params)
-            sel = (a <= b).astype(float)
-            res = newton_solve(self.rj, self.r, z0, np.concatenate([params, sel]), jacobian=self.jacobian,
-                               tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
-            if not res.converged:
-                continue
-            a, b = self._ab(res.z, params)
-            if np.all(np.where(sel > 0, b, a) > 0):
-                res.message = "converged (branch finish)"
-                return res
-        return None
 
 
 class _InnerOptions:

@@ -172,7 +172,9 @@ class _BuiltMPCC(BuiltFormulation):
         Pairs with both ``g`` and ``p`` below ``10 sqrt(tau) + 100 max_i min(g_i, p_i)`` are first
         tried as biactive (``g = p = 0``); that branch is accepted only if B-stationary (both
         multipliers of the lower bounds non-positive in CasADi's sign convention), so a generous
-        identification cannot pin a free or a contact pair to the corner.
+        identification cannot pin a free or a contact pair to the corner. Where the identification
+        is ambiguous (a classical pair near grazing cannot be biactive), both single branches are
+        tried; each is accepted only if every sign holds.
         """
         nx, nc, ne = self._nx, self._nc, self._ne
         gap = np.asarray(self._gap(w, params), float).ravel()
@@ -181,7 +183,15 @@ class _BuiltMPCC(BuiltFormulation):
         tol = 10.0 * np.sqrt(tau) + 100.0 * float(np.max(np.minimum(np.abs(gap), np.abs(p)), initial=0.0))
         both = (np.abs(gap) <= tol) & (np.abs(p) <= tol)
         iters = 0
-        for fix_gap, fix_p in ((on_gap | both, ~on_gap | both), (on_gap, ~on_gap)):
+        # Biactive first, then the identified branch, then ambiguous pairs all in contact / all free.
+        candidates = [(on_gap | both, ~on_gap | both), (on_gap, ~on_gap),
+                      (on_gap | both, ~on_gap & ~both), (on_gap & ~both, ~on_gap | both)]
+        tried = set()
+        for fix_gap, fix_p in candidates:
+            key = (fix_gap.tobytes(), fix_p.tobytes())
+            if key in tried:
+                continue
+            tried.add(key)
             if ne + fix_gap.sum() + fix_p.sum() > nx + nc:
                 continue  # over-determined (e.g. a biactive pair of the classical problem)
             inf = np.full(nc, np.inf)

@@ -36,6 +36,16 @@ class FBSystem:
     ``theta_i`` and ``nu_i`` (the biactive branch); elsewhere ``nu_i = 0``. A corner found by
     plain Newton is accepted only if it is B-stationary, ``theta_i <= 0`` and ``nu_i <= 0``
     (a local minimum on both branches).
+
+    Branch finish. Near a pair on one branch with a tiny partner (``a = 0 < b << 1``) ``Phi``
+    rounds its corner at the scale ``b``, the Hessian grows like ``theta / b`` and Newton stalls at
+    its roundoff floor or needs smoothing; with many pairs this happens often. When everything
+    else fails, the DDCM system is finished by a primal-dual active-set iteration on the pieces of
+    ``Z_E``: each pair is put on the branch its iterate lies on (``a_i = 0`` where ``a_i <= b_i``,
+    else ``b_i = 0``), Newton solves that smooth KKT system, pairs whose other sign is violated
+    switch branch, until the signs hold. A strictly complementary result is a KKT point of a convex
+    piece that solves the ``Phi`` system exactly (there ``grad Phi = -grad a_i`` or ``-grad b_i``,
+    so ``theta`` is the same multiplier); biactive pairs go to the corner polish.
     """
 
     def __init__(self, problem: ComplementarityProblem, a_scale: float, b_scale: float, *,
@@ -76,6 +86,15 @@ class FBSystem:
             self.corner = True
             self._ab = ca.Function("fb_ab", [z, problem.params], [a, b])
             self._ne = ne
+            # The branch system: each pair on one piece of its complementarity (see the notes).
+            branch = ca.SX.sym("branch", nc)
+            piece = -(branch * a + (1 - branch) * b)
+            lag_b = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, piece)
+            r_b = ca.vertcat(ca.gradient(lag_b, ca.vertcat(problem.x, problem.p)), problem.residual, piece, nu)
+            Pb = ca.vertcat(problem.params, branch)
+            self._branch_rj = ca.Function("fb_branch_rj", [z, Pb], [r_b, ca.jacobian(r_b, z)])
+            self._branch_r = ca.Function("fb_branch_r", [z, Pb], [r_b])
+            self._branch_jac = SparseJacobian(self._branch_rj)
         self.rj = ca.Function("fb_rj", [z, P], [r, ca.jacobian(r, z)])
         self.r = ca.Function("fb_r", [z, P], [r])
         self.phi = ca.Function("fb_phi", [z, P], [phi])
@@ -117,9 +136,54 @@ class FBSystem:
             if polished is not None:
                 total += polished.iterations
                 best, mu = polished, 0.0
+        if not best.converged:
+            finish = self.branch_finish((best.z, z0), params, opts, corner_tol=corner_tol)
+            if finish is not None:
+                total += finish.iterations
+                best, mu = finish, 0.0
         best.iterations = total
         x, p, st = self.split(best.z)
         return x, p, st, best, mu, stages
+
+    def branch_finish(self, starts, params, opts, *, corner_tol: float = 1e-3, max_switches: int | None = None):
+        """Primal-dual active-set finish on the pieces of ``Z_E`` (see the class notes).
+
+        Returns the converged Newton result, or ``None`` if no start leads to a solution whose
+        signs hold (then the caller reports the failure).
+        """
+        npar = self.problem.params.numel()
+        P = np.asarray(params, float)[:npar]
+        kw = dict(jacobian=self._branch_jac, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        max_switches = 2 * self.nc + 5 if max_switches is None else max_switches
+        for z in starts:
+            if not np.all(np.isfinite(z)):
+                continue
+            a, b = (np.asarray(v, float).ravel() for v in self._ab(z, P))
+            branch = (a <= b).astype(float)
+            seen, total = set(), 0
+            for _ in range(max_switches):
+                seen.add(branch.tobytes())
+                res = newton_solve(self._branch_rj, self._branch_r, z, np.concatenate([P, branch]), **kw)
+                total += res.iterations
+                if not res.converged:
+                    break
+                a, b = (np.asarray(v, float).ravel() for v in self._ab(res.z, P))
+                other = np.where(branch > 0, b, a)  # the sign the piece leaves free
+                if np.all(other > 0):
+                    res.iterations, res.message = total, "converged (branch finish)"
+                    return res
+                if np.all(other >= -1e-12 * max(1.0, float(np.max(np.abs(other))))):
+                    # Biactive pairs: a corner, accepted only if B-stationary.
+                    corner = self._corner(res.z, np.asarray(params, float), corner_tol, dict(kw, jacobian=self.jacobian))
+                    if corner is not None:
+                        corner.iterations += total
+                        return corner
+                    break
+                z = res.z
+                branch = np.where(other < 0, 1.0 - branch, branch)
+                if branch.tobytes() in seen:
+                    break
+        return None
 
     def polish_corner(self, z, params, opts, *, corner_tol: float = 1e-3):
         """The biactive-branch solution near ``z`` if it is B-stationary, else ``None``."""
