@@ -20,7 +20,6 @@ import statistics
 import sys
 import time
 import tracemalloc
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse.linalg as spla
