@@ -84,6 +84,59 @@ class MaterialDataset:
         _, idx = self._tree.query(self._scaled(np.atleast_1d(strain), np.atleast_1d(stress)))
         return np.asarray(idx, dtype=np.intp)
 
+    #: Neighbours per datum in the graph of the warm-started search.
+    NEIGHBOURS = 8
+
+    def _graph(self):
+        """k-nearest-neighbour graph of the data (built once, on first use) and each datum's
+        radius: the distance to its k-th neighbour."""
+        graph = self.__dict__.get("_knn")
+        if graph is None:
+            k = min(self.NEIGHBOURS, self.strain.size - 1)
+            pts = self._tree.data
+            if k < 1:
+                graph = (np.zeros((pts.shape[0], 0), dtype=np.intp), np.zeros(pts.shape[0]))
+            else:
+                dist, idx = self._tree.query(pts, k=k + 1)
+                graph = (idx[:, 1:].astype(np.int32 if pts.shape[0] < 2**31 else np.intp), dist[:, -1])
+            object.__setattr__(self, "_knn", graph)
+        return graph
+
+    def nearest_warm(self, strain, stress, previous, *, max_walk: int = 8) -> np.ndarray:
+        """:meth:`nearest`, started from a previous assignment (Eggersmann et al., 2021), exact.
+
+        Each state walks the k-nearest-neighbour graph of the data from its previous datum to
+        the nearest datum among a datum and its neighbours. The result ``j`` is certified when
+        ``d(q, j) < r_k(j) / 2`` (``r_k`` the distance from ``j`` to its k-th neighbour): any datum
+        outside the neighbourhood is then farther from ``q`` than ``j`` (triangle inequality).
+        Uncertified states, and walks that do not settle, fall back to the KD-tree query, so the
+        answer is always the exact nearest datum.
+        """
+        q = self._scaled(np.atleast_1d(strain), np.atleast_1d(stress))
+        j = np.array(previous, dtype=np.intp, copy=True)
+        if j.shape != (q.shape[0],):
+            raise InputError("previous assignment must have one index per state")
+        nbrs, radius = self._graph()
+        pts = self._tree.data
+        rows = np.arange(q.shape[0])
+        settled = False
+        for _ in range(max_walk):
+            cand = np.column_stack([j, nbrs[j]])
+            d2 = np.sum((pts[cand] - q[:, None, :]) ** 2, axis=2)
+            best = cand[rows, np.argmin(d2, axis=1)]
+            settled = bool(np.array_equal(best, j))
+            j = best
+            if settled:
+                break
+        d = np.sqrt(np.sum((pts[j] - q) ** 2, axis=1))
+        uncertain = ~(d < 0.5 * radius[j]) if settled else np.ones(j.size, dtype=bool)
+        if uncertain.any():
+            _, j[uncertain] = self._tree.query(q[uncertain])
+        self.__dict__.setdefault("search_stats", {"queries": 0, "fallbacks": 0})
+        self.search_stats["queries"] += int(j.size)
+        self.search_stats["fallbacks"] += int(uncertain.sum())
+        return j
+
     def point_metric(self, n_points: int) -> np.ndarray:
         """Metric constant ``c`` of each of ``n_points`` material points (all share this set)."""
         return np.full(n_points, self.c)
@@ -202,6 +255,16 @@ class PointData:
         for k, pts in enumerate(self._groups):
             if pts.size:
                 out[pts] = self.datasets[k].nearest(strain[pts], stress[pts]) + self.offsets[k]
+        return out
+
+    def nearest_warm(self, strain, stress, previous, **kw) -> np.ndarray:
+        strain, stress = np.atleast_1d(strain), np.atleast_1d(stress)
+        previous = np.asarray(previous, dtype=np.intp)
+        out = np.empty(strain.size, dtype=np.intp)
+        for k, pts in enumerate(self._groups):
+            if pts.size:
+                local = self.datasets[k].nearest_warm(strain[pts], stress[pts], previous[pts] - self.offsets[k], **kw)
+                out[pts] = local + self.offsets[k]
         return out
 
     def distance2(self, strain, stress, index) -> np.ndarray:
