@@ -118,9 +118,9 @@ def data_search(n_points: int, n_data: int, repeats: int) -> dict:
     t0 = time.perf_counter()
     data._graph()
     graph = time.perf_counter() - t0
-    data.__dict__["search_stats"] = {"queries": 0, "fallbacks": 0}
-    t_warm = median_time(lambda: data.nearest_warm(strain, stress, previous), repeats)
-    fallback = data.search_stats["fallbacks"] / max(1, data.search_stats["queries"])
+    stats: dict = {}
+    t_warm = median_time(lambda: data.nearest_warm(strain, stress, previous, stats=stats), repeats)
+    fallback = stats["fallbacks"] / max(1, stats["queries"])
     return dict(unknowns=n_points, data_points=n_data, seconds=t, floor_seconds=t, ratio=1.0,
                 build_seconds=build, peak_memory_mb=peak / 2**20, warm_seconds=t_warm,
                 warm_over_cold=t_warm / t, warm_fallback_share=fallback, graph_build_seconds=graph)

@@ -195,7 +195,7 @@ def fields(cmp: Comparison) -> dict[str, dict[str, list]] | None:
     ``nodal_displacement`` and ``member_force``, for DDCM the assigned data) to nested lists,
     steps first. The one-unknown bar has none: its CSV rows already hold ``u`` and ``p``.
     """
-    if cmp._scalar():
+    if cmp.scalar_model:
         return None
     return {f"{variant}/{name}": {k: _json_array(v) for k, v in cmp.fields(variant, name).items()}
             for (variant, name) in cmp.results}

@@ -49,6 +49,7 @@ class MaterialDataset:
     stress: np.ndarray
     c: float
     _tree: cKDTree = field(init=False, repr=False)
+    _knn: tuple | None = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
         c = check_positive("metric c", self.c)
@@ -90,7 +91,7 @@ class MaterialDataset:
     def _graph(self):
         """k-nearest-neighbour graph of the data (built once, on first use) and each datum's
         radius: the distance to its k-th neighbour."""
-        graph = self.__dict__.get("_knn")
+        graph = self._knn
         if graph is None:
             k = min(self.NEIGHBOURS, self.strain.size - 1)
             pts = self._tree.data
@@ -102,7 +103,7 @@ class MaterialDataset:
             object.__setattr__(self, "_knn", graph)
         return graph
 
-    def nearest_warm(self, strain, stress, previous, *, max_walk: int = 8) -> np.ndarray:
+    def nearest_warm(self, strain, stress, previous, *, max_walk: int = 8, stats: dict | None = None) -> np.ndarray:
         """:meth:`nearest`, started from a previous assignment (Eggersmann et al., 2021), exact.
 
         Each state walks the k-nearest-neighbour graph of the data from its previous datum to
@@ -110,7 +111,8 @@ class MaterialDataset:
         ``d(q, j) < r_k(j) / 2`` (``r_k`` the distance from ``j`` to its k-th neighbour): any datum
         outside the neighbourhood is then farther from ``q`` than ``j`` (triangle inequality).
         Uncertified states, and walks that do not settle, fall back to the KD-tree query, so the
-        answer is always the exact nearest datum.
+        answer is always the exact nearest datum. ``stats``, if given, accumulates ``queries`` and
+        ``fallbacks`` (uncertified states).
         """
         q = self._scaled(np.atleast_1d(strain), np.atleast_1d(stress))
         j = np.array(previous, dtype=np.intp, copy=True)
@@ -132,9 +134,9 @@ class MaterialDataset:
         uncertain = ~(d < 0.5 * radius[j]) if settled else np.ones(j.size, dtype=bool)
         if uncertain.any():
             _, j[uncertain] = self._tree.query(q[uncertain])
-        self.__dict__.setdefault("search_stats", {"queries": 0, "fallbacks": 0})
-        self.search_stats["queries"] += int(j.size)
-        self.search_stats["fallbacks"] += int(uncertain.sum())
+        if stats is not None:
+            stats["queries"] = stats.get("queries", 0) + int(j.size)
+            stats["fallbacks"] = stats.get("fallbacks", 0) + int(uncertain.sum())
         return j
 
     def point_metric(self, n_points: int) -> np.ndarray:

@@ -130,7 +130,8 @@ class Comparison:
         keep = slice(None) if points is None else points
         return max(float(np.max(np.abs(self.fields(v, f)["strain"][:, keep]))) for v, f in self.results)
 
-    def _scalar(self) -> bool:
+    @property
+    def scalar_model(self) -> bool:
         """One unknown and one pair (the paper's bar): the CSV holds ``u`` and ``p`` themselves."""
         return self.model.n_dofs == 1 and self.model.n_contacts <= 1 and self.model.n_points == 1
 
@@ -148,7 +149,7 @@ class Comparison:
             err = self.errors(variant, name)
             for s in r.steps:
                 row = dict(variant=variant, formulation=name, step=s.step, **{m.load_parameter_name: s.load_parameter})
-                if self._scalar():
+                if self.scalar_model:
                     row.update(u=float(s.u[-1]), p=float(s.p[0]) if s.p.size else float("nan"))
                 else:
                     row.update(max_abs_u=float(np.max(np.abs(s.u))),
@@ -158,7 +159,7 @@ class Comparison:
                            residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,
                            seconds=s.seconds)
                 if variant == "ddcm":
-                    if self._scalar():
+                    if self.scalar_model:
                         row.update(strain_star=float(s.strain_star[0]), stress_star=float(s.stress_star[0]),
                                    data_index=int(s.data_index[0]))
                     row.update(distance=s.distance,

@@ -19,6 +19,7 @@ Rungs
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import asdict, dataclass
@@ -127,6 +128,12 @@ def many_stops_bar():
 
 
 # --------------------------------------------------------------------------------------- rungs
+@functools.lru_cache(maxsize=None)
+def _compare(builder: Callable, variants: tuple = ("classical", "ddcm")):
+    """One comparison per ladder model, shared by the rungs (cleared by :func:`run_ladder`)."""
+    return compare(builder(), variants=variants)
+
+
 def _classical_against(name: str, cmp, ref_u, ref_p, reference: str) -> list[Check]:
     out = []
     for f in EXACT:
@@ -188,9 +195,9 @@ def _ddcm_fixed_points(name: str, cmp) -> list[Check]:
     return out
 
 
-def rung_paper(progress) -> list[Check]:
-    m = paper_bar()
-    cmp = compare(m)
+def rung_paper() -> list[Check]:
+    cmp = _compare(paper_bar)
+    m = cmp.model
     ref_u = np.array([m.closed_form(k)[0] for k in range(m.n_steps)])
     ref_p = np.array([m.closed_form(k)[1] for k in range(m.n_steps)])
     out = _classical_against("paper bar", cmp, ref_u, ref_p, "closed form")
@@ -211,9 +218,9 @@ def rung_paper(progress) -> list[Check]:
     return out
 
 
-def rung_stops(progress) -> list[Check]:
-    m = stops_bar()
-    cmp = compare(m)
+def rung_stops() -> list[Check]:
+    cmp = _compare(stops_bar)
+    m = cmp.model
     ref = [m.closed_form(k) for k in range(m.n_steps)]
     ref_u, ref_p = np.array([a for a, _ in ref]), np.array([b for _, b in ref])
     out = _classical_against("bar with 3 stops", cmp, ref_u, ref_p, "closed form")
@@ -226,10 +233,10 @@ def rung_stops(progress) -> list[Check]:
     return out
 
 
-def rung_trusses(progress) -> list[Check]:
+def rung_trusses() -> list[Check]:
     out = []
-    for m in (warren_truss(), tower_3d()):
-        cmp = compare(m, variants=["classical"])
+    for cmp in (_compare(warren_truss), _compare(tower_3d, ("classical",))):
+        m = cmp.model
         ref = ContactQP(m).solve()
         out.append(Check.make(f"{m.name} / QP reference", "QP steps solved", int(ref.success.sum()), m.n_steps, 0,
                               note="qpOASES via casadi.conic"))
@@ -238,7 +245,7 @@ def rung_trusses(progress) -> list[Check]:
     return out
 
 
-def rung_data_convergence(progress, *, sizes=(250, 500, 1000, 2000, 4000, 8000, 16000)) -> list[Check]:
+def rung_data_convergence(*, sizes=(250, 500, 1000, 2000, 4000, 8000, 16000)) -> list[Check]:
     """DDCM error against the classical solution as the data set grows (2-D truss with contact)."""
     errs = []
     for n in sizes:
@@ -257,7 +264,7 @@ def rung_data_convergence(progress, *, sizes=(250, 500, 1000, 2000, 4000, 8000, 
                        slope, -1.0, 0.3, note=note)]
 
 
-def rung_no_contact(progress) -> list[Check]:
+def rung_no_contact() -> list[Check]:
     out = []
     for n in (5000, 10000):
         m = four_member_truss(n_data=n)
@@ -273,42 +280,37 @@ def rung_no_contact(progress) -> list[Check]:
     return out
 
 
-def rung_active_sets(progress) -> list[Check]:
+def rung_active_sets() -> list[Check]:
     out = []
-    for m in (many_stops_bar(), warren_truss(), tower_3d()):
-        cmp = compare(m, variants=["classical"])
-        problems = cmp.problems
+    for cmp in (_compare(many_stops_bar, ("classical",)), _compare(warren_truss), _compare(tower_3d, ("classical",))):
+        m, problems = cmp.model, cmp.problems
         ex = ExactEnumerator(problems.classical, max_pairs=12)
-        P = np.column_stack([problems.step_params(k) for k in range(m.n_steps)])
-        sol = ex.solve(P)
-        n_solutions = max(len(ex.solutions(P[:, k])) for k in range(m.n_steps))
+        solutions = [ex.solutions(problems.step_params(k)) for k in range(m.n_steps)]
         out.append(Check.make(f"{m.name} ({m.n_contacts} contacts) / enumeration", "max number of distinct "
-                              f"solutions per step among {2 ** m.n_contacts} active sets", n_solutions, 1, 0,
+                              f"solutions per step among {2 ** m.n_contacts} active sets",
+                              max(len(s) for s in solutions), 1, 0,
                               note="a convex problem has exactly one; more would mean a local solution"))
-        exact_active = sol.partition.T == 1
-        tol = 1e-8 * m.scales["stress"]
+        # Active: a pressure above 1e-8 of its scale, in the enumeration (scaled) and the solvers.
+        exact_active = np.array([s[0].z[m.n_dofs:] > 1e-8 for s in solutions])
         for f in EXACT:
-            r = cmp["classical", f]
-            active = r.array("p") > tol
+            active = cmp["classical", f].array("p") > 1e-8 * m.scales["stress"]
             out.append(Check.make(f"{m.name} / classical / {f}", "steps whose active set differs from enumeration",
                                   int(np.sum(np.any(active != exact_active, axis=1))), 0, 0))
-    for m in (stops_bar(), warren_truss()):
-        cmp = compare(m, variants=["ddcm"])
-        problems = cmp.problems
+    for cmp in (_compare(stops_bar), _compare(warren_truss)):
+        m, problems = cmp.model, cmp.problems
         ex = ExactEnumerator(problems.projection)
         for f in registry.available():
-            r = cmp["ddcm", f]
+            # The same tolerances as the fixed-point checks: exact formulations 1e-8, penalty its tilt.
+            tol = EXACT_TOL if f != "penalty" else _penalty_tilt(cmp, f)
             not_global, several = 0, []
-            for s in r.steps:
-                P = problems.projection_params(s.step, s.strain_star, s.stress_star)
-                minima = ex.local_minima(P)
+            for s in cmp["ddcm", f].steps:
+                minima = ex.local_minima(problems.projection_params(s.step, s.strain_star, s.stress_star))
                 if len(minima) > 1:
                     several.append(s.step)
                 x, p = problems.scaled_start("mpcc", s.u, s.p, s.stress)
                 best = minima[0].z
-                z = np.concatenate([x, p])
-                tol = 1e-6 if f != "penalty" else _penalty_tilt(cmp, f)
-                not_global += int(np.max(np.abs(z - best)) > tol * max(1.0, float(np.max(np.abs(best)))))
+                not_global += int(np.max(np.abs(np.concatenate([x, p]) - best))
+                                  > tol * max(1.0, float(np.max(np.abs(best)))))
             out.append(Check.make(f"{m.name} / ddcm / {f}", f"projections not at the global minimum of Z_E "
                                   f"(enumeration of {3 ** m.n_contacts} branches)", not_global, 0, 0,
                                   note=("steps with several local minima of the projection: "
@@ -329,13 +331,15 @@ RUNGS: dict[str, Callable] = {
 def run_ladder(*, progress: Callable[[str], None] | None = None) -> list[Check]:
     """Run every rung; returns the checks (nothing is raised for a failed check)."""
     checks: list[Check] = []
+    _compare.cache_clear()  # the rungs share comparisons within one run, never across runs
     for title, rung in RUNGS.items():
         t0 = time.perf_counter()
-        new = rung(progress)
+        new = rung()
         checks += new
         if progress is not None:
             failed = sum(not c.passed for c in new)
             progress(f"{title}: {len(new) - failed}/{len(new)} passed ({time.perf_counter() - t0:.1f} s)")
+    _compare.cache_clear()
     return checks
 
 

@@ -24,6 +24,7 @@ from typing import Sequence
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
@@ -200,7 +201,7 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
                             (np.repeat(np.arange(nc), d), dof)), shape=(nc, nn * d))
     G = G_full[:, free]
     if nc:
-        base = np.array([normals[i] @ X[pair_nodes[i]] for i in range(nc)])
+        base = np.einsum("ij,ij->i", np.asarray(normals), X[np.asarray(pair_nodes)])
         off = np.column_stack([np.broadcast_to(o, (n_steps,)) for o in offsets])
         gap0 = base[None, :] - off
     else:
@@ -214,6 +215,7 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
     node_area = section_sum / np.maximum(member_count, 1)
     contact_area = node_area[np.asarray(pair_nodes, dtype=np.intp)] if nc else np.zeros(0)
 
+    check_not_mechanism(B, A * length)
     data = _data(dataset, material, ne)
     size = float(np.max(np.ptp(X, axis=0))) or float(np.max(length))
     return TrussModel(
@@ -223,6 +225,34 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
         load_parameter_name="step" if load_factors is None else "load factor",
         nodes=X, members=M.astype(np.intp), free_dofs=free, contact_nodes=np.asarray(pair_nodes, dtype=np.intp),
         contact_normals=np.asarray(normals).reshape(nc, d), member_area=A)
+
+
+#: Up to this many unknowns the mechanism check is an exact eigenvalue count (dense, n x n).
+EXACT_RANK_LIMIT = 1000
+
+
+def check_not_mechanism(B: sp.spmatrix, volumes: np.ndarray) -> None:
+    """Raise :class:`InputError` if members and supports leave a free degree of freedom
+    unrestrained (``K = B^T W B`` singular).
+
+    Small models: eigenvalues of ``K`` below ``1e-12 max`` (roundoff is ``n eps ||K||``, below
+    that for ``n <= 1000``, while a slender real structure stays above ``1/n^2``). Larger ones:
+    the same test on the pivots of a sparse LU of ``K``.
+    """
+    n = B.shape[1]
+    K = (B.T @ sp.diags(volumes) @ B).tocsc()
+    if n <= EXACT_RANK_LIMIT:
+        ev = np.linalg.eigvalsh(K.toarray())
+        free = int(np.sum(ev <= 1e-12 * max(float(ev[-1]), 1e-300)))
+    else:
+        try:
+            pivots = np.abs(spla.splu(K).U.diagonal())
+            free = int(np.sum(pivots <= 1e-12 * pivots.max()))
+        except RuntimeError:  # exactly singular
+            free = 1
+    if free:
+        raise InputError(f"the structure is a mechanism: members and supports leave {free} of its {n} free "
+                         "degrees of freedom unrestrained (add supports or members)")
 
 
 def _supports(supports, nn: int, d: int) -> np.ndarray:

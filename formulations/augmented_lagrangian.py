@@ -36,7 +36,7 @@ cannot be evaluated below ``|Hessian| * eps * |x|`` (3e-10 with ``|x| = 1``), ab
 the iterate lies on (``a_i = 0`` where ``a_i <= b_i``, else ``b_i = 0``): Newton on that smooth
 system (same tolerances), with pairs whose sign fails switching branch, accepted only if strictly
 complementary (``b_i > 0``, resp. ``a_i > 0``) or a B-stationary corner
-(:meth:`formulations.ncp.FBSystem.branch_finish`). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
+(:meth:`formulations.ncp.FBSystem.branch_finish`, the last stage of every inner solve). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
 ``-grad b_i``), so the branch KKT point with its multiplier ``theta`` solves the ``Phi``-KKT
 system exactly, and ``lam = theta`` is a fixed point of the multiplier update (``c = 0``): the
 result is the exact projection, as at ordinary convergence.
@@ -197,15 +197,9 @@ class _BuiltAL(BuiltFormulation):
             P = np.concatenate([params, lam, [rho]])
             x, p, st, res, mu, _ = self.system.solve(z, P, self._inner)
             newton_its += res.iterations
-            if not res.converged:
-                # Finish on the branch of the failed iterate, else of the start (see the module notes).
-                finish = self.system.branch_finish((res.z, z), P, self._inner)
-                if finish is None:
-                    message = f"inner Newton failed at update {k}: {res.message}"
-                    break
-                newton_its += finish.iterations
-                res = finish
-                x, p, st = self.system.split(res.z)
+            if not res.converged:  # after smoothing, corner polish and the branch finish
+                message = f"inner Newton failed at update {k}: {res.message}"
+                break
             z = res.z
             c = np.asarray(self.system.phi(z, np.concatenate([P, [0.0], np.zeros(nc)])), float).ravel()
             if float(np.max(np.abs(c), initial=0.0)) > o.tol:

@@ -86,15 +86,8 @@ class FBSystem:
             self.corner = True
             self._ab = ca.Function("fb_ab", [z, problem.params], [a, b])
             self._ne = ne
-            # The branch system: each pair on one piece of its complementarity (see the notes).
-            branch = ca.SX.sym("branch", nc)
-            piece = -(branch * a + (1 - branch) * b)
-            lag_b = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, piece)
-            r_b = ca.vertcat(ca.gradient(lag_b, ca.vertcat(problem.x, problem.p)), problem.residual, piece, nu)
-            Pb = ca.vertcat(problem.params, branch)
-            self._branch_rj = ca.Function("fb_branch_rj", [z, Pb], [r_b, ca.jacobian(r_b, z)])
-            self._branch_r = ca.Function("fb_branch_r", [z, Pb], [r_b])
-            self._branch_jac = SparseJacobian(self._branch_rj)
+            self._branch = None  # built on first use (see branch_finish)
+            self._pieces = (problem, a, b, z, eta, theta, nu)
         self.rj = ca.Function("fb_rj", [z, P], [r, ca.jacobian(r, z)])
         self.r = ca.Function("fb_r", [z, P], [r])
         self.phi = ca.Function("fb_phi", [z, P], [phi])
@@ -145,6 +138,21 @@ class FBSystem:
         x, p, st = self.split(best.z)
         return x, p, st, best, mu, stages
 
+    def _branch_system(self):
+        """The KKT system with each pair on one piece: ``-a_i = 0`` (``branch_i = 1``) or
+        ``-b_i = 0``, multiplier ``theta_i``, ``nu = 0``. Built once, when first needed: most
+        problems never need it, and its Jacobian costs as much to build as the FB one."""
+        if self._branch is None:
+            problem, a, b, z, eta, theta, nu = self._pieces
+            branch = ca.SX.sym("branch", self.nc)
+            piece = -(branch * a + (1 - branch) * b)
+            lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, piece)
+            r = ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, piece, nu)
+            P = ca.vertcat(problem.params, branch)
+            rj = ca.Function("fb_branch_rj", [z, P], [r, ca.jacobian(r, z)])
+            self._branch = (rj, ca.Function("fb_branch_r", [z, P], [r]), SparseJacobian(rj))
+        return self._branch
+
     def branch_finish(self, starts, params, opts, *, corner_tol: float = 1e-3, max_switches: int | None = None):
         """Primal-dual active-set finish on the pieces of ``Z_E`` (see the class notes).
 
@@ -153,7 +161,8 @@ class FBSystem:
         """
         npar = self.problem.params.numel()
         P = np.asarray(params, float)[:npar]
-        kw = dict(jacobian=self._branch_jac, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        branch_rj, branch_r, branch_jac = self._branch_system()
+        kw = dict(jacobian=branch_jac, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
         max_switches = 2 * self.nc + 5 if max_switches is None else max_switches
         for z in starts:
             if not np.all(np.isfinite(z)):
@@ -163,7 +172,7 @@ class FBSystem:
             seen, total = set(), 0
             for _ in range(max_switches):
                 seen.add(branch.tobytes())
-                res = newton_solve(self._branch_rj, self._branch_r, z, np.concatenate([P, branch]), **kw)
+                res = newton_solve(branch_rj, branch_r, z, np.concatenate([P, branch]), **kw)
                 total += res.iterations
                 if not res.converged:
                     break
