@@ -54,6 +54,7 @@ import casadi as ca
 import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.solvers.evaluate import NumericFunction
 from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
@@ -128,9 +129,9 @@ class _BuiltAL(BuiltFormulation):
             p_of_x = plus(mult - gamma * problem.gap, mu)
             r = ca.substitute(problem.residual, problem.p, p_of_x)
             P = ca.vertcat(problem.params, mult, mu)
-            self._update = ca.Function("uzawa", [problem.x, P], [p_of_x])
-            self._rj = ca.Function("al_rj", [problem.x, P], [r, ca.jacobian(r, problem.x)])
-            self._r = ca.Function("al_r", [problem.x, P], [r])
+            self._update = NumericFunction(ca.Function("uzawa", [problem.x, P], [p_of_x]))
+            self._rj = NumericFunction(ca.Function("al_rj", [problem.x, P], [r, ca.jacobian(r, problem.x)]))
+            self._r = NumericFunction(ca.Function("al_r", [problem.x, P], [r]))
             self._jac = SparseJacobian(self._rj)
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)

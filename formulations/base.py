@@ -17,6 +17,7 @@ import numpy as np
 
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.solvers.evaluate import NumericFunction
 
 
 @dataclass
@@ -62,8 +63,8 @@ class Metrics:
 
     def __init__(self, problem: ComplementarityProblem) -> None:
         obj = problem.objective if problem.objective is not None else ca.SX(0)
-        self._f = ca.Function("metrics", [problem.x, problem.p, problem.params],
-                              [problem.residual, problem.gap, obj])
+        self._f = NumericFunction(ca.Function("metrics", [problem.x, problem.p, problem.params],
+                                              [problem.residual, problem.gap, obj]))
 
     def __call__(self, x, p, params) -> tuple[float, float, float, float]:
         res, gap, obj = self._f(x, p, params)
@@ -73,7 +74,7 @@ class Metrics:
         residual = float(np.max(np.abs(res))) if res.size else 0.0
         comp = float(np.max(np.abs(np.minimum(gap, p)))) if gap.size else 0.0
         pen = float(np.max(np.maximum(0.0, -gap))) if gap.size else 0.0
-        return residual, comp, pen, float(obj)
+        return residual, comp, pen, float(obj[0]) if obj.size else 0.0
 
 
 class Formulation(ABC):

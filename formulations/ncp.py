@@ -9,6 +9,7 @@ import casadi as ca
 import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.solvers.evaluate import NumericFunction
 from ddcm_casadi.solvers.newton import SparseJacobian, newton_solve, smoothed_newton_solve
 
 
@@ -84,13 +85,13 @@ class FBSystem:
                                                               theta=z[nx + nc + ne:nx + 2 * nc + ne]))
             P = ca.vertcat(problem.params, *extra, mu, sel)
             self.corner = True
-            self._ab = ca.Function("fb_ab", [z, problem.params], [a, b])
+            self._ab = NumericFunction(ca.Function("fb_ab", [z, problem.params], [a, b]))
             self._ne = ne
             self._branch = None  # built on first use (see branch_finish)
             self._pieces = (problem, a, b, z, eta, theta, nu)
-        self.rj = ca.Function("fb_rj", [z, P], [r, ca.jacobian(r, z)])
-        self.r = ca.Function("fb_r", [z, P], [r])
-        self.phi = ca.Function("fb_phi", [z, P], [phi])
+        self.rj = NumericFunction(ca.Function("fb_rj", [z, P], [r, ca.jacobian(r, z)]))
+        self.r = NumericFunction(ca.Function("fb_r", [z, P], [r]))
+        self.phi = NumericFunction(ca.Function("fb_phi", [z, P], [phi]))
         self.jacobian = SparseJacobian(self.rj)
 
     def start(self, x0, p0, state) -> np.ndarray:
@@ -149,8 +150,8 @@ class FBSystem:
             lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, piece)
             r = ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, piece, nu)
             P = ca.vertcat(problem.params, branch)
-            rj = ca.Function("fb_branch_rj", [z, P], [r, ca.jacobian(r, z)])
-            self._branch = (rj, ca.Function("fb_branch_r", [z, P], [r]), SparseJacobian(rj))
+            rj = NumericFunction(ca.Function("fb_branch_rj", [z, P], [r, ca.jacobian(r, z)]))
+            self._branch = (rj, NumericFunction(ca.Function("fb_branch_r", [z, P], [r])), SparseJacobian(rj))
         return self._branch
 
     def branch_finish(self, starts, params, opts, *, corner_tol: float = 1e-3, max_switches: int | None = None):

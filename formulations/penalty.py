@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.solvers.evaluate import NumericFunction
 from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
@@ -92,9 +93,9 @@ class _BuiltPenalty(BuiltFormulation):
         p_of_x = gamma * plus(-problem.gap, mu)
         r = ca.substitute(problem.residual, problem.p, p_of_x)
         P = ca.vertcat(problem.params, mu)
-        self._rj = ca.Function("penalty_rj", [problem.x, P], [r, ca.jacobian(r, problem.x)])
-        self._r = ca.Function("penalty_r", [problem.x, P], [r])
-        self._p = ca.Function("penalty_p", [problem.x, P], [p_of_x])
+        self._rj = NumericFunction(ca.Function("penalty_rj", [problem.x, P], [r, ca.jacobian(r, problem.x)]))
+        self._r = NumericFunction(ca.Function("penalty_r", [problem.x, P], [r]))
+        self._p = NumericFunction(ca.Function("penalty_p", [problem.x, P], [p_of_x]))
         self._jac = SparseJacobian(self._rj)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
@@ -116,8 +117,8 @@ class _BuiltCompliantProjection(BuiltFormulation):
         compliant_gap = problem.gap + problem.p / gamma
         self.system = FBSystem(problem, problem.fb_alpha * problem.gap_ref, problem.fb_beta * problem.pressure_ref,
                                gap=compliant_gap)
-        self._pairs = ca.Function("compliant_pairs", [problem.x, problem.p, problem.params],
-                                  [ca.fmin(compliant_gap, problem.p)])
+        self._pairs = NumericFunction(ca.Function("compliant_pairs", [problem.x, problem.p, problem.params],
+                                                  [ca.fmin(compliant_gap, problem.p)]))
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         x, p, st, res, mu, stages = self.system.solve(self.system.start(x0, p0, state), params, self.opts)

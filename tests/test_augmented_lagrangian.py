@@ -62,4 +62,4 @@ def test_ddcm_projection_onto_a_tiny_contact_pressure(paper):
     assert np.array_equal(sol.state["lam"], sol.state["theta"])
     z = np.concatenate([sol.x, sol.p, sol.state["eta"], sol.state["theta"], np.zeros(1)])
     phi = built.system.phi(z, np.concatenate([params, sol.state["lam"], [sol.state["rho"], 0.0, 0.0]]))
-    assert abs(float(phi)) <= 1e-12
+    assert abs(float(phi[0])) <= 1e-12

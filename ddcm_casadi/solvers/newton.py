@@ -28,15 +28,17 @@ class NewtonResult:
 class SparseJacobian:
     """Converts the Jacobian output of a CasADi Function to scipy CSC, reusing its pattern."""
 
-    def __init__(self, fun: ca.Function, index: int = 1) -> None:
+    def __init__(self, fun, index: int = 1) -> None:
         sparsity = fun.sparsity_out(index)
         colind, row = sparsity.get_ccs()
         self.shape = (sparsity.size1(), sparsity.size2())
         self.indptr = np.asarray(colind, dtype=np.int64)
         self.indices = np.asarray(row, dtype=np.int64)
 
-    def __call__(self, J: ca.DM) -> sp.csc_matrix:
-        return sp.csc_matrix((np.asarray(J.nonzeros(), dtype=float), self.indices, self.indptr), shape=self.shape)
+    def __call__(self, J: ca.DM | np.ndarray) -> sp.csc_matrix:
+        """``J``: a ``DM``, or its nonzeros as returned by a :class:`NumericFunction`."""
+        data = np.asarray(J.nonzeros() if isinstance(J, ca.DM) else J, dtype=float)
+        return sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
 
 
 def solve_linear(J: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray:
