@@ -121,6 +121,9 @@ class Formulation(ABC):
                         isinstance(e, (int, float)) and not isinstance(e, bool) and np.isfinite(e) and e >= 0
                         for e in v):
                     raise InputError(f"{where} must be a list of finite non-negative numbers, got {v!r}")
+            elif kind.startswith("bool"):
+                if not isinstance(v, bool):
+                    raise InputError(f"{where} must be true or false, got {v!r}")
             elif kind.startswith("dict") and not isinstance(v, dict):
                 raise InputError(f"{where} must be a table, got {v!r}")
 

@@ -61,6 +61,11 @@ class FischerBurmeister(Formulation):
             ``mu`` values of the fallback smoothing continuation (ends with 0).
         comp_tol : float
             A solve counts as converged only if ``max |min(g, p)| <= comp_tol`` (scaled) as well.
+        active_set_predictor : bool
+            Before Newton, solve the system of the pieces the start lies on (``a_i = 0`` where
+            ``a_i <= b_i``, else ``b_i = 0``) with a factorisation cached per active set; accepted
+            only if strictly complementary and ``||r_FB||_inf <= residual_tol`` (see
+            :class:`formulations.ncp.FBSystem`).
         """
 
         alpha: float | None = None
@@ -70,6 +75,7 @@ class FischerBurmeister(Formulation):
         max_iter: int = 50
         smoothing: tuple = SMOOTHING
         comp_tol: float = 1e-9
+        active_set_predictor: bool = True
 
     def _validate(self) -> None:
         super()._validate()
@@ -85,7 +91,8 @@ class _BuiltFB(BuiltFormulation):
         super().__init__(problem)
         self.opts = opts
         self.system = FBSystem(problem, (opts.alpha or problem.fb_alpha) * problem.gap_ref,
-                               (opts.beta or problem.fb_beta) * problem.pressure_ref)
+                               (opts.beta or problem.fb_beta) * problem.pressure_ref,
+                               predictor=opts.active_set_predictor)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         x, p, st, res, mu, stages = self.system.solve(self.system.start(x0, p0, state), params, self.opts)

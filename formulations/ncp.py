@@ -5,12 +5,15 @@
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import casadi as ca
 import numpy as np
+import scipy.sparse.linalg as spla
 
 from ddcm_casadi.problem import ComplementarityProblem
 from ddcm_casadi.solvers.evaluate import NumericFunction
-from ddcm_casadi.solvers.newton import SparseJacobian, newton_solve, smoothed_newton_solve
+from ddcm_casadi.solvers.newton import NewtonResult, SparseJacobian, newton_solve, smoothed_newton_solve
 
 
 def fischer_burmeister(a, b, mu=0.0):
@@ -47,11 +50,27 @@ class FBSystem:
     switch branch, until the signs hold. A strictly complementary result is a KKT point of a convex
     piece that solves the ``Phi`` system exactly (there ``grad Phi = -grad a_i`` or ``-grad b_i``,
     so ``theta`` is the same multiplier); biactive pairs go to the corner polish.
+
+    Active-set predictor (``predictor=True``, not with ``proximal``). Between DDCM iterations only
+    the assigned data change, and between load steps only the loads; the active set mostly stays.
+    Before semismooth Newton, the system of the piece the start lies on is solved (the branch
+    system above; for ``mcp``, ``F = 0`` with ``a_i = 0`` or ``b_i = 0``). For a linear model its
+    Jacobian does not depend on the unknowns or the parameters, so its LU factorisation is computed
+    once per active set and reused (a few are cached): a solve is then two triangular solves (the
+    second one refines roundoff and gives Newton's increment test). The result is accepted only if
+    every pair is strictly complementary with the right signs and the Fischer-Burmeister residual
+    itself passes ``residual_tol``: it is then an exact root of the same system Newton solves.
+    Otherwise semismooth Newton runs from the original start, as without the predictor.
     """
 
+    #: Factorisations of piece systems kept per system (one per active set).
+    LU_CACHE = 4
+
     def __init__(self, problem: ComplementarityProblem, a_scale: float, b_scale: float, *,
-                 gap=None, proximal: bool = False) -> None:
+                 gap=None, proximal: bool = False, predictor: bool = True) -> None:
         self.problem = problem
+        self.predictor = bool(predictor) and not proximal
+        self.stats = {"predicted": 0, "newton": 0}
         gap = problem.gap if gap is None else gap
         mu = ca.SX.sym("mu")
         a, b = a_scale * gap, b_scale * problem.p
@@ -67,6 +86,7 @@ class FBSystem:
             self.split = lambda z: (z[:nx], z[nx:nx + nc], {})
             P = ca.vertcat(problem.params, mu)
             self.corner = False
+            eta = theta = nu = None
         else:
             ne = problem.residual.numel()
             eta, theta, nu = ca.SX.sym("eta", ne), ca.SX.sym("theta", nc), ca.SX.sym("nu", nc)
@@ -85,14 +105,21 @@ class FBSystem:
                                                               theta=z[nx + nc + ne:nx + 2 * nc + ne]))
             P = ca.vertcat(problem.params, *extra, mu, sel)
             self.corner = True
-            self._ab = NumericFunction(ca.Function("fb_ab", [z, problem.params], [a, b]))
             self._ne = ne
-            self._branch = None  # built on first use (see branch_finish)
-            self._pieces = (problem, a, b, z, eta, theta, nu)
+        self._ab = NumericFunction(ca.Function("fb_ab", [z, problem.params], [a, b]))
+        self._branch = None  # built on first use (see _branch_system)
+        self._pieces = (problem, a, b, z, eta, theta, nu)
+        self._lu: OrderedDict[bytes, object] = OrderedDict()
+        if self.predictor:
+            self._branch_system()  # part of the build, not of the first solve
         self.rj = NumericFunction(ca.Function("fb_rj", [z, P], [r, ca.jacobian(r, z)]))
         self.r = NumericFunction(ca.Function("fb_r", [z, P], [r]))
         self.phi = NumericFunction(ca.Function("fb_phi", [z, P], [phi]))
         self.jacobian = SparseJacobian(self.rj)
+
+    @property
+    def n_params(self) -> int:
+        return self.problem.params.numel()
 
     def start(self, x0, p0, state) -> np.ndarray:
         if self.problem.kind == "mcp":
@@ -107,6 +134,13 @@ class FBSystem:
         ``(x, p, state, result, mu, stages)``."""
         nc = self.nc
         kw = dict(jacobian=self.jacobian, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        if self.predictor:
+            predicted = self._predict(z0, params, opts, corner_tol)
+            if predicted is not None:
+                self.stats["predicted"] += 1
+                x, p, st = self.split(predicted.z)
+                return x, p, st, predicted, 0.0, 0
+        self.stats["newton"] += 1
         if not self.corner:
             res, mu, stages = smoothed_newton_solve(self.rj, self.r, z0, params, smoothing=opts.smoothing, **kw)
             x, p, st = self.split(res.z)
@@ -140,19 +174,85 @@ class FBSystem:
         return x, p, st, best, mu, stages
 
     def _branch_system(self):
-        """The KKT system with each pair on one piece: ``-a_i = 0`` (``branch_i = 1``) or
-        ``-b_i = 0``, multiplier ``theta_i``, ``nu = 0``. Built once, when first needed: most
-        problems never need it, and its Jacobian costs as much to build as the FB one."""
+        """The system with each pair on one piece: ``-a_i = 0`` (``branch_i = 1``) or ``-b_i = 0``.
+
+        ``mpcc``: the KKT system of the piece, multiplier ``theta_i``, ``nu = 0``. ``mcp``:
+        ``F = 0`` and the pieces. Built once, when first needed. Returns ``(rj, r, jacobian,
+        linear)``; ``linear`` says that the Jacobian depends on neither the unknowns nor the
+        parameters (then one factorisation serves every solve on the same pieces). Built with the
+        system when the predictor is on, else on first use (most solves never need it).
+        """
         if self._branch is None:
             problem, a, b, z, eta, theta, nu = self._pieces
             branch = ca.SX.sym("branch", self.nc)
             piece = -(branch * a + (1 - branch) * b)
-            lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, piece)
-            r = ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, piece, nu)
+            if problem.kind == "mcp":
+                r = ca.vertcat(problem.residual, piece)
+            else:
+                lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, piece)
+                r = ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, piece, nu)
             P = ca.vertcat(problem.params, branch)
-            rj = NumericFunction(ca.Function("fb_branch_rj", [z, P], [r, ca.jacobian(r, z)]))
-            self._branch = (rj, NumericFunction(ca.Function("fb_branch_r", [z, P], [r])), SparseJacobian(rj))
+            J = ca.jacobian(r, z)
+            linear = not ca.depends_on(J, ca.vertcat(z, problem.params))
+            rj = NumericFunction(ca.Function("fb_branch_rj", [z, P], [r, J]))
+            self._branch = (rj, NumericFunction(ca.Function("fb_branch_r", [z, P], [r])), SparseJacobian(rj),
+                            linear)
         return self._branch
+
+    def _solve_piece(self, z, P, branch, kw) -> NewtonResult | None:
+        """Newton on the piece system ``branch`` (parameters ``P`` without the branch); for a linear
+        model with a cached factorisation. ``None`` if the piece system is singular."""
+        rj, r, jac, linear = self._branch_system()
+        Pb = np.concatenate([P, branch])
+        if not linear:
+            return newton_solve(rj, r, z, Pb, **dict(kw, jacobian=jac))
+        key = branch.tobytes()
+        lu = self._lu.pop(key, None)
+        if lu is None:
+            res, J = rj(z, Pb)
+            try:
+                lu = spla.splu(jac(J))
+            except RuntimeError:  # singular piece (degenerate active set)
+                return None
+        else:
+            res = r(z, Pb)
+        self._lu[key] = lu
+        while len(self._lu) > self.LU_CACHE:
+            self._lu.popitem(last=False)
+        z = np.array(z, dtype=float)
+        rnorm, increment, it = float(np.max(np.abs(res), initial=0.0)), np.inf, 0
+        # Exact Jacobian of a linear system: the first step solves it, the next ones refine roundoff.
+        for it in range(1, min(3, kw["max_iter"]) + 1):
+            dz = -lu.solve(res)
+            if not np.all(np.isfinite(dz)):
+                return None
+            z = z + dz
+            increment = float(np.max(np.abs(dz), initial=0.0)) / max(1.0, float(np.max(np.abs(z), initial=0.0)))
+            res = r(z, Pb)
+            rnorm = float(np.max(np.abs(res), initial=0.0))
+            if increment <= kw["tol"] and rnorm <= kw["residual_tol"]:
+                return NewtonResult(z, True, it, rnorm, increment, "converged")
+        return NewtonResult(z, False, it, rnorm, increment, "piece system: refinement stalled")
+
+    def _signs(self, z, P, branch):
+        """The sign each piece leaves free: ``b_i`` where ``a_i = 0`` is imposed, else ``a_i``."""
+        a, b = self._ab(z, P)
+        return np.where(branch > 0, b, a)
+
+    def _predict(self, z0, params, opts, corner_tol: float) -> NewtonResult | None:
+        """The active-set predictor (see the class notes); ``None`` if it does not apply."""
+        res = self._active_set(z0, params, opts, corner_tol=corner_tol, max_switches=opts.max_iter)
+        if res is None:
+            return None
+        if "corner" in res.message:  # converged on the selector system and found B-stationary
+            return res
+        extra = [0.0] + ([0.0] * self.nc if self.corner else [])
+        fb = self.r(res.z, np.concatenate([np.asarray(params, float), extra]))
+        rnorm = float(np.max(np.abs(fb), initial=0.0))
+        if not rnorm <= opts.residual_tol:
+            return None
+        res.residual, res.message = rnorm, res.message.replace("active set", "active-set predictor")
+        return res
 
     def branch_finish(self, starts, params, opts, *, corner_tol: float = 1e-3, max_switches: int | None = None):
         """Primal-dual active-set finish on the pieces of ``Z_E`` (see the class notes).
@@ -160,40 +260,63 @@ class FBSystem:
         Returns the converged Newton result, or ``None`` if no start leads to a solution whose
         signs hold (then the caller reports the failure).
         """
-        npar = self.problem.params.numel()
-        P = np.asarray(params, float)[:npar]
-        branch_rj, branch_r, branch_jac = self._branch_system()
-        kw = dict(jacobian=branch_jac, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
         max_switches = 2 * self.nc + 5 if max_switches is None else max_switches
         for z in starts:
-            if not np.all(np.isfinite(z)):
-                continue
-            a, b = (np.asarray(v, float).ravel() for v in self._ab(z, P))
-            branch = (a <= b).astype(float)
-            seen, total = set(), 0
-            for _ in range(max_switches):
-                seen.add(branch.tobytes())
-                res = newton_solve(branch_rj, branch_r, z, np.concatenate([P, branch]), **kw)
-                total += res.iterations
-                if not res.converged:
-                    break
-                a, b = (np.asarray(v, float).ravel() for v in self._ab(res.z, P))
-                other = np.where(branch > 0, b, a)  # the sign the piece leaves free
-                if np.all(other > 0):
-                    res.iterations, res.message = total, "converged (branch finish)"
-                    return res
-                if np.all(other >= -1e-12 * max(1.0, float(np.max(np.abs(other))))):
-                    # Biactive pairs: a corner, accepted only if B-stationary.
-                    corner = self._corner(res.z, np.asarray(params, float), corner_tol, dict(kw, jacobian=self.jacobian))
-                    if corner is not None:
-                        corner.iterations += total
-                        return corner
-                    break
-                z = res.z
-                branch = np.where(other < 0, 1.0 - branch, branch)
-                if branch.tobytes() in seen:
-                    break
+            res = self._active_set(z, params, opts, corner_tol=corner_tol, max_switches=max_switches)
+            if res is not None:
+                res.message = res.message.replace("active set", "branch finish")
+                return res
         return None
+
+    def _active_set(self, z, params, opts, *, corner_tol: float, max_switches: int) -> NewtonResult | None:
+        """Primal-dual active-set iteration from ``z``: solve the piece system of the branches ``z``
+        lies on, switch the pairs whose free sign is violated, until every sign holds.
+
+        A sign-consistent result is accepted if strictly complementary; with biactive pairs (signs
+        hold to 1e-12 relative) it is accepted for ``mcp`` (any sign-consistent point solves the
+        pairs) and, for ``mpcc``, only after the corner polish finds it B-stationary. ``None`` if a piece is singular, a branch
+        repeats or ``max_switches`` is reached.
+        """
+        if not np.all(np.isfinite(z)):
+            return None
+        P = np.asarray(params, float)[:self.n_params]
+        kw = dict(tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        a, b = self._ab(z, P)
+        branch = (a <= b).astype(float)
+        seen, total = set(), 0
+        closest, violation = None, np.inf  # the iterate with the smallest sign violation
+        for _ in range(max_switches):
+            seen.add(branch.tobytes())
+            res = self._solve_piece(z, P, branch, kw)
+            if res is None or not res.converged:
+                return None
+            total += res.iterations
+            other = self._signs(res.z, P, branch)
+            strict = bool(np.all(other > 0))
+            if strict:
+                res.iterations, res.message = total, "converged (active set)"
+                return res
+            worst = -float(np.min(other))
+            if worst <= 1e-12 * max(1.0, float(np.max(np.abs(other)))):
+                if not self.corner:  # mcp: signs hold to roundoff; the caller checks the residual
+                    res.iterations, res.message = total, "converged (active set)"
+                    return res
+                return self._corner_after(res.z, params, corner_tol, kw, total)
+            if worst < violation:
+                closest, violation = res.z, worst
+            z = res.z
+            branch = np.where(other < 0, 1.0 - branch, branch)
+            if branch.tobytes() in seen:
+                # Cycling between pieces: the solution is at their common corner, if anywhere.
+                return self._corner_after(closest, params, corner_tol, kw, total) if self.corner else None
+        return None
+
+    def _corner_after(self, z, params, corner_tol, kw, iterations) -> NewtonResult | None:
+        """Biactive pairs: the corner polish from ``z``, accepted only if B-stationary."""
+        corner = self._corner(z, np.asarray(params, float), corner_tol, dict(kw, jacobian=self.jacobian))
+        if corner is not None:
+            corner.iterations += iterations
+        return corner
 
     def polish_corner(self, z, params, opts, *, corner_tol: float = 1e-3):
         """The biactive-branch solution near ``z`` if it is B-stationary, else ``None``."""
@@ -201,7 +324,7 @@ class FBSystem:
         return self._corner(z, params, corner_tol, kw) if self.corner else None
 
     def _creeping(self, z, params, corner_tol) -> bool:
-        a, b = (np.asarray(v, float).ravel() for v in self._ab(z, params[:self.problem.params.numel()]))
+        a, b = self._ab(z, params[:self.n_params])
         near = np.maximum(np.abs(a), np.abs(b)) <= corner_tol
         return bool(np.any(np.minimum(np.abs(a), np.abs(b))[near] > 1e-14))
 
@@ -209,7 +332,7 @@ class FBSystem:
         """Newton on the biactive branch of the pairs near a corner; ``None`` unless B-stationary."""
         if not np.all(np.isfinite(z)):
             return None
-        a, b = (np.asarray(v, float).ravel() for v in self._ab(z, params[:self.problem.params.numel()]))
+        a, b = self._ab(z, params[:self.n_params])
         sel = (np.maximum(np.abs(a), np.abs(b)) <= corner_tol).astype(float)
         if not sel.any():
             return None

@@ -56,6 +56,9 @@ class Penalty(Formulation):
             Fallback smoothing continuation ``mu -> 0`` (see :mod:`ddcm_casadi.solvers.newton`).
         comp_tol : float
             DDCM: the compliant pairs must satisfy ``max |min(g + p/gamma, p)| <= comp_tol`` (scaled).
+        active_set_predictor : bool
+            DDCM: the active-set predictor of the compliant pairs' FB system (see
+            :class:`formulations.ncp.FBSystem`).
         """
 
         gamma: float | None = None
@@ -64,6 +67,7 @@ class Penalty(Formulation):
         max_iter: int = 50
         smoothing: tuple = SMOOTHING
         comp_tol: float = 1e-9
+        active_set_predictor: bool = True
 
     DEFAULT_GAMMA_FACTOR = 1e4
 
@@ -116,7 +120,7 @@ class _BuiltCompliantProjection(BuiltFormulation):
         self.opts = opts
         compliant_gap = problem.gap + problem.p / gamma
         self.system = FBSystem(problem, problem.fb_alpha * problem.gap_ref, problem.fb_beta * problem.pressure_ref,
-                               gap=compliant_gap)
+                               gap=compliant_gap, predictor=opts.active_set_predictor)
         self._pairs = NumericFunction(ca.Function("compliant_pairs", [problem.x, problem.p, problem.params],
                                                   [ca.fmin(compliant_gap, problem.p)]))
 
