@@ -30,7 +30,7 @@ from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_at
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.reference import ContactQP
 from ddcm_casadi.solvers.path import DDCMSolver
-from ddcm_casadi.truss import Obstacle, bar_chain, truss_model
+from ddcm_casadi.truss import bar_chain, warren_truss
 
 
 def median_time(fn, repeats: int) -> float:
@@ -51,20 +51,10 @@ def stopped_bar(n_elements: int, n_data: int, *, steps=(0.985,)):
 
 def warren(panels: int, n_data: int, *, contacts: int = 5, steps=(1.0,)):
     """2-D Warren truss with ``panels`` panels on a plane under ``contacts`` bottom nodes."""
-    nb = panels + 1
-    X = np.vstack([np.column_stack([np.arange(nb), np.zeros(nb)]),
-                   np.column_stack([np.arange(panels) + 0.5, np.full(panels, 0.8)])])
-    idx = np.arange(panels)
-    members = np.vstack([np.column_stack([idx, idx + 1]), np.column_stack([nb + idx[:-1], nb + idx[1:]]),
-                         np.column_stack([idx, nb + idx]), np.column_stack([idx + 1, nb + idx])])
-    loads = np.zeros_like(X)
-    loads[nb:, 1] = -1e5
     nodes = np.unique(np.linspace(1, panels - 1, contacts).astype(int))
     data = MaterialDataset.hookean(200e9, -0.01, 0.01, n_data, c=200e9)
-    return truss_model(nodes=X, members=members, area=1e-3, youngs_modulus=200e9,
-                       supports=[(0, "xy"), (panels, "y")], loads=loads,
-                       obstacles=[Obstacle(normal=[0, 1], offset=-0.002 * panels / 4, nodes=nodes)],
-                       load_factors=list(steps), dataset=data, name=f"Warren truss, {panels} panels")
+    return warren_truss(panels=panels, gap=0.002 * panels / 4, contact_nodes=nodes, load_factors=steps,
+                        dataset=data)
 
 
 def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister") -> dict:

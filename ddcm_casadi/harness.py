@@ -233,7 +233,7 @@ class Comparison:
 
 
 def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] = VARIANTS,
-            raise_on_failure: bool = False, ddcm_max_outer: int = 100,
+            raise_on_failure: bool = False, ddcm_max_outer: int = 100, ddcm_search: str = "kdtree",
             progress: Callable[[str, str, StepResult], None] | None = None) -> Comparison:
     """Run every formulation in every variant along the model's load path.
 
@@ -246,6 +246,11 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     variants : iterable of {"classical", "ddcm"}
     raise_on_failure : bool
         Raise :class:`~ddcm_casadi.errors.ConvergenceError` at the first non-converged step.
+    ddcm_max_outer : int
+        Alternating-projection iterations per DDCM load step.
+    ddcm_search : {"kdtree", "warm"}
+        Data search of the DDCM iterations: a cold KD-tree query, or the exact warm-started search
+        from the previous assignment (:meth:`~ddcm_casadi.data.MaterialDataset.nearest_warm`).
     progress : callable, optional
         Called as ``progress(variant, formulation, step_result)`` after every step.
 
@@ -257,6 +262,8 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
         raise InputError(f"unknown variant {bad[0]!r}; choose from {', '.join(VARIANTS)}")
+    if ddcm_search not in DDCMSolver.SEARCHES:
+        raise InputError(f"unknown data search {ddcm_search!r}; known: {', '.join(DDCMSolver.SEARCHES)}")
     forms = resolve_formulations(formulations)
     problems = build_problems(model)
     out = Comparison(model=model, problems=problems, formulations=forms)
@@ -274,7 +281,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
                 r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb)
             else:
                 built = form.build(problems.projection)
-                solver = DDCMSolver(problems, built, max_outer=ddcm_max_outer)
+                solver = DDCMSolver(problems, built, max_outer=ddcm_max_outer, search=ddcm_search)
                 build = time.perf_counter() - t0
                 r = solver.solve(formulation_name=form.name, raise_on_failure=raise_on_failure, progress=cb)
             r.build_seconds = build

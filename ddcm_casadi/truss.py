@@ -390,3 +390,37 @@ def bar_chain(*, length: float, elements: int, area: float = 1.0, youngs_modulus
     kw = {f: getattr(base, f) for f in base.__dataclass_fields__ if not f.startswith("_")}
     kw.update(load_parameter=h, load_parameter_name="h", length_scale=L)
     return StoppedBarModel(**kw)
+
+
+def warren_truss(*, panels: int, gap: float, contact_nodes, load_factors, panel_length: float = 1.0,
+                 height: float = 0.8, area: float = 1e-3, youngs_modulus: float | None = 200e9,
+                 node_load: float = 1e5, dataset=None, name: str | None = None) -> TrussModel:
+    """A 2-D Warren truss on a pin and a roller, its top nodes loaded downwards, above a plane.
+
+    Parameters
+    ----------
+    panels : int
+        Number of bottom-chord panels (``4 panels - 1`` members, ``2 panels + 1`` nodes).
+    gap : float
+        Initial distance (m) between the bottom chord and the plane ``y = -gap``.
+    contact_nodes : sequence of int
+        Bottom-chord nodes (``0 .. panels``) that may touch the plane.
+    load_factors : sequence of float
+        Load path: the top-node loads ``-node_load`` (N, in ``y``) times each factor.
+    """
+    panels = int(panels)
+    if panels < 2:
+        raise InputError(f"a Warren truss needs at least 2 panels, got {panels}")
+    nb = panels + 1
+    X = np.vstack([np.column_stack([np.arange(nb) * panel_length, np.zeros(nb)]),
+                   np.column_stack([(np.arange(panels) + 0.5) * panel_length, np.full(panels, height)])])
+    i = np.arange(panels)
+    members = np.vstack([np.column_stack([i, i + 1]), np.column_stack([nb + i[:-1], nb + i[1:]]),
+                         np.column_stack([i, nb + i]), np.column_stack([i + 1, nb + i])])
+    loads = np.zeros_like(X)
+    loads[nb:, 1] = -node_load
+    return truss_model(nodes=X, members=members, area=area, youngs_modulus=youngs_modulus,
+                       supports=[(0, "xy"), (panels, "y")], loads=loads,
+                       obstacles=[Obstacle(normal=[0, 1], offset=-gap, nodes=list(contact_nodes))],
+                       load_factors=list(load_factors), dataset=dataset,
+                       name=name or f"Warren truss, {panels} panels")

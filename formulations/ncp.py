@@ -274,8 +274,10 @@ class FBSystem:
 
         A sign-consistent result is accepted if strictly complementary; with biactive pairs (signs
         hold to 1e-12 relative) it is accepted for ``mcp`` (any sign-consistent point solves the
-        pairs) and, for ``mpcc``, only after the corner polish finds it B-stationary. ``None`` if a piece is singular, a branch
-        repeats or ``max_switches`` is reached.
+        pairs) and, for ``mpcc``, only after the corner polish finds it B-stationary. If the
+        iteration cycles, the pairs that switched back and forth are the biactive candidates: the
+        corner polish on them decides. ``None`` if a piece is singular, the corner is not
+        B-stationary or ``max_switches`` is reached.
         """
         if not np.all(np.isfinite(z)):
             return None
@@ -283,7 +285,7 @@ class FBSystem:
         kw = dict(tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
         a, b = self._ab(z, P)
         branch = (a <= b).astype(float)
-        seen, total = set(), 0
+        seen, total, flips = set(), 0, np.zeros(self.nc, dtype=int)
         closest, violation = None, np.inf  # the iterate with the smallest sign violation
         for _ in range(max_switches):
             seen.add(branch.tobytes())
@@ -296,24 +298,29 @@ class FBSystem:
             if strict:
                 res.iterations, res.message = total, "converged (active set)"
                 return res
+            roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other))))
             worst = -float(np.min(other))
-            if worst <= 1e-12 * max(1.0, float(np.max(np.abs(other)))):
+            if worst <= roundoff:
                 if not self.corner:  # mcp: signs hold to roundoff; the caller checks the residual
                     res.iterations, res.message = total, "converged (active set)"
                     return res
-                return self._corner_after(res.z, params, corner_tol, kw, total)
+                return self._corner_after(res.z, params, np.abs(other) <= roundoff, kw, total)
             if worst < violation:
                 closest, violation = res.z, worst
             z = res.z
-            branch = np.where(other < 0, 1.0 - branch, branch)
+            switch = other < 0
+            flips += switch
+            branch = np.where(switch, 1.0 - branch, branch)
             if branch.tobytes() in seen:
-                # Cycling between pieces: the solution is at their common corner, if anywhere.
-                return self._corner_after(closest, params, corner_tol, kw, total) if self.corner else None
+                # Cycling between pieces: the solution is at the corner of the pairs that switch
+                # back and forth, if anywhere.
+                return self._corner_after(closest, params, flips >= 2, kw, total) if self.corner else None
         return None
 
-    def _corner_after(self, z, params, corner_tol, kw, iterations) -> NewtonResult | None:
-        """Biactive pairs: the corner polish from ``z``, accepted only if B-stationary."""
-        corner = self._corner(z, np.asarray(params, float), corner_tol, dict(kw, jacobian=self.jacobian))
+    def _corner_after(self, z, params, selection, kw, iterations) -> NewtonResult | None:
+        """Biactive pairs ``selection``: the corner polish from ``z``, accepted only if B-stationary."""
+        corner = self._corner(z, np.asarray(params, float), None, dict(kw, jacobian=self.jacobian),
+                              selection=selection)
         if corner is not None:
             corner.iterations += iterations
         return corner
@@ -328,12 +335,15 @@ class FBSystem:
         near = np.maximum(np.abs(a), np.abs(b)) <= corner_tol
         return bool(np.any(np.minimum(np.abs(a), np.abs(b))[near] > 1e-14))
 
-    def _corner(self, z, params, corner_tol, kw):
-        """Newton on the biactive branch of the pairs near a corner; ``None`` unless B-stationary."""
+    def _corner(self, z, params, corner_tol, kw, *, selection=None):
+        """Newton on the biactive branch of the pairs ``selection`` (default: those within
+        ``corner_tol`` of a corner); ``None`` unless B-stationary."""
         if not np.all(np.isfinite(z)):
             return None
-        a, b = self._ab(z, params[:self.n_params])
-        sel = (np.maximum(np.abs(a), np.abs(b)) <= corner_tol).astype(float)
+        if selection is None:
+            a, b = self._ab(z, params[:self.n_params])
+            selection = np.maximum(np.abs(a), np.abs(b)) <= corner_tol
+        sel = np.asarray(selection, dtype=float)
         if not sel.any():
             return None
         P = np.concatenate([params, [0.0], sel])

@@ -5,7 +5,8 @@ Both warm-start each step from the previous one. The DDCM driver alternates
 1. the projection onto ``Z_E`` (solved by the chosen formulation; for problems with few contact
    pairs the exact branch enumeration of :mod:`ddcm_casadi.exact` is consulted and the formulation
    is restarted on the globally best branch if it stopped on another one), and
-2. the projection onto the data (vectorised KD-tree nearest neighbour under the metric),
+2. the projection onto the data (vectorised KD-tree nearest neighbour under the metric, or the
+   warm-started exact search that starts from the previous assignment, ``search="warm"``),
 
 until the data assignment no longer changes. The first step starts from the data point nearest
 the origin. For one-element problems it also finds the global DDCM optimum by enumerating the data
@@ -52,6 +53,8 @@ class StepResult:
     projection_global: bool | None = None
     global_optimum: bool | None = None
     global_distance: float = float("nan")
+    projection_seconds: float = 0.0
+    search_seconds: float = 0.0
 
     def diagnostics(self) -> dict:
         d = asdict(self)
@@ -117,10 +120,18 @@ def solve_classical(problems: ProblemPair, built, formulation_name: str, *, rais
 class DDCMSolver:
     """Alternating projections for one model and one built projection formulation."""
 
+    #: Data searches: a cold KD-tree query, or the warm-started exact search.
+    SEARCHES = ("kdtree", "warm")
+
     def __init__(self, problems: ProblemPair, built, *, max_outer: int = 100, enumerate_pairs: int = 4,
-                 global_search: bool = True) -> None:
+                 global_search: bool = True, search: str = "kdtree") -> None:
         if problems.projection is None:
             raise InputError("the DDCM variant needs a material data set")
+        if search not in self.SEARCHES:
+            raise InputError(f"unknown data search {search!r}; known: {', '.join(self.SEARCHES)}")
+        self.search = search
+        #: ``queries`` and ``fallbacks`` (uncertified states) of the warm search, accumulated.
+        self.search_stats: dict = {}
         self.problems = problems
         self.built = built
         self.max_outer = int(max_outer)
@@ -164,27 +175,35 @@ class DDCMSolver:
         t_all = time.perf_counter()
         for k in range(model.n_steps):
             t0 = time.perf_counter()
-            inner = 0
-            seen = {tuple(index)}
+            inner, t_project, t_search = 0, 0.0, 0.0
+            seen = {index.tobytes()}
             converged, message = False, "maximum outer iterations reached"
             for outer in range(1, self.max_outer + 1):
+                t1 = time.perf_counter()
                 params = problems.projection_params(k, data.strain[index], data.stress[index])
                 sol, is_global, err = self._project(params, x, p, state)
+                t_project += time.perf_counter() - t1
                 inner += sol.iterations
                 if not sol.converged:
                     message = f"Z_E projection did not converge: {sol.message}"
                     break
                 x, p, state = sol.x, sol.p, sol.state
+                t1 = time.perf_counter()
                 f = problems.fields("mpcc", sol.x, sol.p)
-                new_index = data.nearest(f["strain"], f["stress"])
+                if self.search == "warm":
+                    new_index = data.nearest_warm(f["strain"], f["stress"], index, stats=self.search_stats)
+                else:
+                    new_index = data.nearest(f["strain"], f["stress"])
+                t_search += time.perf_counter() - t1
                 if np.array_equal(new_index, index):
                     converged, message = True, "fixed point"
                     break
-                if tuple(new_index) in seen:
+                key = new_index.tobytes()
+                if key in seen:
                     message = "data assignment cycles"
                     index = new_index
                     break
-                seen.add(tuple(new_index))
+                seen.add(key)
                 index = new_index
             f = problems.fields("mpcc", sol.x, sol.p)
             d2 = data.distance2(f["strain"], f["stress"], index)
@@ -195,7 +214,7 @@ class DDCMSolver:
                               strain=f["strain"], stress=f["stress"], strain_star=data.strain[index].copy(),
                               stress_star=data.stress[index].copy(), data_index=index.copy(),
                               distance=float(0.5 * np.dot(model.volumes, d2)), projection_error=err,
-                              projection_global=is_global)
+                              projection_global=is_global, projection_seconds=t_project, search_seconds=t_search)
             if self.global_search:
                 self._global_optimum(k, step)
             step.seconds = time.perf_counter() - t0
