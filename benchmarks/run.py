@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import subprocess
 import sys
 import time
-import tracemalloc
 
 import numpy as np
 import scipy.sparse.linalg as spla
@@ -29,27 +29,36 @@ from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.reference import ContactQP
-from ddcm_casadi.solvers.path import DDCMSolver
+from ddcm_casadi.solvers.path import DDCMSolver, solve_classical
 from ddcm_casadi.truss import bar_chain, warren_truss
 
 
-def median_time(fn, repeats: int) -> float:
+def median_time(fn, repeats: int, budget: float = 20.0) -> float:
+    """Median wall time of up to ``repeats`` calls; calls stop once ``budget`` seconds are spent
+    (at least one call)."""
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         fn()
         times.append(time.perf_counter() - t0)
+        if sum(times) > budget:
+            break
     return statistics.median(times)
 
 
-def stopped_bar(n_elements: int, n_data: int, *, steps=(0.985,)):
+BAR_STEPS = (0.99, 0.9875, 0.985, 0.9825, 0.98)
+TRUSS_STEPS = (0.6, 0.7, 0.8, 0.9, 1.0)
+
+
+def stopped_bar(n_elements: int, n_data: int, *, steps=BAR_STEPS):
+    """A bar pushed at its tip onto 9 stops behind interior nodes (5 load steps)."""
     stops = {max(1, int(n_elements * j / 10)): 0.002 * j for j in range(1, 10)}
     data = MaterialDataset.hookean(200e9, -0.05, 0.01, n_data, c=300e9)
     return bar_chain(length=1.0, elements=n_elements, youngs_modulus=200e9, tip_positions=list(steps),
                      stops=stops, dataset=data, name=f"bar, {n_elements} elements")
 
 
-def warren(panels: int, n_data: int, *, contacts: int = 5, steps=(1.0,)):
+def warren(panels: int, n_data: int, *, contacts: int = 5, steps=TRUSS_STEPS):
     """2-D Warren truss with ``panels`` panels on a plane under ``contacts`` bottom nodes."""
     nodes = np.unique(np.linspace(1, panels - 1, contacts).astype(int))
     data = MaterialDataset.hookean(200e9, -0.01, 0.01, n_data, c=200e9)
@@ -57,77 +66,126 @@ def warren(panels: int, n_data: int, *, contacts: int = 5, steps=(1.0,)):
                         dataset=data)
 
 
-def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister") -> dict:
-    """Seconds per DDCM iteration (projection + data search) against its floor."""
+def _reset(built) -> None:
+    system = getattr(built, "system", None)
+    if system is not None:
+        system.reset()  # cold factorisation cache: every repeat measures the same work
+
+
+def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister", *, search: str = "kdtree",
+                   floor: bool = True) -> dict:
+    """Seconds per DDCM iteration (projection + data search) along the model's load path, against
+    the floor: one scipy LU factorisation and solve of the FB saddle-point system at the converged
+    state, plus one KD-tree query of every material point against the data set.
+
+    ``seconds`` is the mean over every iteration of the path, the cold first step included;
+    ``first_step_seconds`` and ``later_steps_seconds`` split it.
+    """
     problems = build_problems(model)
+    t0 = time.perf_counter()
     built = formulations.get(formulation).build(problems.projection)
-    solver = DDCMSolver(problems, built)
+    build = time.perf_counter() - t0
     runs = []
     for _ in range(repeats):
-        path = solver.solve(formulation_name=formulation)
-        step = path.steps[-1]
-        runs.append((path.solve_seconds / sum(s.outer_iterations for s in path.steps), path))
-    seconds, path = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
-    step = path.steps[-1]
-    # The same saddle-point system at the converged state, factorised and solved by scipy.
+        _reset(built)
+        path = DDCMSolver(problems, built, search=search).solve(formulation_name=formulation)
+        its = sum(s.outer_iterations for s in path.steps)
+        runs.append((path.solve_seconds / its, path, dict(getattr(built, "system", None).stats)))
+    seconds, path, stats = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
+    steps = path.steps
+    its = np.array([s.outer_iterations for s in steps])
+    secs = np.array([s.seconds for s in steps])
+    total = float(secs.sum())
+    rec = dict(unknowns=0, data_points=len(model.dataset), seconds=seconds, floor_seconds=float("nan"),
+               ratio=float("nan"), search=search, steps=len(steps), outer_iterations=int(its.sum()),
+               first_step_seconds=float(secs[0] / its[0]),
+               later_steps_seconds=float(secs[1:].sum() / its[1:].sum()) if len(steps) > 1 else float("nan"),
+               projection_share=float(sum(s.projection_seconds for s in steps)) / total,
+               search_share=float(sum(s.search_seconds for s in steps)) / total,
+               search_seconds_per_iteration=float(sum(s.search_seconds for s in steps)) / int(its.sum()),
+               newton_per_projection=float(sum(s.iterations for s in steps) / its.sum()),
+               predicted_share=stats["predicted"] / max(1, stats["predicted"] + stats["newton"]),
+               build_seconds=build, converged=bool(path.converged))
     system = built.system
+    step = steps[-1]
     x, p = problems.scaled_start("mpcc", step.u, step.p, step.stress)
     z = system.start(x, p, None)
     P = np.concatenate([problems.projection_params(step.step, step.strain_star, step.stress_star),
                         [0.0], np.zeros(problems.projection.n_pairs)])
     r, J = system.rj(z, P)
     A = system.jacobian(J)
-    rhs = np.asarray(r, float).ravel() + 1.0
-    t_lu = median_time(lambda: spla.splu(A).solve(rhs), max(3, repeats))
-    data = model.dataset
-    t_kd = median_time(lambda: data.nearest(step.strain, step.stress), max(3, repeats))
-    floor = t_lu + t_kd
-    return dict(unknowns=int(A.shape[0]), data_points=len(data), seconds=seconds, floor_seconds=floor,
-                ratio=seconds / floor, lu_seconds=t_lu, kdtree_seconds=t_kd,
-                newton_per_projection=float(sum(s.iterations for s in path.steps)
-                                            / sum(s.outer_iterations for s in path.steps)),
-                outer_iterations=int(sum(s.outer_iterations for s in path.steps)),
-                converged=bool(path.converged))
+    rec["unknowns"] = int(A.shape[0])
+    if floor:
+        rhs = np.asarray(r, float).ravel() + 1.0
+        t_lu = median_time(lambda: spla.splu(A).solve(rhs), max(3, repeats))
+        t_kd = median_time(lambda: model.dataset.nearest(step.strain, step.stress), max(3, repeats))
+        rec.update(floor_seconds=t_lu + t_kd, ratio=seconds / (t_lu + t_kd), lu_seconds=t_lu, kdtree_seconds=t_kd)
+    return rec
 
 
-def data_search(n_points: int, n_data: int, repeats: int) -> dict:
-    """Cold KD-tree query of ``n_points`` states against the warm-started exact search, and the
-    tree's build time and peak memory."""
-    rng = np.random.default_rng(1)
-    tracemalloc.start()
-    t0 = time.perf_counter()
-    data = MaterialDataset.hookean(200e9, -0.01, 0.01, n_data, c=200e9)
-    build = time.perf_counter() - t0
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    strain = rng.uniform(-0.01, 0.01, n_points)
-    stress = 200e9 * strain * (1 + 0.01 * rng.standard_normal(n_points))
-    t = median_time(lambda: data.nearest(strain, stress), repeats)
-    # Warm start as between two DDCM iterations: the previous states differ slightly.
-    previous = data.nearest(strain * (1 + 1e-3), stress * (1 - 1e-3))
-    t0 = time.perf_counter()
-    data._graph()
-    graph = time.perf_counter() - t0
-    stats: dict = {}
-    t_warm = median_time(lambda: data.nearest_warm(strain, stress, previous, stats=stats), repeats)
-    fallback = stats["fallbacks"] / max(1, stats["queries"])
-    return dict(unknowns=n_points, data_points=n_data, seconds=t, floor_seconds=t, ratio=1.0,
-                build_seconds=build, peak_memory_mb=peak / 2**20, warm_seconds=t_warm,
-                warm_over_cold=t_warm / t, warm_fallback_share=fallback, graph_build_seconds=graph)
+PEAK_MEMORY = """
+import resource, sys, time
+import numpy as np
+from ddcm_casadi import MaterialDataset
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+n = int(sys.argv[1])
+t0 = time.perf_counter()
+data = MaterialDataset.hookean(200e9, -0.01, 0.01, n, c=200e9)
+build = time.perf_counter() - t0
+strain = np.random.default_rng(1).uniform(-0.01, 0.01, 30_000)
+t0 = time.perf_counter()
+data.nearest(strain, 200e9 * strain)
+query = time.perf_counter() - t0
+tree = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+data._graph()
+graph = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(build, query, (tree - base) / 1024, (graph - base) / 1024)
+"""
 
 
-def fb_vs_qp(model, repeats: int) -> list[dict]:
-    """Classical path: FB Newton against the QP solvers of CasADi, same model, same accuracy."""
+def data_set_memory(n_data: int) -> dict:
+    """Build time and peak memory of a data set and its KD-tree (and the warm search's
+    neighbour graph), measured in a fresh process (peak resident set size above the imports)."""
+    out = subprocess.run([sys.executable, "-c", PEAK_MEMORY, str(n_data)], capture_output=True, text=True,
+                         check=True)
+    build, query, tree_mb, graph_mb = (float(v) for v in out.stdout.split())
+    return dict(name=f"data set of {n_data:.0e} points: build and one query of 3e4 states", unknowns=30_000,
+                data_points=n_data, seconds=build + query, floor_seconds=float("nan"), ratio=float("nan"),
+                build_seconds=build, query_seconds=query, peak_memory_mb=tree_mb,
+                peak_memory_with_graph_mb=graph_mb)
+
+
+def fb_vs_qp(model, repeats: int, *, max_dofs: dict) -> list[dict]:
+    """Classical path: FB Newton against the QP solvers of CasADi on the same model. Solve times
+    only (each is built once beforehand); ``max_rel_difference_u`` is the distance to the FB
+    solution, relative to ``max |u|``."""
     out = []
-    cmp = compare(model, ["fischer_burmeister"], variants=["classical"])
-    fb = cmp["classical", "fischer_burmeister"]
-    t_fb = median_time(lambda: compare(model, ["fischer_burmeister"], variants=["classical"]), repeats)
+    problems = build_problems(model)
     n = model.n_dofs + model.n_contacts
-    out.append(dict(name=f"classical FB Newton, {model.name}", unknowns=n, data_points=0, seconds=t_fb,
-                    floor_seconds=t_fb, ratio=1.0, converged=bool(fb.converged)))
+    ref = None
+    for predictor in (True, False):
+        built = formulations.get("fischer_burmeister", active_set_predictor=predictor).build(problems.classical)
+
+        def run():
+            _reset(built)
+            return solve_classical(problems, built, "fischer_burmeister")
+
+        res = run()
+        t = median_time(run, repeats)
+        u = res.array("u")
+        if ref is None:
+            ref, t_fb = (u, t)
+        label = "with active-set predictor" if predictor else "plain semismooth Newton"
+        out.append(dict(name=f"classical FB Newton ({label}), {model.name}", unknowns=n, data_points=0,
+                        seconds=t, floor_seconds=t_fb, ratio=t / t_fb, converged=bool(res.converged),
+                        newton_iterations=int(res.array("iterations").sum()), steps=model.n_steps,
+                        max_rel_difference_u=float(np.max(np.abs(u - ref)) / np.max(np.abs(ref)))))
     for solver in ("highs", "osqp", "qpoases"):
-        if model.n_dofs > 3000 and solver == "qpoases":
-            continue  # dense active-set internals: minutes at this size
+        if model.n_dofs > max_dofs.get(solver, np.inf):
+            out.append(dict(name=f"classical QP {solver}, {model.name}", unknowns=n, data_points=0,
+                            seconds=float("nan"), floor_seconds=t_fb, ratio=float("nan"),
+                            skipped=f"above {max_dofs[solver]} unknowns in this run (minutes per solve)"))
+            continue
         try:
             qp = ContactQP(model, solver=solver)
         except Exception as exc:  # a plugin that cannot take the problem is reported, not fatal
@@ -136,10 +194,10 @@ def fb_vs_qp(model, repeats: int) -> list[dict]:
             continue
         sol = qp.solve()
         t = median_time(qp.solve, repeats)
-        err = float(np.max(np.abs(sol.u - fb.array("u")))) / max(float(np.max(np.abs(fb.array("u")))), 1e-300)
+        err = float(np.max(np.abs(sol.u - ref))) / max(float(np.max(np.abs(ref))), 1e-300)
         out.append(dict(name=f"classical QP {solver}, {model.name}", unknowns=n, data_points=0, seconds=t,
                         floor_seconds=t_fb, ratio=t / t_fb, max_rel_difference_u=err,
-                        converged=bool(sol.success.all())))
+                        converged=bool(sol.success.all()), steps=model.n_steps))
     return out
 
 
@@ -181,7 +239,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     out = prepare_output_dir(args.out)
     quick = args.quick
-    rep = 1 if quick else 3
+    rep = 3
     records: list[dict] = []
 
     def log(rec):
@@ -189,18 +247,28 @@ def main(argv=None) -> int:
         print(f"{rec['name']:<55} {rec['unknowns']:>8} {rec['data_points']:>9} {rec['seconds']:10.4g} s  "
               f"ratio {rec['ratio']:8.3g}", file=sys.stderr, flush=True)
 
-    bars = (300, 3000, 30000)
-    for n in bars:
-        log(dict(name=f"DDCM iteration, {stopped_bar(n, 10).name}", **ddcm_iteration(stopped_bar(n, 10_000), rep)))
-    for panels in ((100, 1000) if quick else (100, 1000, 10000)):
+    for n in (300, 3000, 30000):
+        model = stopped_bar(n, 10_000)
+        log(dict(name=f"DDCM iteration, {model.name}", **ddcm_iteration(model, rep)))
+    for panels in ((100, 1000, 8000) if quick else (100, 1000, 8000)):
         model = warren(panels, 10_000)
         log(dict(name=f"DDCM iteration, {model.name}", **ddcm_iteration(model, rep)))
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):
-        log(dict(name=f"DDCM iteration, bar 300 elements, {n_data:.0e} data",
-                 **ddcm_iteration(stopped_bar(300, n_data), rep)))
-        log(dict(name=f"KD-tree query of 3e4 states, {n_data:.0e} data", **data_search(30_000, n_data, 3)))
+        log(data_set_memory(n_data))
+        model = stopped_bar(3000, n_data)
+        cold = ddcm_iteration(model, rep)
+        log(dict(name=f"DDCM iteration, {model.name}, {n_data:.0e} data", **cold))
+        warm = ddcm_iteration(model, rep, search="warm", floor=False)
+        log(dict(name=f"DDCM iteration, {model.name}, {n_data:.0e} data, warm search", **warm))
+        log(dict(name=f"warm / cold data search, {model.name}, {n_data:.0e} data", unknowns=cold["unknowns"],
+                 data_points=n_data, seconds=warm["search_seconds_per_iteration"],
+                 floor_seconds=cold["search_seconds_per_iteration"],
+                 ratio=warm["search_seconds_per_iteration"] / cold["search_seconds_per_iteration"],
+                 overall_ratio=warm["seconds"] / cold["seconds"]))
     for n in ((1000, 10_000) if quick else (1000, 10_000, 100_000)):
-        for rec in fb_vs_qp(stopped_bar(n, 10, steps=np.linspace(1.0, 0.97, 4)), rep):
+        # qpOASES (dense internals) and OSQP take minutes per path above these sizes.
+        limits = dict(qpoases=3000, osqp=3000 if quick else 20_000)
+        for rec in fb_vs_qp(stopped_bar(n, 10, steps=np.linspace(1.0, 0.97, 4)), rep, max_dofs=limits):
             log(rec)
     for rec in paper_shares(3):
         log(rec)

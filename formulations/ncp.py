@@ -117,6 +117,11 @@ class FBSystem:
         self.phi = NumericFunction(ca.Function("fb_phi", [z, P], [phi]))
         self.jacobian = SparseJacobian(self.rj)
 
+    def reset(self) -> None:
+        """Forget the cached factorisations and the counters (for cold-start measurements)."""
+        self._lu.clear()
+        self.stats = {"predicted": 0, "newton": 0}
+
     @property
     def n_params(self) -> int:
         return self.problem.params.numel()

@@ -37,3 +37,18 @@ def test_warm_search_with_duplicates_and_per_point_data():
     cold = data.nearest(q_e, q_s)
     warm = data.nearest_warm(q_e, q_s, data.offsets[data.material])
     assert np.array_equal(data.distance2(q_e, q_s, warm), data.distance2(q_e, q_s, cold))
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e6, 1e9])
+@pytest.mark.parametrize("offset", [0.0, 1e-6, 1e-2])
+def test_search_is_exact_near_and_far_from_the_data(noise, offset):
+    """The tree works in the data's principal axes; that is a rotation, so the nearest datum is
+    the brute-force one, for states on the data and far from it (offset in strain, with the
+    stress of the Hookean line). Ties within roundoff (1e-12 relative) may go either way."""
+    data = _noisy(5000, noise) if noise else MaterialDataset.hookean(200e9, -0.01, 0.01, 5000, c=300e9)
+    e = RNG.uniform(-0.012, 0.012, 300)
+    s = 200e9 * e
+    e = e + offset
+    found = data.nearest(e, s)
+    d2 = data.c * (e[:, None] - data.strain) ** 2 + (s[:, None] - data.stress) ** 2 / data.c
+    assert np.all(d2[np.arange(e.size), found] <= d2.min(axis=1) * (1 + 1e-12))
