@@ -58,12 +58,14 @@ def stopped_bar(n_elements: int, n_data: int, *, steps=BAR_STEPS):
                      stops=stops, dataset=data, name=f"bar, {n_elements} elements")
 
 
-def warren(panels: int, n_data: int, *, contacts: int = 5, steps=TRUSS_STEPS):
-    """2-D Warren truss with ``panels`` panels on a plane under ``contacts`` bottom nodes."""
-    nodes = np.unique(np.linspace(1, panels - 1, contacts).astype(int))
+def warren(panels: int, n_data: int, *, steps=TRUSS_STEPS):
+    """2-D Warren truss on a stepped ground: every 4th bottom node may touch it, at gaps of 0,
+    0.1 and 0.2 mm in turn (``panels / 4`` contact pairs)."""
+    nodes = np.arange(2, panels - 1, 4)
+    gaps = 1e-4 * (np.arange(nodes.size) % 3)
     data = MaterialDataset.hookean(200e9, -0.01, 0.01, n_data, c=200e9)
-    return warren_truss(panels=panels, gap=0.002 * panels / 4, contact_nodes=nodes, load_factors=steps,
-                        dataset=data)
+    return warren_truss(panels=panels, gap=gaps, contact_nodes=nodes, load_factors=steps, dataset=data,
+                        name=f"Warren truss on a stepped ground, {panels} panels, {nodes.size} contacts")
 
 
 def _reset(built) -> None:

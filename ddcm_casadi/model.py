@@ -149,7 +149,12 @@ class ContactModel:
         K_diag = (self.strain_operator.T @ sp.diags(self.volumes * modulus) @ self.strain_operator).diagonal()
         k_ref = float(np.max(K_diag)) if K_diag.size else modulus
         load = float(np.max(np.abs(self.loads))) if self.loads.size else 0.0
-        strain = max(travel / self.length_scale, load / k_ref / self.length_scale, 1e-12)
+        # A nodal load strains the members at its node by about (load / k_ref) / l, with l their
+        # typical length (1 / |B_ij| for a bar or truss member), not by that over the whole size.
+        B = abs(sp.csr_matrix(self.strain_operator))
+        row_max = B.max(axis=1).toarray().ravel() if B.nnz else np.zeros(0)
+        member = 1.0 / float(np.median(row_max[row_max > 0])) if np.any(row_max > 0) else self.length_scale
+        strain = max(travel / self.length_scale, load / k_ref / min(member, self.length_scale), 1e-12)
         if travel == 0.0 and load == 0.0:
             strain = 1e-3
         area = float(np.mean(self.contact_area)) if self.n_contacts else float(np.mean(self.volumes)) / self.length_scale

@@ -401,10 +401,11 @@ def warren_truss(*, panels: int, gap: float, contact_nodes, load_factors, panel_
     ----------
     panels : int
         Number of bottom-chord panels (``4 panels - 1`` members, ``2 panels + 1`` nodes).
-    gap : float
-        Initial distance (m) between the bottom chord and the plane ``y = -gap``.
+    gap : float or sequence of float
+        Initial distance (m) between the bottom chord and the plane ``y = -gap`` under each
+        contact node (one value, or one per contact node: a stepped ground).
     contact_nodes : sequence of int
-        Bottom-chord nodes (``0 .. panels``) that may touch the plane.
+        Bottom-chord nodes (``0 .. panels``) that may touch the ground.
     load_factors : sequence of float
         Load path: the top-node loads ``-node_load`` (N, in ``y``) times each factor.
     """
@@ -419,8 +420,11 @@ def warren_truss(*, panels: int, gap: float, contact_nodes, load_factors, panel_
                          np.column_stack([i, nb + i]), np.column_stack([i + 1, nb + i])])
     loads = np.zeros_like(X)
     loads[nb:, 1] = -node_load
+    contact_nodes = np.asarray(contact_nodes, dtype=int).ravel()
+    gaps = np.broadcast_to(np.asarray(gap, dtype=float), contact_nodes.shape)
+    obstacles = [Obstacle(normal=[0, 1], offset=-float(g), nodes=contact_nodes[gaps == g].tolist())
+                 for g in np.unique(gaps)]
     return truss_model(nodes=X, members=members, area=area, youngs_modulus=youngs_modulus,
-                       supports=[(0, "xy"), (panels, "y")], loads=loads,
-                       obstacles=[Obstacle(normal=[0, 1], offset=-gap, nodes=list(contact_nodes))],
+                       supports=[(0, "xy"), (panels, "y")], loads=loads, obstacles=obstacles,
                        load_factors=list(load_factors), dataset=dataset,
                        name=name or f"Warren truss, {panels} panels")

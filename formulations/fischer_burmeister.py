@@ -27,9 +27,9 @@ of the pieces the start lies on (``a_i = 0`` or ``b_i = 0`` per pair) is solved,
 whose other sign is violated (a primal-dual active-set iteration). For a linear model each piece
 system is linear with a constant matrix, factorised once per active set and cached: along a load
 path, and between DDCM iterations, a solve is then two triangular solves. A predicted solution is
-accepted only if it is strictly complementary and the FB residual itself passes
-``residual_tol`` (or it is a B-stationary corner), so it is the root Newton would find; otherwise
-Newton runs as without the predictor.
+accepted only if it is strictly complementary (or a B-stationary corner): it then solves the FB
+system exactly, since at ``a = 0 < b`` ``Phi = 0`` and ``grad Phi = -grad a``. Otherwise Newton runs
+as without the predictor.
 """
 
 from __future__ import annotations
@@ -72,9 +72,9 @@ class FischerBurmeister(Formulation):
             A solve counts as converged only if ``max |min(g, p)| <= comp_tol`` (scaled) as well.
         active_set_predictor : bool
             Before Newton, solve the system of the pieces the start lies on (``a_i = 0`` where
-            ``a_i <= b_i``, else ``b_i = 0``) with a factorisation cached per active set; accepted
-            only if strictly complementary and ``||r_FB||_inf <= residual_tol`` (see
-            :class:`formulations.ncp.FBSystem`).
+            ``a_i <= b_i``, else ``b_i = 0``) with a factorisation cached per active set, switching
+            the pairs whose other sign is violated; accepted only if strictly complementary or a
+            B-stationary corner (see :class:`formulations.ncp.FBSystem`).
         """
 
         alpha: float | None = None
