@@ -288,7 +288,7 @@ class FBSystem:
         kw = dict(tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
         a, b = self._ab(z, P)
         branch = (a <= b).astype(float)
-        seen, total, flips = set(), 0, np.zeros(self.nc, dtype=int)
+        seen, total, flips, releases = set(), 0, np.zeros(self.nc, dtype=int), 3
         closest, violation = None, np.inf  # the iterate with the smallest sign violation
         for _ in range(max_switches):
             seen.add(branch.tobytes())
@@ -321,7 +321,25 @@ class FBSystem:
             if branch.tobytes() in seen:
                 # Cycling between pieces: the solution is at the corner of the pairs that switch
                 # back and forth, if anywhere.
-                return self._corner_after(closest, params, flips >= 2, kw, total) if self.corner else None
+                if not self.corner:
+                    return None
+                sel = flips >= 2
+                corner = self._corner_solve(closest, np.asarray(params, float), sel, dict(kw, jacobian=self.jacobian))
+                if corner is None:
+                    return None
+                res, wrong_theta, wrong_nu = corner
+                total += res.iterations
+                if not (wrong_theta.any() or wrong_nu.any()):
+                    res.iterations, res.message = total, "converged (biactive corner)"
+                    return res
+                if releases == 0:
+                    return None
+                # Not B-stationary: leave the corner along the piece its multipliers point to
+                # (an active-set step), then go on switching.
+                releases -= 1
+                branch = np.where(wrong_theta, 0.0, np.where(wrong_nu, 1.0, branch))
+                z, seen, flips[:] = res.z, set(), 0
+                closest, violation = None, np.inf
         return None
 
     def _corner_after(self, z, params, selection, kw, iterations) -> NewtonResult | None:
@@ -350,8 +368,18 @@ class FBSystem:
         if selection is None:
             a, b = self._ab(z, params[:self.n_params])
             selection = np.maximum(np.abs(a), np.abs(b)) <= corner_tol
+        out = self._corner_solve(z, params, selection, kw)
+        if out is None or out[1].any() or out[2].any():
+            return None
+        out[0].message = "converged (biactive corner)"
+        return out[0]
+
+    def _corner_solve(self, z, params, selection, kw):
+        """Newton on the biactive branch of ``selection``: ``(result, wrong_theta, wrong_nu)``,
+        the pairs whose multiplier breaks B-stationarity (``theta_i > 0``: ``a_i`` wants to
+        open, ``nu_i > 0``: ``b_i`` does; the larger decides); ``None`` if Newton fails."""
         sel = np.asarray(selection, dtype=float)
-        if not sel.any():
+        if not sel.any() or not np.all(np.isfinite(z)):
             return None
         P = np.concatenate([params, [0.0], sel])
         res = newton_solve(self.rj, self.r, z, P, **kw)
@@ -362,7 +390,6 @@ class FBSystem:
         nu = res.z[nx + 2 * nc + ne:]
         scale = 1e-8 * max(1.0, float(np.max(np.abs(np.concatenate([theta, nu])))))
         on = sel > 0
-        if np.any(theta[on] > scale) or np.any(nu[on] > scale):
-            return None
-        res.message = "converged (biactive corner)"
-        return res
+        wrong_theta = on & (theta > scale) & (theta >= nu)
+        wrong_nu = on & (nu > scale) & ~wrong_theta
+        return res, wrong_theta, wrong_nu

@@ -10,7 +10,7 @@ import pytest
 import formulations
 from ddcm_casadi import MaterialDataset, bar_model, compare
 from ddcm_casadi.problem import build_problems
-from ddcm_casadi.truss import Obstacle, truss_model
+from ddcm_casadi.truss import Obstacle, bar_chain, truss_model
 from ddcm_casadi.validate import nearest_by_brute_force, check_fixed_points
 
 from .conftest import ALL
@@ -141,3 +141,18 @@ def test_ddcm_with_ten_contact_pairs(name):
         assert s.residual <= opts.residual_tol  # the equilibrium rows of the converged Newton system
         if name != "penalty":
             assert s.complementarity <= comp_tol and s.penetration <= comp_tol
+
+
+@pytest.mark.parametrize("name", ["fischer_burmeister", "penalty"])
+def test_ddcm_with_nine_stops_at_their_corner(name):
+    """3000 elements, nine stops touching with zero pressure, 1e5 data: a projection from the
+    warm multipliers failed at the last step (the active-set iteration cycles among 2^9 pieces
+    and Newton needs smoothing); restarting without the multipliers converges."""
+    stops = {300 * j: 0.002 * j for j in range(1, 10)}
+    data = MaterialDataset.hookean(200e9, -0.05, 0.01, 100_000, c=300e9)
+    model = bar_chain(length=1.0, elements=3000, youngs_modulus=200e9,
+                      tip_positions=[0.99, 0.9875, 0.985, 0.9825, 0.98], stops=stops, dataset=data)
+    r = compare(model, [name], variants=["ddcm"])["ddcm", name]
+    assert r.converged, [(s.step, s.message) for s in r.steps if not s.converged]
+    for s in r.steps:
+        assert nearest_by_brute_force(model.dataset, model.metric, s)

@@ -2,9 +2,11 @@
 
 Both warm-start each step from the previous one. The DDCM driver alternates
 
-1. the projection onto ``Z_E`` (solved by the chosen formulation; for problems with few contact
-   pairs the exact branch enumeration of :mod:`ddcm_casadi.exact` is consulted and the formulation
-   is restarted on the globally best branch if it stopped on another one), and
+1. the projection onto ``Z_E`` (solved by the chosen formulation, warm-started with the previous
+   solution and its multipliers, and restarted without the multipliers if that fails; for
+   problems with few contact pairs the exact branch enumeration of :mod:`ddcm_casadi.exact` is
+   consulted and the formulation is restarted on the globally best branch if it stopped on
+   another one), and
 2. the projection onto the data (vectorised KD-tree nearest neighbour under the metric, or the
    warm-started exact search that starts from the previous assignment, ``search="warm"``),
 
@@ -148,6 +150,14 @@ class DDCMSolver:
         branch); ``error`` is the scaled distance to the exact projection.
         """
         sol = self.built.solve(params, x0, p0, state)
+        if not sol.converged and state:
+            # Warm multipliers can mislead Newton near many corners (measured: 9 stops at the
+            # corner, 1e5 data); the same primal start without them is the next try.
+            retry = self.built.solve(params, x0, p0, None)
+            retry.iterations += sol.iterations
+            if retry.converged:
+                retry.message += " (restarted without warm multipliers)"
+                sol = retry
         if self.exact is None:
             return sol, None, float("nan")
         ex = self.exact.solve(params)
