@@ -127,10 +127,17 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
 
 
 PEAK_MEMORY = """
-import resource, sys, time
+import sys, time
 import numpy as np
 from ddcm_casadi import MaterialDataset
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+def status(key):
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith(key)) / 1024
+
+with open("/proc/self/clear_refs", "w") as fh:
+    fh.write("5")  # reset the peak (VmHWM) to the current resident set
+base = status("VmRSS:")
 n = int(sys.argv[1])
 t0 = time.perf_counter()
 data = MaterialDataset.hookean(200e9, -0.01, 0.01, n, c=200e9)
@@ -139,16 +146,17 @@ strain = np.random.default_rng(1).uniform(-0.01, 0.01, 30_000)
 t0 = time.perf_counter()
 data.nearest(strain, 200e9 * strain)
 query = time.perf_counter() - t0
-tree = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+tree = status("VmHWM:") - base
 data._graph()
-graph = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print(build, query, (tree - base) / 1024, (graph - base) / 1024)
+graph = status("VmHWM:") - base
+print(build, query, tree, graph)
 """
 
 
 def data_set_memory(n_data: int) -> dict:
     """Build time and peak memory of a data set and its KD-tree (and the warm search's
-    neighbour graph), measured in a fresh process (peak resident set size above the imports)."""
+    neighbour graph), measured in a fresh process: the peak resident set size (Linux ``VmHWM``,
+    reset after the imports) above the resident set after the imports."""
     out = subprocess.run([sys.executable, "-c", PEAK_MEMORY, str(n_data)], capture_output=True, text=True,
                          check=True)
     build, query, tree_mb, graph_mb = (float(v) for v in out.stdout.split())
