@@ -115,6 +115,7 @@ class FBSystem:
         self._branch = None  # built on first use (see _branch_system)
         self._pieces = (problem, a, b, z, eta, theta, nu)
         self._lu: OrderedDict[bytes, object] = OrderedDict()
+        self._spent = 0  # work of the last active-set iteration (counted even when it fails)
         if self.predictor:
             self._branch_system()  # part of the build, not of the first solve
         self.rj = NumericFunction(ca.Function("fb_rj", [z, P], [r, ca.jacobian(r, z)]))
@@ -144,15 +145,18 @@ class FBSystem:
         ``(x, p, state, result, mu, stages)``."""
         nc = self.nc
         kw = dict(jacobian=self.jacobian, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        spent = 0
         if self.predictor:
             predicted = self._predict(z0, params, opts, corner_tol)
             if predicted is not None:
                 self.stats["predicted"] += 1
                 x, p, st = self.split(predicted.z)
                 return x, p, st, predicted, 0.0, 0
+            spent = self._spent
         self.stats["newton"] += 1
         if not self.corner:
             res, mu, stages = smoothed_newton_solve(self.rj, self.r, z0, params, smoothing=opts.smoothing, **kw)
+            res.iterations += spent
             x, p, st = self.split(res.z)
             return x, p, st, res, mu, stages
         none = np.zeros(nc)
@@ -160,7 +164,7 @@ class FBSystem:
         rj = lambda z, P: self.rj(z, np.concatenate([P, none]))  # noqa: E731
         r = lambda z, P: self.r(z, np.concatenate([P, none]))  # noqa: E731
         best = newton_solve(rj, r, z0, np.append(params, 0.0), **kw)
-        total, mu, stages = best.iterations, 0.0, 0
+        total, mu, stages = spent + best.iterations, 0.0, 0
         if not best.converged or self._creeping(best.z, params, corner_tol):
             polished = self._corner(best.z, params, corner_tol, kw)
             if polished is not None:
@@ -179,6 +183,8 @@ class FBSystem:
             if finish is not None:
                 total += finish.iterations
                 best, mu = finish, 0.0
+            else:
+                total += self._spent
         best.iterations = total
         x, p, st = self.split(best.z)
         return x, p, st, best, mu, stages
@@ -263,11 +269,15 @@ class FBSystem:
         signs hold (then the caller reports the failure).
         """
         max_switches = 2 * self.nc + 5 if max_switches is None else max_switches
+        spent = 0
         for z in starts:
             res = self._active_set(z, params, opts, corner_tol=corner_tol, max_switches=max_switches)
             if res is not None:
+                res.iterations += spent
                 res.message = res.message.replace("active set", "branch finish")
                 return res
+            spent += self._spent
+        self._spent = spent
         return None
 
     def _active_set(self, z, params, opts, *, corner_tol: float, max_switches: int) -> NewtonResult | None:
@@ -282,6 +292,7 @@ class FBSystem:
         switches but is never accepted. ``None`` if a piece is singular, the corner is not
         B-stationary or ``max_switches`` is reached.
         """
+        self._spent = 0  # linear solves and Newton steps, also when it fails
         if not np.all(np.isfinite(z)):
             return None
         P = np.asarray(params, float)[:self.n_params]
@@ -296,6 +307,7 @@ class FBSystem:
             if res is None or not np.all(np.isfinite(res.z)):
                 return None
             total += res.iterations
+            self._spent = total
             other = self._signs(res.z, P, branch)
             roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other), initial=0.0)))
             worst = -float(np.min(other, initial=np.inf))
@@ -329,6 +341,7 @@ class FBSystem:
                     return None
                 res, wrong_theta, wrong_nu = corner
                 total += res.iterations
+                self._spent = total
                 if not (wrong_theta.any() or wrong_nu.any()):
                     res.iterations, res.message = total, "converged (biactive corner)"
                     return res
