@@ -93,7 +93,7 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
         _reset(built)
         path = DDCMSolver(problems, built, search=search).solve(formulation_name=formulation)
         its = sum(s.outer_iterations for s in path.steps)
-        runs.append((path.solve_seconds / its, path, dict(getattr(built, "system", None).stats)))
+        runs.append((path.solve_seconds / its, path, dict(built.system.stats)))
     seconds, path, stats = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
     steps = path.steps
     its = np.array([s.outer_iterations for s in steps])

@@ -177,28 +177,17 @@ def parameters(case: Case, cmp: Comparison) -> dict:
     return dict(case=case.source, **model, data=data, ddcm_max_outer=case.ddcm_max_outer, formulations=forms)
 
 
-def _json_array(a: np.ndarray) -> list:
-    """``a`` as nested lists, with ``None`` for NaN and infinities (results.json stays strict JSON)."""
-    a = np.asarray(a)
-    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
-        obj = a.astype(object)
-        obj[~np.isfinite(a)] = None
-        return obj.tolist()
-    return a.tolist()
-
-
-def fields(cmp: Comparison) -> dict[str, dict[str, list]] | None:
+def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
     """Per-step fields of every run, keyed ``"variant/formulation"`` (``None`` for the paper's bar).
 
     Each run maps the names of :meth:`~ddcm_casadi.harness.Comparison.fields` (``u``,
     ``contact_pressure``, ``contact_force``, ``strain``, ``stress``, for trusses
-    ``nodal_displacement`` and ``member_force``, for DDCM the assigned data) to nested lists,
-    steps first. The one-unknown bar has none: its CSV rows already hold ``u`` and ``p``.
+    ``nodal_displacement`` and ``member_force``, for DDCM the assigned data) to arrays, steps
+    first (written as nested lists, non-finite values as null). The one-unknown bar has none: its CSV rows already hold ``u`` and ``p``.
     """
     if cmp.scalar_model:
         return None
-    return {f"{variant}/{name}": {k: _json_array(v) for k, v in cmp.fields(variant, name).items()}
-            for (variant, name) in cmp.results}
+    return {f"{variant}/{name}": cmp.fields(variant, name) for (variant, name) in cmp.results}
 
 
 def versions() -> dict:

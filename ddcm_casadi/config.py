@@ -79,6 +79,7 @@ every error is an :class:`~ddcm_casadi.errors.InputError` with a one-line messag
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import sys
@@ -98,7 +99,7 @@ import formulations as registry
 from .data import MAX_DATA_POINTS, MaterialDataset, check_positive
 from .errors import InputError
 from .model import ContactModel, bar_model, paper_bar
-from .truss import AXES, Obstacle, bar_chain, truss_model
+from .truss import AXES, Obstacle, bar_chain, member_data, truss_model
 
 #: Keys of each section (``None``: checked elsewhere). Sections in ``_ARRAYS`` are arrays of tables.
 _SECTIONS: dict[str, set[str] | None] = {
@@ -118,7 +119,6 @@ _BAR_ONLY = ("obstacle", "stops")
 _STRUCTURE_ONLY = ("path", "obstacles")
 _HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus"}
 _SUFFIXES = (".toml", ".json")
-#: Mechanism check (rank of the strain operator) up to this many unknowns.
 
 
 @dataclass
@@ -398,9 +398,8 @@ def _data_specs(doc: dict, *, base_dir: Path, default_modulus) -> list[_DataSpec
 
 def _run_options(doc: dict) -> tuple[int, dict[str, dict]]:
     """``[ddcm] max_outer`` and the per-formulation options (validated against the registry)."""
-    max_outer = doc.get("ddcm", {}).get("max_outer", 100)
-    if isinstance(max_outer, bool) or not isinstance(max_outer, int) or max_outer < 1:
-        raise InputError(f"[ddcm] max_outer must be a positive integer, got {_show(max_outer)}")
+    max_outer = _integer("ddcm", "max_outer", doc.get("ddcm", {}).get("max_outer", 100), low=1,
+                         what="a positive integer")
     options: dict[str, dict] = {}
     for fname, opts in doc.get("formulations", {}).items():
         if not isinstance(opts, dict):
@@ -625,9 +624,8 @@ def _structure_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Cas
     geometry = dict(nodes=X, members=M, area=area, supports=supports, loads=loads, distributed_loads=q,
                     obstacles=obstacles, load_factors=factors, name=name)
     # The geometry alone first (a placeholder modulus, no data): truss_model finds mechanisms and
-    # bad obstacles before any data file is read or data set generated.
-    truss_model(youngs_modulus=1.0 if E is None else E, **geometry)
-    sets = [s.build() for s in specs]
-    dataset = None if not sets else (sets[0] if len(sets) == 1 and material is None else sets)
-    model = truss_model(youngs_modulus=E, dataset=dataset, material=material, **geometry)
+    # bad obstacles before any data file is read or data set generated; the data are added after.
+    geom = truss_model(youngs_modulus=1.0 if E is None else E, **geometry)
+    dataset = member_data([s.build() for s in specs] or None, material)
+    model = dataclasses.replace(geom, youngs_modulus=None if E is None else geom.youngs_modulus, dataset=dataset)
     return Case(model=model, formulation_options=options, ddcm_max_outer=max_outer, source=source)

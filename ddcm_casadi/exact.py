@@ -38,7 +38,6 @@ class ExactSolution:
     objective: np.ndarray  # (k,) scaled (0 for the classical problem)
     partition: np.ndarray  # (nc, k) FREE / CONTACT / GRAZING
     found: np.ndarray      # (k,) bool: a sign-feasible branch exists
-    n_feasible: np.ndarray  # (k,) number of sign-feasible partitions (mcp: solutions of the LCP)
 
 
 @dataclass
@@ -120,42 +119,53 @@ class ExactEnumerator:
             self._factors[part] = (lu, on_gap, on_p)
         return self._factors[part]
 
+    def _solve_partition(self, part, affine):
+        """Solve one partition for every parameter column: ``(solution, z, ok)`` (``ok``: finite and
+        sign-feasible per column), or ``None`` if the partition is singular."""
+        R0, g0, q, _ = affine
+        lu, on_gap, on_p = self._factor(part)
+        if lu is None:
+            return None
+        d = np.vstack([-R0, -g0[on_gap], np.zeros((on_p.size, R0.shape[1]))])
+        sol = lu.solve(d if self.problem.kind == "mcp" else np.vstack([-q, d]))
+        z = sol[:self.nz]
+        gap = self.Gz @ z + g0
+        ok = (np.all(gap >= -self.sign_tol, axis=0) & np.all(z[self.nx:] >= -self.sign_tol, axis=0)
+              & np.all(np.isfinite(z), axis=0))
+        return sol, z, ok
+
+    def _objective(self, z, affine) -> np.ndarray:
+        _, _, q, f0 = affine
+        if self.problem.kind == "mcp":
+            return np.zeros(z.shape[1])
+        return 0.5 * np.einsum("ik,ik->k", z, self.H @ z) + np.einsum("ik,ik->k", q, z) + f0
+
     def solve(self, params: np.ndarray) -> ExactSolution:
         """Exact solution for each column of ``params`` (a vector gives one column)."""
         params = np.asarray(params, float)
         if params.ndim == 1:
             params = params[:, None]
         k = params.shape[1]
-        R0, g0, q, f0 = self._affine_parts(params)
+        affine = self._affine_parts(params)
         best_obj = np.full(k, np.inf)
         best_z = np.full((self.nz, k), np.nan)
         best_part = np.zeros((self.nc, k), dtype=int)
-        n_feasible = np.zeros(k, dtype=int)
         for part in self.partitions:
-            lu, on_gap, on_p = self._factor(part)
-            if lu is None:
+            out = self._solve_partition(part, affine)
+            if out is None:
                 continue
-            d = np.vstack([-R0, -g0[on_gap], np.zeros((on_p.size, k))])
-            rhs = d if self.problem.kind == "mcp" else np.vstack([-q, d])
-            sol = lu.solve(rhs)
-            zsol = sol[:self.nz]
-            gap = self.Gz @ zsol + g0
-            p = zsol[self.nx:]
-            ok = np.all(gap >= -self.sign_tol, axis=0) & np.all(p >= -self.sign_tol, axis=0) & np.all(np.isfinite(zsol), axis=0)
-            n_feasible += ok
-            if self.problem.kind == "mcp":
+            _, z, ok = out
+            if self.problem.kind == "mcp":  # the first solution found (the LCP's is unique here)
+                better = ok & ~np.isfinite(best_obj)
                 obj = np.zeros(k)
             else:
-                obj = 0.5 * np.einsum("ik,ik->k", zsol, self.H @ zsol) + np.einsum("ik,ik->k", q, zsol) + f0
-            if self.problem.kind == "mcp":
-                better = ok & ~np.isfinite(best_obj)
-            else:
+                obj = self._objective(z, affine)
                 better = ok & (obj < best_obj)
             best_obj[better] = obj[better]
-            best_z[:, better] = zsol[:, better]
+            best_z[:, better] = z[:, better]
             best_part[:, better] = np.asarray(part)[:, None]
         return ExactSolution(x=best_z[:self.nx], p=best_z[self.nx:], objective=best_obj,
-                             partition=best_part, found=np.isfinite(best_obj), n_feasible=n_feasible)
+                             partition=best_part, found=np.isfinite(best_obj))
 
     def branches(self, params: np.ndarray) -> list[Branch]:
         """Every sign-feasible partition's solution for one parameter vector.
@@ -164,38 +174,35 @@ class ExactEnumerator:
         for a classical problem (``mcp``) these are the solutions of the LCP (a solution with a
         biactive pair appears once per partition that admits it: see :meth:`solutions`).
         """
-        P = np.asarray(params, float).reshape(-1, 1)
-        R0, g0, q, f0 = self._affine_parts(P)
-        mpcc = self.problem.kind == "mpcc"
+        affine = self._affine_parts(np.asarray(params, float).reshape(-1, 1))
         out = []
         for part in self.partitions:
-            lu, on_gap, on_p = self._factor(part)
-            if lu is None:
+            solved = self._solve_partition(part, affine)
+            if solved is None or not solved[2][0]:
                 continue
-            d = np.vstack([-R0, -g0[on_gap], np.zeros((on_p.size, 1))])
-            sol = lu.solve(np.vstack([-q, d]) if mpcc else d)[:, 0]
-            z = sol[:self.nz]
-            gap = (self.Gz @ z + g0[:, 0])
-            if not (np.all(np.isfinite(z)) and np.all(gap >= -self.sign_tol) and np.all(z[self.nx:] >= -self.sign_tol)):
-                continue
+            sol, z = solved[0][:, 0], solved[1][:, 0]
             mg, mp = np.zeros(self.nc), np.zeros(self.nc)
-            obj = 0.0
-            if mpcc:
+            if self.problem.kind == "mpcc":
+                _, on_gap, on_p = self._factor(part)
                 lam = sol[self.nz:]
                 ne = self.Rz.shape[0]
                 mg[on_gap] = lam[ne:ne + on_gap.size]
                 mp[on_p] = lam[ne + on_gap.size:]
-                obj = float(0.5 * z @ (self.H @ z) + q[:, 0] @ z + f0[0])
-            out.append(Branch(tuple(part), z, obj, mg, mp))
+            out.append(Branch(tuple(part), z, float(self._objective(z[:, None], affine)[0]), mg, mp))
         return out
 
     @staticmethod
-    def _distinct(branches: list[Branch], tol: float) -> list[Branch]:
+    def _distinct(branches: list[Branch], tol: float, prefer=None) -> list[Branch]:
+        """One branch per distinct solution; among duplicates the first, or the first for which
+        ``prefer(branch)`` holds."""
         out: list[Branch] = []
         for b in branches:
-            if not any(np.max(np.abs(b.z - o.z), initial=0.0) <= tol * max(1.0, float(np.max(np.abs(o.z), initial=0.0)))
-                       for o in out):
+            same = [i for i, o in enumerate(out) if np.max(np.abs(b.z - o.z), initial=0.0)
+                    <= tol * max(1.0, float(np.max(np.abs(o.z), initial=0.0)))]
+            if not same:
                 out.append(b)
+            elif prefer is not None and prefer(b) and not prefer(out[same[0]]):
+                out[same[0]] = b
         return out
 
     def solutions(self, params: np.ndarray, *, tol: float = 1e-8) -> list[Branch]:
@@ -208,10 +215,22 @@ class ExactEnumerator:
         A branch solution is a local minimum of the MPCC when it is optimal on every piece of
         ``Z_E`` that contains it; the pieces differ only at biactive pairs (``g = p = 0``), so it is
         enough that the multipliers of both ``g >= 0`` and ``p >= 0`` there have the sign of an
-        active inequality (here ``<= 0``: the Lagrangian is ``f + lambda^T c``).
+        active inequality (here ``<= 0``: the Lagrangian is ``f + lambda^T c``). Biactive pairs are
+        found by value (``|g|, |p| <= tol``), and a solution is judged on the partition that marks
+        all of them grazing (the one that carries both multipliers) whenever that partition solves.
         """
+        g0 = self._affine_parts(np.asarray(params, float).reshape(-1, 1))[1][:, 0]
+
+        def biactive(b: Branch) -> np.ndarray:
+            gap, p = self.Gz @ b.z + g0, b.z[self.nx:]
+            scale = tol * max(1.0, float(np.max(np.abs(b.z), initial=0.0)))
+            return (np.abs(gap) <= scale) & (np.abs(p) <= scale)
+
+        def graded(b: Branch) -> bool:  # every biactive pair carries both multipliers
+            return bool(np.all(np.asarray(b.partition)[biactive(b)] == GRAZING))
+
         minima: list[Branch] = []
-        for b in self.solutions(params, tol=tol):
+        for b in self._distinct(self.branches(params), tol, prefer=graded):
             scale = tol * max(1.0, float(np.max(np.abs(np.concatenate([b.gap_multiplier, b.pressure_multiplier])),
                                                 initial=0.0)))
             both = np.array(b.partition) == GRAZING

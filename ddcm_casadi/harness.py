@@ -21,6 +21,7 @@ from .errors import InputError
 from .model import BarModel, ContactModel
 from .problem import ProblemPair, build_problems
 from .solvers.path import DDCMSolver, PathResult, StepResult, solve_classical
+from .truss import TrussModel
 
 VARIANTS = ("classical", "ddcm")
 _COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "max_abs_u", "total_contact_force",
@@ -114,11 +115,11 @@ class Comparison:
         r, m = self.results[(variant, formulation)], self.model
         p = r.array("p")
         out = dict(load_parameter=r.array("load_parameter"), u=r.array("u"), contact_pressure=p,
-                   contact_force=p * m.contact_area[None, :], strain=r.array("strain"), stress=r.array("stress"),
+                   contact_force=m.contact_area * p, strain=r.array("strain"), stress=r.array("stress"),
                    converged=r.array("converged"))
-        if hasattr(m, "nodal_displacements"):
+        if isinstance(m, TrussModel):
             out["nodal_displacement"] = np.array([m.nodal_displacements(u) for u in out["u"]])
-            out["member_force"] = out["stress"] * m.member_area[None, :]
+            out["member_force"] = m.member_force(out["stress"])
         if variant == "ddcm":
             for k in ("strain_star", "stress_star", "data_index"):
                 out[k] = r.array(k)
@@ -128,7 +129,7 @@ class Comparison:
         """Largest ``|strain|`` over every run and step, of all material points or of ``points``
         (an index or boolean mask): compare it with the data range."""
         keep = slice(None) if points is None else points
-        return max(float(np.max(np.abs(self.fields(v, f)["strain"][:, keep]))) for v, f in self.results)
+        return max(float(np.max(np.abs(r.array("strain")[:, keep]))) for r in self.results.values())
 
     @property
     def scalar_model(self) -> bool:
@@ -144,17 +145,17 @@ class Comparison:
         """
         rows = []
         m = self.model
-        active_tol = 1e-8 * m.scales["stress"]
         for (variant, name), r in self.results.items():
             err = self.errors(variant, name)
             for s in r.steps:
-                row = dict(variant=variant, formulation=name, step=s.step, **{m.load_parameter_name: s.load_parameter})
+                row = dict(variant=variant, formulation=name, step=s.step)
+                row[m.load_parameter_name if m.load_parameter_name not in row else "load_parameter"] = s.load_parameter
                 if self.scalar_model:
                     row.update(u=float(s.u[-1]), p=float(s.p[0]) if s.p.size else float("nan"))
                 else:
                     row.update(max_abs_u=float(np.max(np.abs(s.u))),
                                total_contact_force=float(np.sum(m.contact_area * s.p)),
-                               active_contacts=int(np.sum(s.p > active_tol)))
+                               active_contacts=int(np.sum(m.active_contacts(s.p))))
                 row.update(converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
                            residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,
                            seconds=s.seconds)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -50,7 +51,9 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
 
 
 def write_json_atomic(path: str | os.PathLike, obj: Any) -> Path:
-    return write_bytes_atomic(path, (json.dumps(obj, indent=2, default=_json_default) + "\n").encode())
+    """Strict JSON: NaN and infinities (a missing check, a failed residual) are written as null."""
+    text = json.dumps(_strict(obj), indent=2, allow_nan=False)
+    return write_bytes_atomic(path, (text + "\n").encode())
 
 
 def write_csv_atomic(path: str | os.PathLike, rows: Iterable[dict]) -> Path:
@@ -74,13 +77,26 @@ def _csv_value(v):
     return v
 
 
-def _json_default(o):
+def _strict(o):
+    """``o`` with numpy values as Python ones and non-finite floats as ``None``."""
     import numpy as np
 
+    if isinstance(o, dict):
+        return {k: _strict(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_strict(v) for v in o]
     if isinstance(o, np.ndarray):
-        return o.tolist()
+        if o.dtype.kind == "f" and not np.all(np.isfinite(o)):
+            obj = o.astype(object)
+            obj[~np.isfinite(o)] = None
+            return obj.tolist()
+        return o.tolist()  # already plain and finite: no walk over its elements
     if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
+        o = o.item()
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
     if isinstance(o, Path):
         return str(o)
+    if o is None or isinstance(o, (str, int, float, bool)):
+        return o
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")

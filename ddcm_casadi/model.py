@@ -73,7 +73,7 @@ class ContactModel:
     dataset: MaterialDataset | PointData | None = None
     length_scale: float = 1.0
     name: str = "model"
-    load_parameter_name: str = "step"
+    load_parameter_name: str = "load parameter"
     _scales: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -192,6 +192,11 @@ class ContactModel:
 
     def gap(self, u: np.ndarray, step: int) -> np.ndarray:
         return self.gap_operator @ np.asarray(u) + self.gap_offsets[step]
+
+    def active_contacts(self, pressure: np.ndarray) -> np.ndarray:
+        """Which pairs carry a pressure above 1e-8 of the stress scale (one rule for tables and
+        figures); ``pressure`` may be stacked over steps."""
+        return np.asarray(pressure) > 1e-8 * self._scales["stress"]
 
     def strain(self, u: np.ndarray) -> np.ndarray:
         return self.strain_operator @ np.asarray(u)

@@ -41,7 +41,7 @@ def _panel(cmp: Comparison, quantity: str, ylabel: str, scale: float, title: str
         y = r.array(quantity)
         y = (y[:, -1] if quantity == "u" else y[:, 0]) * scale
         conv = r.array("converged").astype(bool)
-        title_f = next(f.title for f in cmp.formulations if f.name == name)
+        title_f = _title(cmp, name)
         if variant == "classical":
             ax.plot(h, y, _STYLES.get(name, "-"), lw=1.4, label=f"classical, {title_f}", zorder=2)
         else:
@@ -58,7 +58,7 @@ def _panel(cmp: Comparison, quantity: str, ylabel: str, scale: float, title: str
         ax.plot([], [], "D", ms=9, mfc="none", mec="0.3", label="DDCM local minimum (not global)")
     if failed:
         ax.plot([], [], "o", ms=10, mfc="none", mec="red", mew=2, label="NOT CONVERGED")
-    ax.set_xlabel(f"obstacle position {m.load_parameter_name} [m]")
+    ax.set_xlabel(_param_label(cmp))
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.invert_xaxis()
@@ -197,7 +197,7 @@ def figure_structure(cmp: Comparison, variant: str, formulation: str, step: int 
 
     # Contact forces: arrows along +n (the obstacle pushes the node), the largest ~8 % of the size.
     fmax = float(np.max(F)) if F.size else 0.0
-    active = F > 1e-9 * max(fmax, 1e-300) if fmax > 0 else np.zeros(F.size, bool)
+    active = model.active_contacts(F / model.contact_area)
     arrow = 0.08 * size / fmax if fmax > 0 else 0.0
     gap0 = model.gap_offsets[k]
     groups = _obstacle_groups(model, gap0, mag) if model.n_contacts else []
@@ -376,7 +376,6 @@ def figure_contact_history(cmp: Comparison) -> Figure:
     ax = fig.add_subplot()
     ax2 = None if per_pair else ax.twinx()
     pair_colors = [f"C{i % 10}" for i in range(nc)]
-    active_tol = 1e-8 * m.scales["force"]
 
     def curves(force: np.ndarray) -> np.ndarray:
         return force / 1e3 if per_pair else np.sum(force, axis=1, keepdims=True) / 1e3
@@ -407,7 +406,7 @@ def figure_contact_history(cmp: Comparison) -> Figure:
                     local = True
                     ax.plot(h[loc], y[loc, j], "D", ms=11, mfc="none", mec="0.3", mew=1, zorder=4)
         if ax2 is not None:
-            n_active = np.sum(f["contact_force"] > active_tol, axis=1)
+            n_active = np.sum(m.active_contacts(f["contact_pressure"]), axis=1)
             if variant == "classical":
                 ax2.plot(h, n_active, _STYLES.get(name, "-"), color="C3", lw=1.0, alpha=0.7, drawstyle="steps-mid")
             else:

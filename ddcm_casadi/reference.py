@@ -12,8 +12,8 @@ whose KKT conditions are the model's equilibrium with contact forces ``G^T lambd
            \quad\text{s.t.}\quad G u + g_0 + s \ge 0 ,
 
 so the penalty is checked against its own exact solution. Nothing here shares code with the
-formulations (no complementarity function, no Newton): the QP solver (HiGHS by default, an
-active-set method, sparse) is the independent check. The problem is nondimensionalised with the
+formulations (no complementarity function, no Newton): the QP solver (qpOASES by default, an
+active-set method, in its sparse mode) is the independent check. The problem is nondimensionalised with the
 model's scales, built once, and solved for every load step by passing new vectors.
 """
 
@@ -32,9 +32,6 @@ import scipy.sparse as sp
 from .errors import InputError
 from .model import ContactModel
 from .problem import to_casadi
-
-QP_SOLVERS = ("qpoases", "highs", "osqp")
-
 
 @contextlib.contextmanager
 def _quiet_stdout():

@@ -216,13 +216,13 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
     contact_area = node_area[np.asarray(pair_nodes, dtype=np.intp)] if nc else np.zeros(0)
 
     check_not_mechanism(B, A * length)
-    data = _data(dataset, material, ne)
+    data = member_data(dataset, material)
     size = float(np.max(np.ptp(X, axis=0))) or float(np.max(length))
     return TrussModel(
         strain_operator=B, volumes=A * length, gap_operator=G, contact_area=contact_area,
         gap_offsets=gap0, loads=lf[:, None] * f_ref.ravel()[free][None, :], load_parameter=np.arange(n_steps, dtype=float)
         if load_factors is None else lf, youngs_modulus=E, dataset=data, length_scale=size, name=name,
-        load_parameter_name="step" if load_factors is None else "load factor",
+        load_parameter_name="load step" if load_factors is None else "load factor",
         nodes=X, members=M.astype(np.intp), free_dofs=free, contact_nodes=np.asarray(pair_nodes, dtype=np.intp),
         contact_normals=np.asarray(normals).reshape(nc, d), member_area=A)
 
@@ -286,7 +286,9 @@ def _nodal_array(name: str, value, nn: int, d: int) -> np.ndarray:
     return a
 
 
-def _data(dataset, material, ne: int):
+def member_data(dataset, material):
+    """The data of a truss's members: one set (shared), a list of sets with a ``material`` index
+    per member (:class:`PointData`), or ``None``."""
     if dataset is None:
         return None
     if isinstance(dataset, (MaterialDataset, PointData)):

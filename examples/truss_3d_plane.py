@@ -64,24 +64,30 @@ def geometry() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.array(nodes), members, kind
 
 
-def build_model(*, quick: bool = False) -> TrussModel:
-    """The grid, its floor, the load path and the data (``quick``: 6 steps, coarser data)."""
+def build_model(*, quick: bool = False, contact=CONTACT, gradient=GRADIENT, strain_limit: float = STRAIN_LIMIT,
+                load_factors=None) -> TrussModel:
+    """The grid, its floor, the load path and the data (``quick``: 6 steps, coarser data).
+
+    ``contact`` (bottom-layer ``(i, j)`` nodes), ``gradient``, ``strain_limit`` and
+    ``load_factors`` vary the example (the tests use a ten-contact variant)."""
     nodes, members, kind = geometry()
     loads = np.zeros_like(nodes)
     for j in range(NY):
         for i in range(NX):
             # heavier towards +x, +y, so the inner nodes touch down at different load factors
             x, y = (i + 0.5) / NX, (j + 0.5) / NY
-            loads[top(i, j), 2] = -TOP_LOAD * (GRADIENT[0] + GRADIENT[1] * x) * (GRADIENT[2] + GRADIENT[3] * y)
+            loads[top(i, j), 2] = -TOP_LOAD * (gradient[0] + gradient[1] * x) * (gradient[2] + gradient[3] * y)
     corners = [bottom(0, 0), bottom(NX, 0), bottom(0, NY), bottom(NX, NY)]
     # pinned columns: no rigid-body motion (x, y fixed at one corner, y at the next), free to rotate
     supports = [(corners[0], "xyz"), (corners[1], "yz"), (corners[2], "z"), (corners[3], "z")]
-    floor = Obstacle(normal=[0.0, 0.0, 1.0], offset=0.0, nodes=[bottom(i, j) for i, j in CONTACT])
+    floor = Obstacle(normal=[0.0, 0.0, 1.0], offset=0.0, nodes=[bottom(i, j) for i, j in contact])
     n_data = 401 if quick else 2001
-    data = MaterialDataset.hookean(200e9, -STRAIN_LIMIT, STRAIN_LIMIT, n_data, c=200e9)
+    data = MaterialDataset.hookean(200e9, -strain_limit, strain_limit, n_data, c=200e9)
+    if load_factors is None:
+        load_factors = np.linspace(0.0, 1.0, 6 if quick else 31)
     return truss_model(nodes=nodes, members=members, area=np.where(kind == 0, 1e-3, 5e-4),
                        youngs_modulus=200e9, supports=supports, loads=loads, obstacles=[floor],
-                       load_factors=np.linspace(0.0, 1.0, 6 if quick else 31), dataset=data,
+                       load_factors=load_factors, dataset=data,
                        name="double-layer grid on a floor")
 
 

@@ -32,6 +32,7 @@ import casadi as ca
 import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.solvers.evaluate import NumericFunction
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .registry import register
@@ -111,7 +112,7 @@ class _BuiltMPCC(BuiltFormulation):
         self._lbg = np.concatenate([np.zeros(ne), np.zeros(nc), np.full(nc, -np.inf)])
         self._ubg = np.concatenate([np.zeros(ne), np.full(nc, np.inf), np.zeros(nc)])
         self._lbx = np.concatenate([np.full(nx, -np.inf), np.zeros(nc)])
-        self._gap = ca.Function("gap", [w, problem.params], [problem.gap])
+        self._gap = NumericFunction(ca.Function("gap", [w, problem.params], [problem.gap]))
         self._nx, self._nc = nx, nc
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
@@ -150,6 +151,13 @@ class _BuiltMPCC(BuiltFormulation):
             residual, comp, _, _ = self.metrics(w[:nx], w[nx:], params)
             if comp <= o.comp_tol and residual <= o.residual_tol:
                 converged, message = True, "converged"
+                if self._near_corner(w, params, tau):
+                    # min(g, p) <= comp_tol bounds only the smaller of the two: near a corner the
+                    # larger may still be far from 0. Finish on the identified branch.
+                    polished, iters, ok = self._branch_nlp(w, params, tau)
+                    iterations += iters
+                    if ok:
+                        w, message = polished, "converged (branch NLP polish)"
                 break
             stalls = stalls + 1 if comp > 0.5 * comp_prev else 0
             comp_prev = comp
@@ -165,6 +173,12 @@ class _BuiltMPCC(BuiltFormulation):
                 converged, message = True, "converged (branch NLP)"
         return self._finish(w[:nx], w[nx:], params, converged=converged, iterations=iterations, outer=steps,
                             message=message)
+
+    def _near_corner(self, w, params, tau) -> bool:
+        """Is some pair within the branch NLP's biactive identification ``10 sqrt(tau)`` of a corner?"""
+        gap = self._gap(w, params)
+        p = w[self._nx:]
+        return bool(np.any(np.maximum(np.abs(gap), np.abs(p)) <= 10.0 * np.sqrt(tau)))
 
     def _branch_nlp(self, w, params, tau):
         """Solve the branch NLP identified at ``w``; returns ``(w, iterations, accepted)``.

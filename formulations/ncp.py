@@ -115,7 +115,6 @@ class FBSystem:
         self._branch = None  # built on first use (see _branch_system)
         self._pieces = (problem, a, b, z, eta, theta, nu)
         self._lu: OrderedDict[bytes, object] = OrderedDict()
-        self._spent = 0  # work of the last active-set iteration (counted even when it fails)
         if self.predictor:
             self._branch_system()  # part of the build, not of the first solve
         self.rj = NumericFunction(ca.Function("fb_rj", [z, P], [r, ca.jacobian(r, z)]))
@@ -147,12 +146,12 @@ class FBSystem:
         kw = dict(jacobian=self.jacobian, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
         spent = 0
         if self.predictor:
-            predicted = self._predict(z0, params, opts, corner_tol)
+            predicted, spent = self._active_set(z0, params, opts, corner_tol=corner_tol, max_switches=opts.max_iter)
             if predicted is not None:
                 self.stats["predicted"] += 1
+                predicted.message = predicted.message.replace("active set", "active-set predictor")
                 x, p, st = self.split(predicted.z)
                 return x, p, st, predicted, 0.0, 0
-            spent = self._spent
         self.stats["newton"] += 1
         if not self.corner:
             res, mu, stages = smoothed_newton_solve(self.rj, self.r, z0, params, smoothing=opts.smoothing, **kw)
@@ -179,12 +178,10 @@ class FBSystem:
                 total += polished.iterations
                 best, mu = polished, 0.0
         if not best.converged:
-            finish = self.branch_finish((best.z, z0), params, opts, corner_tol=corner_tol)
+            finish, spent = self.branch_finish((best.z, z0), params, opts, corner_tol=corner_tol)
+            total += spent
             if finish is not None:
-                total += finish.iterations
                 best, mu = finish, 0.0
-            else:
-                total += self._spent
         best.iterations = total
         x, p, st = self.split(best.z)
         return x, p, st, best, mu, stages
@@ -255,32 +252,26 @@ class FBSystem:
         a, b = self._ab(z, P)
         return np.where(branch > 0, b, a)
 
-    def _predict(self, z0, params, opts, corner_tol: float) -> NewtonResult | None:
-        """The active-set predictor (see the class notes); ``None`` if it does not apply."""
-        res = self._active_set(z0, params, opts, corner_tol=corner_tol, max_switches=opts.max_iter)
-        if res is not None:
-            res.message = res.message.replace("active set", "active-set predictor")
-        return res
-
     def branch_finish(self, starts, params, opts, *, corner_tol: float = 1e-3, max_switches: int | None = None):
         """Primal-dual active-set finish on the pieces of ``Z_E`` (see the class notes).
 
-        Returns the converged Newton result, or ``None`` if no start leads to a solution whose
-        signs hold (then the caller reports the failure).
+        Returns ``(result, spent)``: the converged Newton result, or ``None`` if no start leads to
+        a solution whose signs hold (then the caller reports the failure), and the linear solves
+        and Newton steps spent on every start.
         """
         max_switches = 2 * self.nc + 5 if max_switches is None else max_switches
         spent = 0
         for z in starts:
-            res = self._active_set(z, params, opts, corner_tol=corner_tol, max_switches=max_switches)
+            res, work = self._active_set(z, params, opts, corner_tol=corner_tol, max_switches=max_switches)
+            spent += work
             if res is not None:
-                res.iterations += spent
+                res.iterations = spent
                 res.message = res.message.replace("active set", "branch finish")
-                return res
-            spent += self._spent
-        self._spent = spent
-        return None
+                return res, spent
+        return None, spent
 
-    def _active_set(self, z, params, opts, *, corner_tol: float, max_switches: int) -> NewtonResult | None:
+    def _active_set(self, z, params, opts, *, corner_tol: float,
+                    max_switches: int) -> tuple[NewtonResult | None, int]:
         """Primal-dual active-set iteration from ``z``: solve the piece system of the branches ``z``
         lies on, switch the pairs whose free sign is violated, until every sign holds.
 
@@ -290,11 +281,11 @@ class FBSystem:
         iteration cycles, the pairs that switched back and forth are the biactive candidates: the
         corner polish on them decides. A piece solve that misses its tolerance still chooses the
         switches but is never accepted. ``None`` if a piece is singular, the corner is not
-        B-stationary or ``max_switches`` is reached.
+        B-stationary or ``max_switches`` is reached. Returns ``(result, spent)``, ``spent`` the
+        linear solves and Newton steps (counted also when it fails).
         """
-        self._spent = 0  # linear solves and Newton steps, also when it fails
         if not np.all(np.isfinite(z)):
-            return None
+            return None, 0
         P = np.asarray(params, float)[:self.n_params]
         kw = dict(tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
         a, b = self._ab(z, P)
@@ -305,9 +296,8 @@ class FBSystem:
             seen.add(branch.tobytes())
             res = self._solve_piece(z, P, branch, kw)
             if res is None or not np.all(np.isfinite(res.z)):
-                return None
+                return None, total
             total += res.iterations
-            self._spent = total
             other = self._signs(res.z, P, branch)
             roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other), initial=0.0)))
             worst = -float(np.min(other, initial=np.inf))
@@ -315,15 +305,16 @@ class FBSystem:
                 # An ill-conditioned piece (a far-off start) may miss residual_tol; its solution
                 # still says which pairs to switch, but it cannot be accepted.
                 if worst <= roundoff:
-                    return None
+                    return None, total
             elif np.all(other > 0):
                 res.iterations, res.message = total, "converged (active set)"
-                return res
+                return res, total
             elif worst <= roundoff:
                 if not self.corner:  # mcp: signs hold to roundoff; the caller checks the residual
                     res.iterations, res.message = total, "converged (active set)"
-                    return res
-                return self._corner_after(res.z, params, np.abs(other) <= roundoff, kw, total)
+                    return res, total
+                res, total, _ = self._corner_after(res.z, params, np.abs(other) <= roundoff, kw, total)
+                return res, total
             if worst < violation:
                 closest, violation = res.z, worst
             z = res.z
@@ -334,34 +325,34 @@ class FBSystem:
                 # Cycling between pieces: the solution is at the corner of the pairs that switch
                 # back and forth, if anywhere.
                 if not self.corner:
-                    return None
-                sel = flips >= 2
-                corner = self._corner_solve(closest, np.asarray(params, float), sel, dict(kw, jacobian=self.jacobian))
-                if corner is None:
-                    return None
-                res, wrong_theta, wrong_nu = corner
-                total += res.iterations
-                self._spent = total
-                if not (wrong_theta.any() or wrong_nu.any()):
-                    res.iterations, res.message = total, "converged (biactive corner)"
-                    return res
-                if releases == 0:
-                    return None
+                    return None, total
+                res, total, wrong = self._corner_after(closest, params, flips >= 2, kw, total)
+                if res is not None or wrong is None or releases == 0:
+                    return res, total
                 # Not B-stationary: leave the corner along the piece its multipliers point to
                 # (an active-set step), then go on switching.
                 releases -= 1
+                z, wrong_theta, wrong_nu = wrong
                 branch = np.where(wrong_theta, 0.0, np.where(wrong_nu, 1.0, branch))
-                z, seen, flips[:] = res.z, set(), 0
+                seen, flips[:] = set(), 0
                 closest, violation = None, np.inf
-        return None
+        return None, total
 
-    def _corner_after(self, z, params, selection, kw, iterations) -> NewtonResult | None:
-        """Biactive pairs ``selection``: the corner polish from ``z``, accepted only if B-stationary."""
-        corner = self._corner(z, np.asarray(params, float), None, dict(kw, jacobian=self.jacobian),
-                              selection=selection)
-        if corner is not None:
-            corner.iterations += iterations
-        return corner
+    def _corner_after(self, z, params, selection, kw, iterations):
+        """Biactive pairs ``selection``: the corner polish from ``z``, accepted only if B-stationary.
+
+        Returns ``(result, spent, wrong)``: ``result`` is ``None`` unless B-stationary; ``wrong``
+        is ``(z, wrong_theta, wrong_nu)`` of a converged but not B-stationary corner, else ``None``.
+        """
+        out = self._corner_solve(z, np.asarray(params, float), selection, dict(kw, jacobian=self.jacobian))
+        if out is None:
+            return None, iterations, None
+        res, wrong_theta, wrong_nu = out
+        res.iterations += iterations
+        if wrong_theta.any() or wrong_nu.any():
+            return None, res.iterations, (res.z, wrong_theta, wrong_nu)
+        res.message = "converged (biactive corner)"
+        return res, res.iterations, None
 
     def polish_corner(self, z, params, opts, *, corner_tol: float = 1e-3):
         """The biactive-branch solution near ``z`` if it is B-stationary, else ``None``."""
@@ -373,19 +364,13 @@ class FBSystem:
         near = np.maximum(np.abs(a), np.abs(b)) <= corner_tol
         return bool(np.any(np.minimum(np.abs(a), np.abs(b))[near] > 1e-14))
 
-    def _corner(self, z, params, corner_tol, kw, *, selection=None):
-        """Newton on the biactive branch of the pairs ``selection`` (default: those within
-        ``corner_tol`` of a corner); ``None`` unless B-stationary."""
+    def _corner(self, z, params, corner_tol, kw):
+        """Newton on the biactive branch of the pairs within ``corner_tol`` of a corner; ``None``
+        unless B-stationary."""
         if not np.all(np.isfinite(z)):
             return None
-        if selection is None:
-            a, b = self._ab(z, params[:self.n_params])
-            selection = np.maximum(np.abs(a), np.abs(b)) <= corner_tol
-        out = self._corner_solve(z, params, selection, kw)
-        if out is None or out[1].any() or out[2].any():
-            return None
-        out[0].message = "converged (biactive corner)"
-        return out[0]
+        a, b = self._ab(z, params[:self.n_params])
+        return self._corner_after(z, params, np.maximum(np.abs(a), np.abs(b)) <= corner_tol, kw, 0)[0]
 
     def _corner_solve(self, z, params, selection, kw):
         """Newton on the biactive branch of ``selection``: ``(result, wrong_theta, wrong_nu)``,

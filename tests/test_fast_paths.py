@@ -20,6 +20,7 @@ from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.solvers.evaluate import NumericFunction
+from ddcm_casadi.solvers.path import DDCMSolver
 from ddcm_casadi.truss import bar_chain, warren_truss
 
 WITH_PREDICTOR = ["fischer_burmeister", "penalty"]
@@ -68,8 +69,6 @@ def test_predictor_is_used_along_a_path():
     model = _bar_with_stops()
     problems = build_problems(model)
     built = formulations.get("fischer_burmeister").build(problems.projection)
-    from ddcm_casadi.solvers.path import DDCMSolver
-
     path = DDCMSolver(problems, built).solve()
     assert path.converged
     stats = built.system.stats

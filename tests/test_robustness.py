@@ -10,10 +10,11 @@ import pytest
 import formulations
 from ddcm_casadi import MaterialDataset, bar_model, compare
 from ddcm_casadi.problem import build_problems
-from ddcm_casadi.truss import Obstacle, bar_chain, truss_model
+from ddcm_casadi.truss import bar_chain
 from ddcm_casadi.validate import nearest_by_brute_force, check_fixed_points
 
 from .conftest import ALL
+from .test_examples import _load
 
 RNG = np.random.default_rng(20261123)
 STRAINS = np.linspace(-0.05, 0.01, 500)
@@ -100,30 +101,13 @@ def test_converges_from_any_start(paper, name):
 
 
 # ------------------------------------------------------------------ many contact pairs (DDCM)
-def _floor_grid(load_factors, nx=6, ny=3, a=1.5, h=0.8, z0=0.008, P=25e3):
-    """A 3-D double-layer grid loaded onto a floor at its 10 inner bottom nodes."""
-    B = lambda i, j: j * (nx + 1) + i
-    nb = (nx + 1) * (ny + 1)
-    T = lambda i, j: nb + j * nx + i
-    nodes = np.array([[i * a, j * a, z0] for j in range(ny + 1) for i in range(nx + 1)]
-                     + [[(i + .5) * a, (j + .5) * a, z0 + h] for j in range(ny) for i in range(nx)])
-    chords = ([[B(i, j), B(i + 1, j)] for j in range(ny + 1) for i in range(nx)]
-              + [[B(i, j), B(i, j + 1)] for j in range(ny) for i in range(nx + 1)]
-              + [[T(i, j), T(i + 1, j)] for j in range(ny) for i in range(nx - 1)]
-              + [[T(i, j), T(i, j + 1)] for j in range(ny - 1) for i in range(nx)])
-    web = [[T(i, j), B(i + di, j + dj)] for j in range(ny) for i in range(nx) for di, dj in ((0, 0), (1, 0), (0, 1), (1, 1))]
-    members = np.array(chords + web)
-    area = np.r_[np.full(len(chords), 1e-3), np.full(len(web), 5e-4)]
-    loads = np.zeros_like(nodes)
-    for j in range(ny):
-        for i in range(nx):
-            loads[T(i, j), 2] = -P * (0.5 + (i + .5) / nx) * (0.7 + 0.6 * (j + .5) / ny)
-    floor = Obstacle([0, 0, 1], 0.0, [B(i, j) for j in range(1, ny) for i in range(1, nx)])
-    return truss_model(nodes=nodes, members=members, area=area, youngs_modulus=200e9,
-                       supports=[(B(0, 0), "xyz"), (B(nx, 0), "yz"), (B(0, ny), "z"), (B(nx, ny), "z")],
-                       loads=loads, obstacles=[floor], load_factors=load_factors,
-                       dataset=MaterialDataset.hookean(200e9, -2e-3, 2e-3, 2001, c=200e9))
-
+def _floor_grid(load_factors):
+    """The 3-D double-layer grid of ``examples/truss_3d_plane.py`` on its floor at its 10 inner
+    bottom nodes, with a gentler load gradient in y and data up to |strain| 2e-3."""
+    grid = _load("truss_3d_plane")
+    inner = [(i, j) for j in range(1, grid.NY) for i in range(1, grid.NX)]
+    return grid.build_model(contact=inner, gradient=(0.5, 1.0, 0.7, 0.6), strain_limit=2e-3,
+                            load_factors=load_factors)
 
 
 @pytest.mark.parametrize("name", ["penalty", "augmented_lagrangian", "fischer_burmeister"])

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from ddcm_casadi import ladder
-from ddcm_casadi.exact import ExactEnumerator
+from ddcm_casadi import ladder, paper_bar
+from ddcm_casadi.exact import CONTACT, ExactEnumerator
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.validate_cli import main
 
@@ -53,10 +53,11 @@ def test_closed_form_of_stops_bar_solves_the_lcp():
     """The concave-envelope closed form is a solution of the classical problem (checked by the
     exact enumerator, which shares no code with it)."""
     m = ladder.stops_bar()
-    ex = ExactEnumerator(build_problems(m).classical)
+    problems = build_problems(m)
+    ex = ExactEnumerator(problems.classical)
     s = m.scales
     for k in range(m.n_steps):
-        sol = ex.solutions(build_problems(m).step_params(k))
+        sol = ex.solutions(problems.step_params(k))
         assert len(sol) == 1
         u, p = m.closed_form(k)
         assert np.allclose(sol[0].z[:m.n_dofs] * s["displacement"], u, rtol=0, atol=1e-12 * max(1e-3, abs(u).max()))
@@ -69,3 +70,15 @@ def test_bad_option_is_one_line(capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("ddcm-validate: error:")
+
+
+def test_a_biactive_point_found_on_one_branch_is_judged_on_both():
+    """Paper bar at its last step with the datum (w / L, -1e9): the free branch gives u = w, p = 0,
+    a biactive point from which raising p lowers the distance (pressure multiplier +1/3 on the
+    grazing partition). It is not a local minimum; the contact branch is the only one."""
+    m = paper_bar()
+    problems = build_problems(m)
+    k = m.n_steps - 1
+    w = m.load_parameter[k] - m.length
+    minima = ExactEnumerator(problems.projection).local_minima(problems.projection_params(k, [w / m.length], [-1e9]))
+    assert [b.partition for b in minima] == [(CONTACT,)]

@@ -14,6 +14,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .evaluate import NumericFunction
+
 
 @dataclass
 class NewtonResult:
@@ -35,10 +37,9 @@ class SparseJacobian:
         self.indptr = np.asarray(colind, dtype=np.int64)
         self.indices = np.asarray(row, dtype=np.int64)
 
-    def __call__(self, J: ca.DM | np.ndarray) -> sp.csc_matrix:
-        """``J``: a ``DM``, or its nonzeros as returned by a :class:`NumericFunction`."""
-        data = np.asarray(J.nonzeros() if isinstance(J, ca.DM) else J, dtype=float)
-        return sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
+    def __call__(self, J: np.ndarray) -> sp.csc_matrix:
+        """``J``: the Jacobian's nonzeros, as a :class:`NumericFunction` returns them."""
+        return sp.csc_matrix((np.asarray(J, dtype=float), self.indices, self.indptr), shape=self.shape)
 
 
 def solve_linear(J: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray:
@@ -55,16 +56,16 @@ def solve_linear(J: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray:
     return spla.spsolve((Jt @ J + shift * sp.identity(J.shape[0], format="csc")).tocsc(), Jt @ rhs)
 
 
-def newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, params: np.ndarray, *,
+def newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params: np.ndarray, *,
                  jacobian: SparseJacobian | None = None, tol: float = 1e-9, residual_tol: float = 1e-9,
                  max_iter: int = 50, armijo: float = 1e-4, max_backtracks: int = 40) -> NewtonResult:
     """Solve ``r(z; params) = 0`` by Newton with an Armijo line search on ``0.5 ||r||^2``.
 
     Parameters
     ----------
-    rj : casadi.Function
-        ``(z, params) -> (r, J)`` with ``J`` sparse.
-    r : casadi.Function
+    rj : NumericFunction or callable
+        ``(z, params) -> (r, J)``, ``J`` the nonzeros of the sparse Jacobian.
+    r : NumericFunction or callable
         ``(z, params) -> r`` (for the line search).
     tol : float
         Tolerance on the relative increment ``||dz||_inf / max(1, ||z||_inf)`` (the paper's test).
@@ -112,7 +113,7 @@ def newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, params: np.nda
 SMOOTHING = (1e-2, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 0.0)
 
 
-def smoothed_newton_solve(rj: ca.Function, r: ca.Function, z0: np.ndarray, params: np.ndarray, *,
+def smoothed_newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params: np.ndarray, *,
                           smoothing: tuple = SMOOTHING, try_plain: bool = True,
                           **kw) -> tuple[NewtonResult, float, int]:
     """Newton on a nonsmooth system whose smoothing parameter ``mu`` is the last parameter.

@@ -154,10 +154,12 @@ class DDCMSolver:
             # Warm multipliers can mislead Newton near many corners (measured: 9 stops at the
             # corner, 1e5 data); the same primal start without them is the next try.
             retry = self.built.solve(params, x0, p0, None)
-            retry.iterations += sol.iterations
             if retry.converged:
+                retry.iterations += sol.iterations
                 retry.message += " (restarted without warm multipliers)"
                 sol = retry
+            else:
+                sol.iterations += retry.iterations
         if self.exact is None:
             return sol, None, float("nan")
         ex = self.exact.solve(params)
