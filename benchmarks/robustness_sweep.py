@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, bar_model, compare
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.validate import check_fixed_points

@@ -25,7 +25,7 @@ import time
 import numpy as np
 import scipy.sparse.linalg as spla
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.problem import build_problems

@@ -13,7 +13,8 @@ from importlib.metadata import PackageNotFoundError, version as _version
 
 from .data import MaterialDataset
 from .errors import ConvergenceError, DDCMError, InputError
-from .model import BarModel, ContactModel, bar_model, paper_bar
+from .bar import BarModel, bar_model, paper_bar
+from .model import ContactModel
 from .problem import build_problems
 
 try:

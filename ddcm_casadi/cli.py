@@ -19,7 +19,7 @@ import casadi
 import numpy as np
 import scipy
 
-import formulations as registry
+from ddcm_casadi import formulations as registry
 
 from . import __version__
 from .config import Case, default_case, load_case
@@ -27,7 +27,7 @@ from .data import MaterialDataset, PointData
 from .errors import DDCMError, InputError
 from .harness import VARIANTS, Comparison, compare
 from .io import prepare_output_dir, write_csv_atomic, write_json_atomic
-from .model import BarModel
+from .bar import BarModel
 
 EXIT_INPUT = 2
 EXIT_NOT_CONVERGED = 3
@@ -140,7 +140,7 @@ def parameters(case: Case, cmp: Comparison) -> dict:
     Returns
     -------
     dict
-        For the paper's bar (:class:`~ddcm_casadi.model.BarModel`): ``length``, ``area``,
+        For the paper's bar (:class:`~ddcm_casadi.bar.BarModel`): ``length``, ``area``,
         ``youngs_modulus``, ``positions``; for any other model its ``name``, sizes (``n_dofs``,
         ``n_points``, ``n_contacts``, ``n_steps``), ``load_parameter_name`` and values, and the
         moduli; ``data`` describes the data set (``sets``, one entry per material, when there are

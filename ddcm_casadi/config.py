@@ -34,7 +34,7 @@ The paper's bar
     gamma = 2e15            # Pa/m
 
 Without ``elements`` and ``[[stops]]`` this is the one-unknown bar of the paper
-(:func:`~ddcm_casadi.model.bar_model`); with either it is
+(:func:`~ddcm_casadi.bar.bar_model`); with either it is
 :func:`~ddcm_casadi.truss.bar_chain` (``elements`` defaults to 1).
 
 Trusses
@@ -94,11 +94,12 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-import formulations as registry
+from ddcm_casadi import formulations as registry
 
 from .data import MAX_DATA_POINTS, MaterialDataset, check_positive
 from .errors import InputError
-from .model import ContactModel, bar_model, paper_bar
+from .bar import bar_model, paper_bar
+from .model import ContactModel
 from .truss import AXES, Obstacle, bar_chain, member_data, truss_model
 
 #: Keys of each section (``None``: checked elsewhere). Sections in ``_ARRAYS`` are arrays of tables.

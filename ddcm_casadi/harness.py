@@ -14,11 +14,12 @@ from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-import formulations as registry
-from formulations.base import Formulation
+from ddcm_casadi import formulations as registry
+from ddcm_casadi.formulations.base import Formulation
 
 from .errors import InputError
-from .model import BarModel, ContactModel
+from .bar import BarModel
+from .model import ContactModel
 from .problem import ProblemPair, build_problems
 from .solvers.path import DDCMSolver, PathResult, StepResult, solve_classical
 from .truss import TrussModel

@@ -27,12 +27,12 @@ from typing import Callable
 
 import numpy as np
 
-import formulations as registry
+from ddcm_casadi import formulations as registry
 
 from .data import MaterialDataset
 from .exact import ExactEnumerator
 from .harness import compare
-from .model import paper_bar
+from .bar import paper_bar
 from .reference import ContactQP
 from . import truss
 from .truss import Obstacle, bar_chain, truss_model

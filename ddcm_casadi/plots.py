@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 
 from .harness import Comparison
 from .io import write_bytes_atomic
-from .model import BarModel
+from .bar import BarModel
 
 _MARKERS = {"penalty": "s", "augmented_lagrangian": "^", "fischer_burmeister": "o", "mpcc": "x"}
 _STYLES = {"penalty": "-", "augmented_lagrangian": "--", "fischer_burmeister": "-.", "mpcc": ":"}
@@ -456,7 +456,7 @@ def _structure_formulation(cmp: Comparison, variant: str) -> str | None:
 def save_figures(cmp: Comparison, out_dir: str | Path) -> list[Path]:
     """Save the figures that suit the model; returns the paths written (atomically).
 
-    The paper's one-element bar (:class:`~ddcm_casadi.model.BarModel`): Fig. 2 (:func:`save_fig2`).
+    The paper's one-element bar (:class:`~ddcm_casadi.bar.BarModel`): Fig. 2 (:func:`save_fig2`).
     Any other (truss) model: ``structure_classical.png`` and ``structure_ddcm.png`` (last step,
     Fischer-Burmeister if it was run, else the first formulation of that variant; a variant that
     was not run is skipped) and ``contact_history.png``.

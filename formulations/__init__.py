@@ -1,6 +1,6 @@
 """Contact formulations: named, registered transformations of complementarity pairs.
 
->>> import formulations
+>>> from ddcm_casadi import formulations
 >>> formulations.available()
 ['penalty', 'augmented_lagrangian', 'fischer_burmeister', 'mpcc']
 >>> fb = formulations.get("fischer_burmeister", tol=1e-10)

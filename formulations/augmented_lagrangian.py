@@ -36,7 +36,7 @@ cannot be evaluated below ``|Hessian| * eps * |x|`` (3e-10 with ``|x| = 1``), ab
 the iterate lies on (``a_i = 0`` where ``a_i <= b_i``, else ``b_i = 0``): Newton on that smooth
 system (same tolerances), with pairs whose sign fails switching branch, accepted only if strictly
 complementary (``b_i > 0``, resp. ``a_i > 0``) or a B-stationary corner
-(:meth:`formulations.ncp.FBSystem.branch_finish`, the last stage of every inner solve). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
+(:meth:`ddcm_casadi.formulations.ncp.FBSystem.branch_finish`, the last stage of every inner solve). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
 ``-grad b_i``), so the branch KKT point with its multiplier ``theta`` solves the ``Phi``-KKT
 system exactly, and ``lam = theta`` is a fixed point of the multiplier update (``c = 0``): the
 result is the exact projection, as at ordinary convergence.

@@ -19,7 +19,7 @@ second derivatives are finite (Facchinei & Pang, the element with ``(xi, zeta) =
 Newton with ``mu = 0`` fails, a smoothing continuation ``mu -> 0`` is run from the last iterate
 (:func:`ddcm_casadi.solvers.newton.smoothed_newton_solve`). A projection that lands on the corner
 ``g = p = 0`` of ``Z_E`` is finished on the biactive branch and accepted only if B-stationary
-(see :class:`formulations.ncp.FBSystem`).
+(see :class:`ddcm_casadi.formulations.ncp.FBSystem`).
 Newton is globalised by an Armijo line search on ``0.5 ||r||^2``.
 
 Active-set predictor (option ``active_set_predictor``, on by default). Before Newton, the system
@@ -74,7 +74,7 @@ class FischerBurmeister(Formulation):
             Before Newton, solve the system of the pieces the start lies on (``a_i = 0`` where
             ``a_i <= b_i``, else ``b_i = 0``) with a factorisation cached per active set, switching
             the pairs whose other sign is violated; accepted only if strictly complementary or a
-            B-stationary corner (see :class:`formulations.ncp.FBSystem`).
+            B-stationary corner (see :class:`ddcm_casadi.formulations.ncp.FBSystem`).
         """
 
         alpha: float | None = None

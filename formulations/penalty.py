@@ -58,7 +58,7 @@ class Penalty(Formulation):
             DDCM: the compliant pairs must satisfy ``max |min(g + p/gamma, p)| <= comp_tol`` (scaled).
         active_set_predictor : bool
             DDCM: the active-set predictor of the compliant pairs' FB system (see
-            :class:`formulations.ncp.FBSystem`).
+            :class:`ddcm_casadi.formulations.ncp.FBSystem`).
         """
 
         gamma: float | None = None

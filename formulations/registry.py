@@ -10,7 +10,7 @@ _REGISTRY: dict[str, type] = {}
 
 
 def register(cls: type) -> type:
-    """Class decorator: register a :class:`~formulations.base.Formulation` under ``cls.name``."""
+    """Class decorator: register a :class:`~ddcm_casadi.formulations.base.Formulation` under ``cls.name``."""
     if cls.name in _REGISTRY:
         raise ValueError(f"formulation {cls.name!r} is already registered")
     _REGISTRY[cls.name] = cls

@@ -1,6 +1,6 @@
 import pytest
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi import compare, paper_bar
 
 ALL = formulations.available()

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi import ConvergenceError, InputError, MaterialDataset, bar_model, compare
 from ddcm_casadi.problem import build_problems
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi import compare
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.validate import check_fixed_points

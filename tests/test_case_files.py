@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi.cli import EXIT_INPUT
 from ddcm_casadi.config import load_case
 from ddcm_casadi.data import MaterialDataset, PointData

@@ -7,7 +7,7 @@ the branch enumeration the solver itself consults.
 import numpy as np
 import pytest
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi.solvers.path import DDCMSolver
 from ddcm_casadi.problem import build_problems
 

@@ -25,7 +25,7 @@ def test_compare_formulations_example(tmp_path, capsys):
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-import formulations  # noqa: E402
+from ddcm_casadi import formulations  # noqa: E402
 from ddcm_casadi.data import PointData  # noqa: E402
 
 CONTACT_EXAMPLES = ("bar_on_stops", "truss_bridge", "truss_3d_plane")

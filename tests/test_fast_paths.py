@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.problem import build_problems

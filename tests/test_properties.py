@@ -5,7 +5,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, bar_model
 from ddcm_casadi.problem import build_problems
 

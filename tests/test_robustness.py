@@ -7,7 +7,7 @@ below); DDCM steps must be converged, true fixed points (see ddcm_casadi.validat
 import numpy as np
 import pytest
 
-import formulations
+from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, bar_model, compare
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.truss import bar_chain
