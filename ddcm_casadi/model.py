@@ -204,3 +204,44 @@ class ContactModel:
     def closed_form(self, step: int):
         """Exact classical solution ``(u, p)`` if the model knows one in closed form, else ``None``."""
         return None
+
+    # ------------------------------------------- self-description (what the front ends need)
+    # A model kind overrides these; the harness, CLI, plots and case files call them and never
+    # check a model's type.
+    def penalty_closed_form(self, step: int, gamma: float):
+        """The penalty solution ``(u, p)`` for the penalty stiffness ``gamma`` (Pa/m) if known in
+        closed form, else ``None`` (then a penalty run is compared with :meth:`closed_form`)."""
+        return None
+
+    def describe(self) -> dict:
+        """The model's record in ``results.json`` (small: sizes, names, moduli; no fields)."""
+        E = None
+        if self.youngs_modulus is not None:
+            moduli = np.unique(self.youngs_modulus)
+            E = float(moduli[0]) if moduli.size == 1 else self.youngs_modulus.tolist()
+        return dict(name=self.name, type=type(self).__name__, n_dofs=self.n_dofs, n_points=self.n_points,
+                    n_contacts=self.n_contacts, n_steps=self.n_steps,
+                    load_parameter_name=self.load_parameter_name,
+                    load_parameter=self.load_parameter.tolist(), youngs_modulus=E)
+
+    @property
+    def scalar(self) -> bool:
+        """One unknown, one material point, at most one pair: tables hold ``u`` and ``p`` themselves."""
+        return self.n_dofs == 1 and self.n_contacts <= 1 and self.n_points == 1
+
+    def step_summary(self, u: np.ndarray, p: np.ndarray) -> dict:
+        """The per-step columns of ``results.csv`` that describe the solution ``(u, p)``."""
+        if self.scalar:
+            return dict(u=float(u[-1]), p=float(p[0]) if p.size else float("nan"))
+        return dict(max_abs_u=float(np.max(np.abs(u))), total_contact_force=float(np.sum(self.contact_area * p)),
+                    active_contacts=int(np.sum(self.active_contacts(p))))
+
+    def extra_fields(self, u: np.ndarray, stress: np.ndarray) -> dict:
+        """Model-specific per-step fields (stacked over steps: ``u`` is ``(n_steps, n_dofs)``),
+        added to :meth:`ddcm_casadi.harness.Comparison.fields`."""
+        return {}
+
+    def save_figures(self, cmp, out_dir) -> list:
+        """Draw the figures that suit this model kind into ``out_dir``; returns the paths.
+        Imports matplotlib only here."""
+        return []

@@ -114,6 +114,12 @@ class AugmentedLagrangian(Formulation):
     def gamma(self, problem: ComplementarityProblem) -> float:
         return self.options.gamma or self.DEFAULT_GAMMA_FACTOR * problem.contact_stiffness
 
+    def resolved_options(self, problem: ComplementarityProblem | None) -> dict:
+        opts = super().resolved_options(problem)
+        if problem is not None:
+            opts["gamma_used"] = self.gamma(problem)
+        return opts
+
     def build(self, problem: ComplementarityProblem) -> "_BuiltAL":
         return _BuiltAL(problem, self.options, problem.scaled_penalty(self.gamma(problem)))
 

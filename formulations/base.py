@@ -130,6 +130,16 @@ class Formulation(ABC):
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.options})"
 
+    def penalty_stiffness(self, problem: ComplementarityProblem) -> float | None:
+        """The physical penalty stiffness (Pa/m) this formulation regularises contact with, or
+        ``None`` if it enforces the pairs exactly (then results are compared with the exact
+        solution)."""
+        return None
+
+    def resolved_options(self, problem: ComplementarityProblem | None) -> dict:
+        """The options with their problem-dependent defaults resolved (for ``results.json``)."""
+        return dict(vars(self.options))
+
     @abstractmethod
     def build(self, problem: ComplementarityProblem) -> "BuiltFormulation":
         """Build the CasADi objects for ``problem`` once; returns an object with ``solve``."""
@@ -141,6 +151,9 @@ class BuiltFormulation(ABC):
     def __init__(self, problem: ComplementarityProblem) -> None:
         self.problem = problem
         self.metrics = Metrics(problem)
+
+    def reset(self) -> None:
+        """Forget caches (factorisations) and counters, for cold-start measurements."""
 
     @abstractmethod
     def solve(self, params: np.ndarray, x0: np.ndarray, p0: np.ndarray,

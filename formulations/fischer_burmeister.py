@@ -103,6 +103,9 @@ class _BuiltFB(BuiltFormulation):
                                (opts.beta or problem.fb_beta) * problem.pressure_ref,
                                predictor=opts.active_set_predictor)
 
+    def reset(self) -> None:
+        self.system.reset()
+
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         x, p, st, res, mu, stages = self.system.solve(self.system.start(x0, p0, state), params, self.opts)
         sol = self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,

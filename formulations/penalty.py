@@ -80,6 +80,15 @@ class Penalty(Formulation):
         """The physical penalty stiffness used for ``problem``."""
         return self.options.gamma or self.DEFAULT_GAMMA_FACTOR * problem.contact_stiffness
 
+    def penalty_stiffness(self, problem: ComplementarityProblem) -> float:
+        return self.gamma(problem)
+
+    def resolved_options(self, problem: ComplementarityProblem | None) -> dict:
+        opts = super().resolved_options(problem)
+        if problem is not None:
+            opts["gamma_used"] = self.gamma(problem)
+        return opts
+
     def build(self, problem: ComplementarityProblem) -> BuiltFormulation:
         gamma = problem.scaled_penalty(self.gamma(problem))
         if problem.kind == "mcp":
@@ -123,6 +132,9 @@ class _BuiltCompliantProjection(BuiltFormulation):
                                gap=compliant_gap, predictor=opts.active_set_predictor)
         self._pairs = NumericFunction(ca.Function("compliant_pairs", [problem.x, problem.p, problem.params],
                                                   [ca.fmin(compliant_gap, problem.p)]))
+
+    def reset(self) -> None:
+        self.system.reset()
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         x, p, st, res, mu, stages = self.system.solve(self.system.start(x0, p0, state), params, self.opts)
