@@ -2,9 +2,10 @@
 
 With no arguments it runs the paper's example (Section 4) and prints a summary table;
 --config CASE runs a case file instead (TOML or JSON: the paper's bar, an N-element bar with
-stops, or a 1-D/2-D/3-D truss; the format is described in ddcm_casadi/config.py). --out DIR
+stops, or a 1-D/2-D/3-D truss; the format is described in ddcm_casadi/config.py, each model
+kind's sections next to its parser in ddcm_casadi/bar.py and ddcm_casadi/truss.py). --out DIR
 writes results.csv, results.json (for models other than the one-unknown bar with the per-step
-fields of every run: nodal displacements, contact forces, ...) and the figures.
+fields of every run: nodal displacements, contact forces, ...) and the figures that suit the model.
 """
 
 from __future__ import annotations
@@ -23,11 +24,9 @@ from ddcm_casadi import formulations as registry
 
 from . import __version__
 from .config import Case, default_case, load_case
-from .data import MaterialDataset, PointData
 from .errors import DDCMError, InputError
 from .harness import VARIANTS, Comparison, compare
 from .io import prepare_output_dir, write_csv_atomic, write_json_atomic
-from .bar import BarModel
 
 EXIT_INPUT = 2
 EXIT_NOT_CONVERGED = 3
@@ -121,10 +120,9 @@ class _Progress:
             print(msg, file=sys.stderr, flush=True)
 
 
-def _dataset_info(dataset: MaterialDataset) -> dict:
-    """Size, metric and strain range of one data set."""
-    return dict(points=len(dataset), c=dataset.c, strain_min=float(dataset.strain.min()),
-                strain_max=float(dataset.strain.max()))
+def describe_dataset(dataset) -> dict | None:
+    """The ``data`` record of ``results.json`` (the data set's own :meth:`describe`), or ``None``."""
+    return None if dataset is None else dataset.describe()
 
 
 def parameters(case: Case, cmp: Comparison) -> dict:
@@ -140,41 +138,18 @@ def parameters(case: Case, cmp: Comparison) -> dict:
     Returns
     -------
     dict
-        For the paper's bar (:class:`~ddcm_casadi.bar.BarModel`): ``length``, ``area``,
-        ``youngs_modulus``, ``positions``; for any other model its ``name``, sizes (``n_dofs``,
-        ``n_points``, ``n_contacts``, ``n_steps``), ``load_parameter_name`` and values, and the
-        moduli; ``data`` describes the data set (``sets``, one entry per material, when there are
-        several). Always ``case``, ``ddcm_max_outer`` and ``formulations``.
+        ``case``, then the model's own record (:meth:`~ddcm_casadi.model.ContactModel.describe`:
+        for the paper's bar ``length``, ``area``, ``youngs_modulus``, ``positions``; for any other
+        model its ``name``, sizes, ``load_parameter_name`` and values, and the moduli, for trusses
+        also ``dimension``, ``n_nodes``, ``n_members``), ``data`` (:func:`describe_dataset`),
+        ``ddcm_max_outer`` and ``formulations`` (options with their problem-dependent defaults
+        resolved, e.g. ``gamma_used``).
     """
     m = case.model
-    forms = {}
-    for f in cmp.formulations:
-        opts = {k: v for k, v in vars(f.options).items()}
-        if hasattr(f, "gamma") and cmp.problems.classical is not None:
-            opts["gamma_used"] = f.gamma(cmp.problems.classical)
-        forms[f.name] = opts
-    data = None
-    if isinstance(m.dataset, MaterialDataset):
-        data = _dataset_info(m.dataset)
-    elif isinstance(m.dataset, PointData):
-        data = dict(points=len(m.dataset), sets=[_dataset_info(d) for d in m.dataset.datasets],
-                    material=m.dataset.material.tolist())
-    if isinstance(m, BarModel):
-        return dict(case=case.source, length=m.length, area=m.area,
-                    youngs_modulus=None if m.youngs_modulus is None else float(m.youngs_modulus[0]),
-                    positions=m.load_parameter.tolist(), data=data, ddcm_max_outer=case.ddcm_max_outer,
-                    formulations=forms)
-    E = None
-    if m.youngs_modulus is not None:
-        moduli = np.unique(m.youngs_modulus)
-        E = float(moduli[0]) if moduli.size == 1 else m.youngs_modulus.tolist()
-    model = dict(name=m.name, type=type(m).__name__, n_dofs=m.n_dofs, n_points=m.n_points,
-                 n_contacts=m.n_contacts, n_steps=m.n_steps, load_parameter_name=m.load_parameter_name,
-                 load_parameter=m.load_parameter.tolist(), youngs_modulus=E)
-    if getattr(m, "nodes", None) is not None:
-        model.update(dimension=int(m.nodes.shape[1]), n_nodes=int(m.nodes.shape[0]),
-                     n_members=int(m.members.shape[0]))
-    return dict(case=case.source, **model, data=data, ddcm_max_outer=case.ddcm_max_outer, formulations=forms)
+    forms = {f.name: f.resolved_options(cmp.problems.classical) for f in cmp.formulations}
+    # A dict display, not keywords: a model record may not clash with the run's own keys.
+    return {"case": case.source, **m.describe(), "data": describe_dataset(m.dataset),
+            "ddcm_max_outer": case.ddcm_max_outer, "formulations": forms}
 
 
 def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
@@ -185,7 +160,7 @@ def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
     ``nodal_displacement`` and ``member_force``, for DDCM the assigned data) to arrays, steps
     first (written as nested lists, non-finite values as null). The one-unknown bar has none: its CSV rows already hold ``u`` and ``p``.
     """
-    if cmp.scalar_model:
+    if cmp.model.scalar:
         return None
     return {f"{variant}/{name}": cmp.fields(variant, name) for (variant, name) in cmp.results}
 
@@ -204,9 +179,11 @@ def run(argv: list[str] | None = None) -> int:
             raise InputError(f"unknown formulation {n!r}; available: {', '.join(registry.available())}")
     variants = _variants(args.variants, case)
     out = prepare_output_dir(args.out) if args.out else None
-    save_figures = None
-    if out is not None and not args.no_plots:
-        from .plots import save_figures  # matplotlib only when a plot is drawn; before any result is written
+    draw = out is not None and not args.no_plots
+    if draw:
+        # matplotlib only when a plot is drawn, but imported before any result is written: a
+        # missing matplotlib must not leave results without their figures.
+        from . import plots  # noqa: F401
     selection = {n: case.formulation_options.get(n, {}) for n in names}
 
     progress = _Progress(case.model.n_steps, not args.quiet)
@@ -226,8 +203,8 @@ def run(argv: list[str] | None = None) -> int:
         write_csv_atomic(out / "results.csv", rows)
         write_json_atomic(out / "results.json", doc)
         written = ["results.csv", "results.json"]
-        if save_figures is not None:
-            written += [p.name for p in save_figures(cmp, out)]
+        if draw:
+            written += [p.name for p in case.model.save_figures(cmp, out)]
         print(f"wrote {', '.join(written)} to {out}", file=sys.stderr)
     failed = [r for r in cmp.results.values() if not r.converged]
     if failed:

@@ -13,6 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import InputError
+from .metric import Metric
 
 #: Data files larger than this are rejected before reading (bytes).
 MAX_DATA_FILE_BYTES = 2 * 1024**3
@@ -33,71 +34,93 @@ def check_positive(name: str, value: float) -> float:
 
 @dataclass(frozen=True, eq=False)
 class MaterialDataset:
-    """A material data set ``Z_D = {(strain*_j, stress*_j)}`` with its metric constant ``c``.
+    """A material data set ``Z_D = {(strain*_j, stress*_j)}`` with its metric.
 
-    The DDCM distance is ``d^2 = c (eps - eps*)^2 + (sigma - sigma*)^2 / c``.
+    The DDCM distance is ``d^2 = de . C de + ds . C^-1 ds`` (:class:`~ddcm_casadi.metric.Metric`;
+    for one component ``c (e - e*)^2 + (s - s*)^2 / c``).
 
     Parameters
     ----------
     strain, stress : array_like
-        The data points, one per entry. Duplicates and any ordering are accepted.
-    c : float
-        Metric constant (a modulus, Pa).
+        The data points: ``(N,)`` for one component per point (bars, trusses), ``(N, k)`` for
+        ``k`` Mandel components. Duplicates and any ordering are accepted.
+    c : float, (k, k) array_like or Metric
+        The metric (Pa): a number for one component, an SPD matrix for ``k``.
     """
 
     strain: np.ndarray
     stress: np.ndarray
-    c: float
+    c: float | np.ndarray | Metric
+    metric: Metric = field(init=False, repr=False)
     _tree: cKDTree = field(init=False, repr=False)
     _knn: tuple | None = field(init=False, repr=False, default=None)
     _frame: tuple = field(init=False, repr=False, default=())
 
     def __post_init__(self) -> None:
-        c = check_positive("metric c", self.c)
-        strain = np.asarray(self.strain, dtype=float).ravel()
-        stress = np.asarray(self.stress, dtype=float).ravel()
+        if isinstance(self.c, Metric):
+            metric = self.c
+        elif np.ndim(self.c) == 0:
+            metric = Metric(check_positive("metric c", self.c))
+        else:
+            metric = Metric(self.c)
+        k = metric.k
+        strain = np.asarray(self.strain, dtype=float)
+        stress = np.asarray(self.stress, dtype=float)
+        if k == 1:
+            strain, stress = strain.ravel(), stress.ravel()
         if strain.size == 0:
             raise InputError("material data set is empty")
         if strain.shape != stress.shape:
             raise InputError("material data set: strain and stress have different lengths")
+        if k > 1 and (strain.ndim != 2 or strain.shape[1] != k):
+            raise InputError(f"material data set: a {k} x {k} metric needs {k} strain and {k} stress "
+                             f"components per point, got shape {strain.shape}")
         if not (np.all(np.isfinite(strain)) and np.all(np.isfinite(stress))):
             raise InputError("material data set contains NaN or infinite values")
-        object.__setattr__(self, "c", c)
+        object.__setattr__(self, "metric", metric)
+        object.__setattr__(self, "c", metric.c if k == 1 else metric.matrix)
         object.__setattr__(self, "strain", strain)
         object.__setattr__(self, "stress", stress)
         # The tree works in the principal axes of the scaled data (a rotation: distances are
         # unchanged). Data along a line (a Hookean set) then fill thin slabs instead of fat
         # diagonal boxes, and a state far from the data no longer visits every box its search
         # ball crosses: measured at 1e6 points, 1.9 s -> 6 ms for 9 000 states 1e4 spacings away.
-        X = self._scaled(strain, stress)
+        X = metric.coordinates(strain, stress)
         mean = X.mean(axis=0)
         _, axes = np.linalg.eigh((X - mean).T @ (X - mean))
         object.__setattr__(self, "_frame", (mean, axes))
         object.__setattr__(self, "_tree", cKDTree(self._coords(strain, stress)))
 
-    def __len__(self) -> int:
-        return self.strain.size
+    @property
+    def k(self) -> int:
+        """Strain (and stress) components per material point."""
+        return self.metric.k
 
-    def _scaled(self, strain: np.ndarray, stress: np.ndarray) -> np.ndarray:
-        # Euclidean distance in these coordinates is the DDCM metric d.
-        rc = math.sqrt(self.c)
-        return np.column_stack([rc * np.asarray(strain), np.asarray(stress) / rc])
+    def __len__(self) -> int:
+        return self.strain.shape[0]
 
     def _coords(self, strain: np.ndarray, stress: np.ndarray) -> np.ndarray:
-        """The tree's coordinates: scaled, centred and rotated to the data's principal axes."""
+        """The tree's coordinates: scaled (Euclidean distance is the metric's), centred and
+        rotated to the data's principal axes."""
         mean, axes = self._frame
-        return np.ascontiguousarray((self._scaled(strain, stress) - mean) @ axes)
+        return np.ascontiguousarray((self.metric.coordinates(strain, stress) - mean) @ axes)
 
     def distance2(self, strain, stress, index) -> np.ndarray:
         """Squared DDCM distance ``d^2`` between states and the data points ``index``."""
-        de = np.asarray(strain) - self.strain[index]
-        ds = np.asarray(stress) - self.stress[index]
-        return self.c * de**2 + ds**2 / self.c
+        shape = (-1,) if self.k == 1 else (-1, self.k)
+        de = np.asarray(strain, dtype=float).reshape(shape) - self.strain[index]
+        ds = np.asarray(stress, dtype=float).reshape(shape) - self.stress[index]
+        return self.metric.distance2(de, ds)
 
     def nearest(self, strain, stress) -> np.ndarray:
         """Indices of the data points nearest to each state ``(strain, stress)`` (vectorised KD-tree)."""
-        _, idx = self._tree.query(self._coords(np.atleast_1d(strain), np.atleast_1d(stress)))
+        _, idx = self._tree.query(self._coords(strain, stress))
         return np.asarray(idx, dtype=np.intp)
+
+    def describe(self) -> dict:
+        """Size, metric and strain range, for results files."""
+        return dict(points=len(self), c=self.metric.describe(), components=self.k,
+                    strain_min=float(self.strain.min()), strain_max=float(self.strain.max()))
 
     #: Neighbours per datum in the graph of the warm-started search.
     NEIGHBOURS = 8
@@ -128,7 +151,7 @@ class MaterialDataset:
         answer is always the exact nearest datum. ``stats``, if given, accumulates ``queries`` and
         ``fallbacks`` (uncertified states).
         """
-        q = self._coords(np.atleast_1d(strain), np.atleast_1d(stress))
+        q = self._coords(strain, stress)
         j = np.array(previous, dtype=np.intp, copy=True)
         if j.shape != (q.shape[0],):
             raise InputError("previous assignment must have one index per state")
@@ -153,13 +176,13 @@ class MaterialDataset:
             stats["fallbacks"] = stats.get("fallbacks", 0) + int(uncertain.sum())
         return j
 
-    def point_metric(self, n_points: int) -> np.ndarray:
-        """Metric constant ``c`` of each of ``n_points`` material points (all share this set)."""
-        return np.full(n_points, self.c)
+    def point_materials(self, n_points: int) -> tuple[list[Metric], np.ndarray]:
+        """The metrics of the materials and the material of each of ``n_points`` points (one here)."""
+        return [self.metric], np.zeros(n_points, dtype=np.intp)
 
-    @property
-    def max_metric(self) -> float:
-        return self.c
+    def point_metric(self, n_points: int) -> np.ndarray:
+        """Scalar metric ``c`` of each of ``n_points`` one-component material points."""
+        return np.full(n_points, self.metric.c)
 
     @classmethod
     def hookean(cls, youngs_modulus: float, strain_min: float, strain_max: float,
@@ -175,8 +198,10 @@ class MaterialDataset:
         return cls(strain, e * strain, c)
 
     @classmethod
-    def from_csv(cls, path: str | os.PathLike, *, c: float) -> "MaterialDataset":
-        """Read a CSV file with the header ``strain,stress``.
+    def from_csv(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
+        """Read a CSV file with the header ``strain,stress`` (one component per point) or
+        ``strain_1,...,strain_k,stress_1,...,stress_k`` (``k`` Mandel components; ``c`` then a
+        ``k x k`` SPD matrix). Other columns are ignored.
 
         A UTF-8 byte-order mark (as written by spreadsheets) is accepted.
 
@@ -203,13 +228,21 @@ class MaterialDataset:
         if header is None or not any(h.strip() for h in header):
             raise InputError(f"data file is empty: {path}")
         names = [h.strip().lower() for h in header]
-        if "strain" not in names or "stress" not in names:
+        k = 1 if np.ndim(c) == 0 and not isinstance(c, Metric) else Metric(c).k
+        wanted = (["strain"], ["stress"]) if k == 1 else ([f"strain_{i}" for i in range(1, k + 1)],
+                                                         [f"stress_{i}" for i in range(1, k + 1)])
+        missing = [w for w in wanted[0] + wanted[1] if w not in names]
+        if missing and k == 1:
             raise InputError(f"data file {path} needs a header with columns 'strain' and 'stress', got {header!r}")
-        i_e, i_s = names.index("strain"), names.index("stress")
+        if missing:
+            cols = ",".join(wanted[0] + wanted[1])
+            raise InputError(f"data file {path} needs a header with columns {cols!r} ({k} strain and {k} stress "
+                             f"components for this metric), got {header!r}")
+        usecols = tuple(names.index(w) for w in wanted[0] + wanted[1])
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
-                table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=(i_e, i_s), encoding="utf-8")
+                table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=usecols, encoding="utf-8")
         except UnicodeDecodeError:
             raise InputError(f"data file is not UTF-8 text: {path}") from None
         except ValueError as exc:
@@ -218,7 +251,9 @@ class MaterialDataset:
             raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
         if table.size == 0:
             raise InputError(f"data file has a header but no data rows: {path}")
-        return cls(table[:, 0], table[:, 1], c)
+        if k == 1:
+            return cls(table[:, 0], table[:, 1], c)
+        return cls(table[:, :k], table[:, k:], c)
 
 
 class PointData:
@@ -248,35 +283,46 @@ class PointData:
         self.material = material.astype(np.intp)
         sizes = np.array([len(d) for d in self.datasets])
         self.offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+        if len({d.k for d in self.datasets}) != 1:
+            raise InputError("the data sets of one model must have the same number of strain components")
+        self.k = self.datasets[0].k
         self.strain = np.concatenate([d.strain for d in self.datasets])
         self.stress = np.concatenate([d.stress for d in self.datasets])
-        self._c = np.array([d.c for d in self.datasets])
         self._groups = [np.flatnonzero(self.material == k) for k in range(len(self.datasets))]
 
     def __len__(self) -> int:
-        return self.strain.size
+        return self.strain.shape[0]
 
-    @property
-    def max_metric(self) -> float:
-        return float(self._c[np.unique(self.material)].max())
-
-    def point_metric(self, n_points: int) -> np.ndarray:
+    def point_materials(self, n_points: int) -> tuple[list[Metric], np.ndarray]:
+        """The metrics of the materials and the material of each point."""
         if n_points != self.material.size:
             raise InputError(f"material list has {self.material.size} entries, the model has {n_points} points")
-        return self._c[self.material]
+        return [d.metric for d in self.datasets], self.material
+
+    def point_metric(self, n_points: int) -> np.ndarray:
+        """Scalar metric ``c`` of each one-component material point."""
+        metrics, material = self.point_materials(n_points)
+        return np.array([m.c for m in metrics])[material]
+
+    def describe(self) -> dict:
+        """Sizes, metrics and strain ranges of the sets, and the material of each point."""
+        return dict(points=len(self), sets=[d.describe() for d in self.datasets], material=self.material.tolist())
+
+    def _per_point(self, a) -> np.ndarray:
+        return np.asarray(a, dtype=float).reshape((-1,) if self.k == 1 else (-1, self.k))
 
     def nearest(self, strain, stress) -> np.ndarray:
-        strain, stress = np.atleast_1d(strain), np.atleast_1d(stress)
-        out = np.empty(strain.size, dtype=np.intp)
+        strain, stress = self._per_point(strain), self._per_point(stress)
+        out = np.empty(strain.shape[0], dtype=np.intp)
         for k, pts in enumerate(self._groups):
             if pts.size:
                 out[pts] = self.datasets[k].nearest(strain[pts], stress[pts]) + self.offsets[k]
         return out
 
     def nearest_warm(self, strain, stress, previous, **kw) -> np.ndarray:
-        strain, stress = np.atleast_1d(strain), np.atleast_1d(stress)
+        strain, stress = self._per_point(strain), self._per_point(stress)
         previous = np.asarray(previous, dtype=np.intp)
-        out = np.empty(strain.size, dtype=np.intp)
+        out = np.empty(strain.shape[0], dtype=np.intp)
         for k, pts in enumerate(self._groups):
             if pts.size:
                 local = self.datasets[k].nearest_warm(strain[pts], stress[pts], previous[pts] - self.offsets[k], **kw)
@@ -284,7 +330,11 @@ class PointData:
         return out
 
     def distance2(self, strain, stress, index) -> np.ndarray:
-        c = self._c[self.material]
-        de = np.asarray(strain) - self.strain[index]
-        ds = np.asarray(stress) - self.stress[index]
-        return c * de**2 + ds**2 / c
+        """Squared DDCM distance of each point's state to its datum ``index``, under its metric."""
+        de = self._per_point(strain) - self.strain[index]
+        ds = self._per_point(stress) - self.stress[index]
+        out = np.empty(de.shape[0])
+        for k, pts in enumerate(self._groups):
+            if pts.size:
+                out[pts] = self.datasets[k].metric.distance2(de[pts], ds[pts])
+        return out

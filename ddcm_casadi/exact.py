@@ -21,12 +21,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
+from .complementarity import BIACTIVE, CONTACT, FREE, b_stationarity, imposes_gap, imposes_pressure
 from .errors import InputError
+from .linalg import SingularMatrix, factorize
 from .problem import ComplementarityProblem
 
-FREE, CONTACT, GRAZING = 0, 1, 2
+GRAZING = BIACTIVE  # the name this module has used for the biactive piece
 
 
 @dataclass
@@ -100,8 +101,8 @@ class ExactEnumerator:
 
     def _constraints(self, part) -> sp.csc_matrix:
         part = np.asarray(part)
-        on_gap = np.flatnonzero(part != FREE)
-        on_p = np.flatnonzero(part != CONTACT)
+        on_gap = np.flatnonzero(imposes_gap(part))
+        on_p = np.flatnonzero(imposes_pressure(part))
         Ep = sp.csr_matrix((np.ones(on_p.size), (np.arange(on_p.size), self.nx + on_p)), shape=(on_p.size, self.nz))
         return sp.vstack([self.Rz, self.Gz[on_gap], Ep]).tocsc(), on_gap, on_p
 
@@ -113,8 +114,8 @@ class ExactEnumerator:
             else:
                 M = sp.bmat([[self.H, C.T], [C, None]]).tocsc()
             try:
-                lu = spla.splu(M) if M.shape[0] == M.shape[1] else None
-            except RuntimeError:
+                lu = factorize(M) if M.shape[0] == M.shape[1] else None
+            except SingularMatrix:
                 lu = None  # singular: this partition has no unique solution
             self._factors[part] = (lu, on_gap, on_p)
         return self._factors[part]
@@ -231,10 +232,8 @@ class ExactEnumerator:
 
         minima: list[Branch] = []
         for b in self._distinct(self.branches(params), tol, prefer=graded):
-            scale = tol * max(1.0, float(np.max(np.abs(np.concatenate([b.gap_multiplier, b.pressure_multiplier])),
-                                                initial=0.0)))
-            both = np.array(b.partition) == GRAZING
-            if np.any(b.gap_multiplier[both] > scale) or np.any(b.pressure_multiplier[both] > scale):
-                continue
-            minima.append(b)
+            wrong_gap, wrong_p = b_stationarity(b.gap_multiplier, b.pressure_multiplier,
+                                                np.array(b.partition) == GRAZING, rel_tol=tol)
+            if not (wrong_gap.any() or wrong_p.any()):
+                minima.append(b)
         return sorted(minima, key=lambda b: b.objective)

@@ -18,11 +18,9 @@ from ddcm_casadi import formulations as registry
 from ddcm_casadi.formulations.base import Formulation
 
 from .errors import InputError
-from .bar import BarModel
 from .model import ContactModel
 from .problem import ProblemPair, build_problems
 from .solvers.path import DDCMSolver, PathResult, StepResult, solve_classical
-from .truss import TrussModel
 
 VARIANTS = ("classical", "ddcm")
 _COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "max_abs_u", "total_contact_force",
@@ -74,21 +72,33 @@ class Comparison:
     def reference(self, variant: str, formulation: str) -> tuple[np.ndarray, np.ndarray] | None:
         """Closed-form ``(u, p)`` per step to compare with, where the model has one.
 
-        The exact classical solution for every formulation, except the classical penalty, which is
-        compared with the penalty's own closed form.
+        The exact classical solution for every formulation, except a classical formulation that
+        regularises contact with a penalty stiffness (:meth:`Formulation.penalty_stiffness`) on a
+        model that knows the penalty solution in closed form
+        (:meth:`ContactModel.penalty_closed_form`): that one is compared with its own closed form.
         """
         m = self.model
         if m.closed_form(0) is None:
             return None
-        if variant == "classical" and formulation == "penalty" and isinstance(m, BarModel):
-            gamma = self._formulation(formulation).gamma(self.problems.classical)
-            pairs = [m.penalty_closed_form(k, gamma) for k in range(m.n_steps)]
-        else:
+        pairs = self._penalty_reference(variant, formulation)
+        if pairs is None:
             pairs = [m.closed_form(k) for k in range(m.n_steps)]
         return np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
 
-    def _formulation(self, name: str) -> Formulation:
-        return next(f for f in self.formulations if f.name == name)
+    def _penalty_reference(self, variant: str, formulation: str) -> list[tuple] | None:
+        """The penalty closed form ``(u, p)`` per step of a classical penalised run, or ``None``
+        (an exact formulation, or a model without a penalty closed form)."""
+        form = self._formulation(formulation)
+        if variant != "classical" or form is None or self.problems.classical is None:
+            return None
+        gamma = form.penalty_stiffness(self.problems.classical)
+        m = self.model
+        if gamma is None or m.penalty_closed_form(0, gamma) is None:
+            return None
+        return [m.penalty_closed_form(k, gamma) for k in range(m.n_steps)]
+
+    def _formulation(self, name: str) -> Formulation | None:
+        return next((f for f in self.formulations if f.name == name), None)
 
     def errors(self, variant: str, formulation: str) -> dict[str, np.ndarray] | None:
         """Per-step relative errors of ``u`` and ``p`` against :meth:`reference`."""
@@ -109,18 +119,17 @@ class Comparison:
         """Per-step fields of one run (physical units), stacked over steps.
 
         ``u`` (n_steps, n_dofs) free displacements, ``contact_pressure`` and ``contact_force``
-        (n_steps, n_contacts), ``strain`` and ``stress`` (n_steps, n_points); for trusses also
-        ``nodal_displacement`` (n_steps, n_nodes, dim) and ``member_force``; for DDCM the assigned
-        ``strain_star``, ``stress_star`` and ``data_index``.
+        (n_steps, n_contacts), ``strain`` and ``stress`` (n_steps, n_points); the model kind's own
+        fields (:meth:`ContactModel.extra_fields`, for trusses ``nodal_displacement`` (n_steps,
+        n_nodes, dim) and ``member_force``); for DDCM the assigned ``strain_star``, ``stress_star``
+        and ``data_index``.
         """
         r, m = self.results[(variant, formulation)], self.model
         p = r.array("p")
         out = dict(load_parameter=r.array("load_parameter"), u=r.array("u"), contact_pressure=p,
                    contact_force=m.contact_area * p, strain=r.array("strain"), stress=r.array("stress"),
                    converged=r.array("converged"))
-        if isinstance(m, TrussModel):
-            out["nodal_displacement"] = np.array([m.nodal_displacements(u) for u in out["u"]])
-            out["member_force"] = m.member_force(out["stress"])
+        out.update(m.extra_fields(out["u"], out["stress"]))
         if variant == "ddcm":
             for k in ("strain_star", "stress_star", "data_index"):
                 out[k] = r.array(k)
@@ -134,14 +143,15 @@ class Comparison:
 
     @property
     def scalar_model(self) -> bool:
-        """One unknown and one pair (the paper's bar): the CSV holds ``u`` and ``p`` themselves."""
-        return self.model.n_dofs == 1 and self.model.n_contacts <= 1 and self.model.n_points == 1
+        """The model's :attr:`ContactModel.scalar`: the CSV holds ``u`` and ``p`` themselves."""
+        return self.model.scalar
 
     def rows(self) -> list[dict]:
         """One flat record per variant x formulation x step (the rows of ``results.csv``).
 
-        For the paper's bar ``u`` and ``p`` are the tip displacement and the contact pressure; for
-        larger models the columns summarise the step (``max_abs_u``, ``total_contact_force``,
+        The model describes each step's solution (:meth:`ContactModel.step_summary`): for the
+        paper's bar ``u`` and ``p`` are the tip displacement and the contact pressure; for larger
+        models the columns summarise the step (``max_abs_u``, ``total_contact_force``,
         ``active_contacts``) and :meth:`fields` holds the full per-step fields.
         """
         rows = []
@@ -151,17 +161,12 @@ class Comparison:
             for s in r.steps:
                 row = dict(variant=variant, formulation=name, step=s.step)
                 row[m.load_parameter_name if m.load_parameter_name not in row else "load_parameter"] = s.load_parameter
-                if self.scalar_model:
-                    row.update(u=float(s.u[-1]), p=float(s.p[0]) if s.p.size else float("nan"))
-                else:
-                    row.update(max_abs_u=float(np.max(np.abs(s.u))),
-                               total_contact_force=float(np.sum(m.contact_area * s.p)),
-                               active_contacts=int(np.sum(m.active_contacts(s.p))))
+                row.update(m.step_summary(s.u, s.p))
                 row.update(converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
                            residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,
                            seconds=s.seconds)
                 if variant == "ddcm":
-                    if self.scalar_model:
+                    if m.scalar:
                         row.update(strain_star=float(s.strain_star[0]), stress_star=float(s.stress_star[0]),
                                    data_index=int(s.data_index[0]))
                     row.update(distance=s.distance,
@@ -191,7 +196,8 @@ class Comparison:
                        max_error_p=float(np.max(err["p"])) if err else None,
                        max_complementarity=float(np.max(r.array("complementarity"))),
                        max_residual=float(np.max(r.array("residual"))))
-            if variant == "classical" and name == "penalty" and err is not None and isinstance(self.model, BarModel):
+            if err is not None and self._penalty_reference(variant, name) is not None:
+                # compared with its own (penalty) closed form above; the exact one as well here
                 ref = [self.model.closed_form(k) for k in range(self.model.n_steps)]
                 rec["max_error_u_vs_exact"] = float(np.max(_relative_error(r.array("u"), np.array([a for a, _ in ref]))))
                 rec["max_error_p_vs_exact"] = float(np.max(_relative_error(r.array("p"), np.array([b for _, b in ref]))))
@@ -292,11 +298,9 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
 
 
 def compare_and_plot(model: ContactModel, out_dir=None, formulations=None, **options) -> Comparison:
-    """:func:`compare`, then the figures of :func:`ddcm_casadi.plots.save_figures` in ``out_dir``
-    (if given; matplotlib is imported only then)."""
+    """:func:`compare`, then the figures that suit the model (:meth:`ContactModel.save_figures`)
+    in ``out_dir`` (if given; matplotlib is imported only then)."""
     cmp = compare(model, formulations, **options)
     if out_dir is not None:
-        from .plots import save_figures
-
-        save_figures(cmp, out_dir)
+        model.save_figures(cmp, out_dir)
     return cmp

@@ -139,8 +139,8 @@ def _classical_against(name: str, cmp, ref_u, ref_p, reference: str) -> list[Che
 
 
 def _gamma(cmp, name: str = "penalty") -> float:
-    """The physical penalty parameter a comparison used for formulation ``name``."""
-    return next(f for f in cmp.formulations if f.name == name).gamma(cmp.problems.classical)
+    """The physical penalty stiffness (Pa/m) a comparison used for formulation ``name``."""
+    return next(f for f in cmp.formulations if f.name == name).penalty_stiffness(cmp.problems.classical)
 
 
 def _penalty_against_qp(name: str, cmp) -> list[Check]:
@@ -182,7 +182,7 @@ def _ddcm_fixed_points(name: str, cmp) -> list[Check]:
         tol = EXACT_TOL
         note = "exact projection (branch enumeration) of the assigned data"
         if f == "penalty":
-            # Penalty projections tilt the contact branch (formulations.md).
+            # Penalty projections tilt the contact branch (docs/formulations.md, Sec. 4).
             tol = _penalty_tilt(cmp, f)
             note = "penalty: tolerance c / (gamma l_e), the tilt of its contact branch"
         out.append(Check.make(f"{name} / ddcm / {f}", "max projection error (u, p), scaled",
@@ -197,7 +197,7 @@ def rung_paper() -> list[Check]:
     m = cmp.model
     ref_u, ref_p = (np.array(v) for v in zip(*(m.closed_form(k) for k in range(m.n_steps))))
     out = _classical_against("paper bar", cmp, ref_u, ref_p, "closed form")
-    gamma = registry.get("penalty").gamma(cmp.problems.classical)
+    gamma = registry.get("penalty").penalty_stiffness(cmp.problems.classical)
     pen = [m.penalty_closed_form(k, gamma) for k in range(m.n_steps)]
     r = cmp["classical", "penalty"]
     out.append(Check.make("paper bar / classical / penalty", "max rel. error of u vs penalty closed form",

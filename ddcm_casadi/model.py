@@ -22,6 +22,7 @@ import scipy.sparse as sp
 
 from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
+from .linalg import SingularMatrix, factorize
 
 
 def _finite(name: str, a: np.ndarray) -> np.ndarray:
@@ -74,12 +75,18 @@ class ContactModel:
     length_scale: float = 1.0
     name: str = "model"
     load_parameter_name: str = "load parameter"
+    strain_components: int = 1
     _scales: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         B = sp.csr_matrix(self.strain_operator, dtype=float)
         G = sp.csr_matrix(self.gap_operator, dtype=float)
-        m, n = B.shape
+        k = self.strain_components
+        if isinstance(k, bool) or int(k) != k or k < 1:
+            raise InputError(f"strain_components must be a positive integer, got {k!r}")
+        if B.shape[0] % k:
+            raise InputError(f"strain operator has {B.shape[0]} rows, not a multiple of {k} components")
+        m, n = B.shape[0] // k, B.shape[1]
         nc = G.shape[0]
         if G.shape[1] != n:
             raise InputError(f"gap operator has {G.shape[1]} columns, expected {n}")
@@ -108,12 +115,15 @@ class ContactModel:
         if self.dataset is not None:
             if not isinstance(self.dataset, (MaterialDataset, PointData)):
                 raise InputError("dataset must be a MaterialDataset or PointData")
-            self.dataset.point_metric(m)  # checks a per-point material list against the model
+            self.dataset.point_materials(m)  # checks a per-point material list against the model
+            if self.dataset.k != k:
+                raise InputError(f"the data set has {self.dataset.k} strain components per point, "
+                                 f"the model's material points have {k}")
         for k, v in dict(strain_operator=B, gap_operator=G, volumes=w, contact_area=a,
                          gap_offsets=g0, loads=f, load_parameter=lp, youngs_modulus=E,
                          length_scale=L).items():
             object.__setattr__(self, k, v)
-        object.__setattr__(self, "_scales", self._reference_scales())
+        object.__setattr__(self, "_scales", {})
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -123,7 +133,7 @@ class ContactModel:
     @property
     def n_points(self) -> int:
         """Number of material points (elements)."""
-        return self.strain_operator.shape[0]
+        return self.strain_operator.shape[0] // self.strain_components
 
     @property
     def n_contacts(self) -> int:
@@ -136,57 +146,122 @@ class ContactModel:
     # ----------------------------------------------------------------- scales
     @property
     def metric(self) -> np.ndarray:
-        """DDCM metric constant ``c`` per material point."""
+        """DDCM metric constant ``c`` per (one-component) material point."""
         if self.dataset is None:
             raise InputError("this model has no material data set")
         return self.dataset.point_metric(self.n_points)
 
-    def _reference_scales(self) -> dict:
-        # Characteristic strain from the load path: obstacle travel over the length.
-        modulus = float(np.max(self.youngs_modulus)) if self.youngs_modulus is not None else self.dataset.max_metric
-        metric = self.dataset.max_metric if self.dataset is not None else modulus
-        travel = float(np.max(np.abs(self.gap_offsets))) if self.gap_offsets.size else 0.0
-        K_diag = (self.strain_operator.T @ sp.diags(self.volumes * modulus) @ self.strain_operator).diagonal()
-        k_ref = float(np.max(K_diag)) if K_diag.size else modulus
-        load = float(np.max(np.abs(self.loads))) if self.loads.size else 0.0
-        # A nodal load strains the members at its node by about (load / k_ref) / l, with l their
-        # typical length (1 / |B_ij| for a bar or truss member), not by that over the whole size.
-        B = abs(sp.csr_matrix(self.strain_operator))
-        row_max = B.max(axis=1).toarray().ravel() if B.nnz else np.zeros(0)
-        member = 1.0 / float(np.median(row_max[row_max > 0])) if np.any(row_max > 0) else self.length_scale
-        strain = max(travel / self.length_scale, load / k_ref / min(member, self.length_scale), 1e-12)
-        if travel == 0.0 and load == 0.0:
-            strain = 1e-3
-        area = float(np.mean(self.contact_area)) if self.n_contacts else float(np.mean(self.volumes)) / self.length_scale
-        with np.errstate(over="ignore"):
-            energy = float(np.sum(self.volumes)) * metric * np.float64(strain) ** 2
-        if not (np.isfinite(energy) and energy > 0 and np.isfinite(metric * strain * area)):
+    def point_stiffness(self, kind: str) -> np.ndarray:
+        """A representative modulus per material point: ``E`` (``"classical"``), or for the data
+        (``"ddcm"``) the secant modulus of each point's data set, ``std(stress) / std(strain)``
+        (exactly ``E`` for Hookean data), never the metric: the states a projection reaches
+        follow the data, whatever ``c`` is."""
+        if kind == "classical":
+            if self.youngs_modulus is None:
+                raise InputError("this model has no Young's modulus (classical variant unavailable)")
+            return self.youngs_modulus
+        metrics, material = self.dataset.point_materials(self.n_points)
+        sets = getattr(self.dataset, "datasets", (self.dataset,))
+        moduli = []
+        for d, mt in zip(sets, metrics):
+            se, ss = float(np.std(d.strain)), float(np.std(d.stress))
+            # A degenerate set (one datum, or no strain spread) says nothing: use the metric.
+            moduli.append(ss / se if se > 0 and ss > 0 else mt.modulus)
+        return np.asarray(moduli)[material]
+
+    def scales_for(self, kind: str) -> dict:
+        """Reference magnitudes of the ``"classical"`` or the ``"ddcm"`` problem (cached).
+
+        Derived from the problem itself, by a linear solve with a representative stiffness
+        ``K = B^T W D B`` (``D`` from :meth:`point_stiffness`):
+
+        - the response to the largest load, ``K u_f = f``;
+        - the displacement the obstacles impose where they penetrate the undeformed body
+          (``gap0 < 0``): ``(K + kappa G^T A G) u_g = -kappa G^T A gap0^-`` with a stiff spring
+          ``kappa``, rescaled so that the imposed normal displacement is the penetration.
+
+        Displacement ``max(|u_f|, max gap0^-)``, strain ``max |B u|`` of both, stress
+        ``D_max strain``, force ``stress x`` a representative section (mean contact area, or the
+        members' volume over length). An obstacle that never penetrates contributes nothing, and
+        the classical scales never see the data: a data set or its metric cannot change a
+        classical number. The projection's energy unit is ``sum(w) (c eps^2 + sigma^2 / c) / 2``
+        with the metric ``c`` (its largest eigenvalue), the size of a distance at these scales.
+        """
+        cached = self._scales.get(kind)
+        if cached is None:
+            cached = self._reference_scales(kind)
+            self._scales[kind] = cached
+        return dict(cached)
+
+    def _reference_scales(self, kind: str) -> dict:
+        D = self.point_stiffness(kind)
+        B, G, w, a = self.strain_operator, self.gap_operator, self.volumes, self.contact_area
+        k = self.strain_components
+        K = (B.T @ sp.diags(np.repeat(w * D, k)) @ B).tocsc()
+        k_max = float(np.max(K.diagonal())) if K.shape[0] else 1.0
+        load_step = int(np.argmax(np.max(np.abs(self.loads), axis=1))) if self.loads.size else 0
+        f = self.loads[load_step] if self.loads.size else np.zeros(self.n_dofs)
+        penetration = np.maximum(-self.gap_offsets, 0.0)
+        pen = float(np.max(penetration)) if penetration.size else 0.0
+        GA = G.T @ sp.diags(a) if self.n_contacts else None
+        # A stiff spring on every pair supports bodies that rest on their obstacles only.
+        spring = (K + (1e3 * k_max / float(np.max(a))) * (GA @ G)).tocsc() if self.n_contacts else K
+        u_f = np.zeros(self.n_dofs)
+        strain = 0.0
+        with np.errstate(over="ignore", invalid="ignore"):
+            if np.any(f):
+                try:
+                    lu = factorize(K)
+                except SingularMatrix:
+                    lu = factorize(spring)
+                u_f = lu.solve(f)
+                strain = float(np.max(np.abs(B @ u_f), initial=0.0))
+            if pen > 0:
+                worst = int(np.argmax(np.max(penetration, axis=1)))
+                kappa = 1e3 * k_max / float(np.max(a))
+                u_g = factorize(spring).solve(kappa * (GA @ penetration[worst]))
+                normal = float(np.max(np.abs(G @ u_g), initial=0.0))
+                if normal > 0:
+                    strain = max(strain, float(np.max(np.abs(B @ u_g), initial=0.0)) * pen / normal)
+        U = max(float(np.max(np.abs(u_f), initial=0.0)), pen)
+        if not (U > 0 and strain > 0):
+            U, strain = 1e-3 * self.length_scale, 1e-3  # nothing moves: any unit will do
+        modulus = float(np.max(D))
+        rows = abs(B).max(axis=1).toarray().ravel() if B.nnz else np.zeros(0)
+        section = (float(np.mean(a)) if self.n_contacts else
+                   float(np.median(np.repeat(w, k)[rows > 0] * rows[rows > 0])) if np.any(rows > 0)
+                   else float(np.mean(w)) / self.length_scale)
+        stress = modulus * strain
+        if kind == "classical":
+            metric, energy = modulus, float(np.sum(w)) * modulus * strain ** 2
+        else:
+            metric = max(m.modulus for m in self.dataset.point_materials(self.n_points)[0])
+            energy = float(np.sum(w)) * 0.5 * (metric * strain ** 2 + stress ** 2 / metric)
+        scales = dict(length=self.length_scale, displacement=U, strain=strain, stress=stress,
+                      force=stress * section, energy=energy, modulus=modulus, metric=metric)
+        if not all(np.isfinite(v) and v > 0 for v in scales.values()):
             raise InputError("obstacle positions, loads or moduli are out of range (scales overflow)")
-        return dict(
-            length=self.length_scale,
-            displacement=strain * self.length_scale,
-            stress=metric * strain,
-            force=metric * strain * area,
-            energy=float(energy),
-            modulus=modulus,
-            metric=metric,
-        )
+        return scales
 
     @property
     def scales(self) -> dict:
-        """Reference magnitudes used to nondimensionalise (displacement, stress, force, energy)."""
-        return dict(self._scales)
+        """Reference magnitudes of the classical problem if the model has one, else of the
+        projection (see :meth:`scales_for`)."""
+        return self.scales_for("classical" if self.youngs_modulus is not None else "ddcm")
 
     @property
     def contact_stiffness(self) -> float:
         """Reference contact stiffness ``E / length`` (Pa/m), the unit of the penalty parameters."""
-        return self._scales["modulus"] / self._scales["length"]
+        s = self.scales
+        return s["modulus"] / s["length"]
 
     # -------------------------------------------------------------- mechanics
     def stiffness(self) -> sp.csr_matrix:
         """Classical stiffness ``K = B^T W E B`` (sparse)."""
         if self.youngs_modulus is None:
             raise InputError("this model has no Young's modulus (classical variant unavailable)")
+        if self.strain_components != 1:
+            raise InputError("a classical law for several strain components is not available for this model")
         B = self.strain_operator
         return (B.T @ sp.diags(self.volumes * self.youngs_modulus) @ B).tocsr()
 
@@ -196,7 +271,7 @@ class ContactModel:
     def active_contacts(self, pressure: np.ndarray) -> np.ndarray:
         """Which pairs carry a pressure above 1e-8 of the stress scale (one rule for tables and
         figures); ``pressure`` may be stacked over steps."""
-        return np.asarray(pressure) > 1e-8 * self._scales["stress"]
+        return np.asarray(pressure) > 1e-8 * self.scales["stress"]
 
     def strain(self, u: np.ndarray) -> np.ndarray:
         return self.strain_operator @ np.asarray(u)
@@ -241,7 +316,18 @@ class ContactModel:
         added to :meth:`ddcm_casadi.harness.Comparison.fields`."""
         return {}
 
+    def contact_pair_labels(self) -> list[str]:
+        """A label per contact pair (legends)."""
+        return [f"pair {j}" for j in range(self.n_contacts)]
+
     def save_figures(self, cmp, out_dir) -> list:
         """Draw the figures that suit this model kind into ``out_dir``; returns the paths.
-        Imports matplotlib only here."""
-        return []
+        Any model: the contact-force history. Imports matplotlib only here."""
+        from pathlib import Path
+
+        from .plots import figure_contact_history, save_figure
+
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        return [save_figure(figure_contact_history(cmp, pair_labels=self.contact_pair_labels()),
+                            out_dir / "contact_history.png")]

@@ -1,9 +1,10 @@
-"""Figures of a comparison.
+"""Figures of a comparison (the drawing code; which figures suit a model, the model kind says:
+:meth:`~ddcm_casadi.model.ContactModel.save_figures`, called by :func:`save_figures`).
 
 - The paper's Fig. 2 (one-element bar): tip displacement and contact pressure vs obstacle.
 - Any truss (:class:`~ddcm_casadi.truss.TrussModel`, 1-D, 2-D or 3-D): the deformed structure
   coloured by member force with its obstacles and contact forces (:func:`figure_structure`), and
-  the contact forces along the load path (:func:`figure_contact_history`).
+  the contact forces along the load path (:func:`figure_contact_history`, any model).
 
 Classical results are lines, DDCM results markers, the closed form a dashed black line; a step that
 did not converge is circled in red and named in the legend, never drawn as if it were fine, and a
@@ -20,7 +21,6 @@ from matplotlib.figure import Figure
 
 from .harness import Comparison
 from .io import write_bytes_atomic
-from .bar import BarModel
 
 _MARKERS = {"penalty": "s", "augmented_lagrangian": "^", "fischer_burmeister": "o", "mpcc": "x"}
 _STYLES = {"penalty": "-", "augmented_lagrangian": "--", "fischer_burmeister": "-.", "mpcc": ":"}
@@ -169,9 +169,9 @@ def figure_structure(cmp: Comparison, variant: str, formulation: str, step: int 
     from matplotlib.colors import Normalize
 
     model = cmp.model
-    if not hasattr(model, "nodal_displacements"):
-        raise TypeError("figure_structure needs a truss model (ddcm_casadi.truss.TrussModel)")
     f = cmp.fields(variant, formulation)
+    if "nodal_displacement" not in f or "member_force" not in f:  # fields of the model kind
+        raise TypeError("figure_structure needs a truss model (ddcm_casadi.truss.TrussModel)")
     k = range(model.n_steps)[step]
     X = model.nodes
     U = f["nodal_displacement"][k]
@@ -358,13 +358,14 @@ def _draw_3d(ax, X, Y, members, colors, groups, model, F, active, arrow, size) -
     ax.set_zlabel("z [m] (displacements magnified)")
 
 
-def figure_contact_history(cmp: Comparison) -> Figure:
+def figure_contact_history(cmp: Comparison, *, pair_labels: list[str] | None = None) -> Figure:
     """Contact forces against the load parameter, for every variant and formulation.
 
-    With at most 8 contact pairs every pair is drawn (one colour per pair); with more, the total
-    contact force, with the number of active contacts on a second axis. Classical runs are lines
-    (one style per formulation), DDCM runs markers; the closed form, where the model has one, is
-    dashed black; non-converged steps are circled in red.
+    With at most 8 contact pairs every pair is drawn (one colour per pair, labelled by
+    ``pair_labels``, default ``pair 0``, ``pair 1``, ...; a truss names its nodes); with more, the
+    total contact force, with the number of active contacts on a second axis. Classical runs are
+    lines (one style per formulation), DDCM runs markers; the closed form, where the model has
+    one, is dashed black; non-converged steps are circled in red.
     """
     from matplotlib.lines import Line2D
 
@@ -419,10 +420,11 @@ def figure_contact_history(cmp: Comparison) -> Figure:
     if ref[0] is not None:
         handles.append(Line2D([], [], color="k", ls="--", lw=1.0, label="closed form"))
     if per_pair:
+        labels = list(pair_labels) if pair_labels is not None else [f"pair {j}" for j in range(nc)]
+        if len(labels) != nc:
+            raise ValueError(f"pair_labels has {len(labels)} labels for {nc} contact pairs")
         for j in range(nc):
-            handles.append(Line2D([], [], color=pair_colors[j], lw=4,
-                                  label=f"node {int(m.contact_nodes[j])}" if hasattr(m, "contact_nodes")
-                                  else f"pair {j}"))
+            handles.append(Line2D([], [], color=pair_colors[j], lw=4, label=labels[j]))
     else:
         handles.append(Line2D([], [], color="C3", lw=1.0, label="active contacts (right axis)"))
     if local:
@@ -446,7 +448,9 @@ def figure_contact_history(cmp: Comparison) -> Figure:
     return fig
 
 
-def _structure_formulation(cmp: Comparison, variant: str) -> str | None:
+def structure_formulation(cmp: Comparison, variant: str) -> str | None:
+    """The run of ``variant`` to draw the structure of: Fischer-Burmeister if it was run, else the
+    first formulation of that variant (``None`` if the variant was not run)."""
     run = [name for v, name in cmp.results if v == variant]
     if not run:
         return None
@@ -456,21 +460,8 @@ def _structure_formulation(cmp: Comparison, variant: str) -> str | None:
 def save_figures(cmp: Comparison, out_dir: str | Path) -> list[Path]:
     """Save the figures that suit the model; returns the paths written (atomically).
 
-    The paper's one-element bar (:class:`~ddcm_casadi.bar.BarModel`): Fig. 2 (:func:`save_fig2`).
-    Any other (truss) model: ``structure_classical.png`` and ``structure_ddcm.png`` (last step,
-    Fischer-Burmeister if it was run, else the first formulation of that variant; a variant that
-    was not run is skipped) and ``contact_history.png``.
+    The model kind decides (:meth:`~ddcm_casadi.model.ContactModel.save_figures`): the paper's
+    one-element bar draws Fig. 2 (:func:`save_fig2`); a truss ``structure_classical.png`` and
+    ``structure_ddcm.png`` (last step, :func:`structure_formulation`) and ``contact_history.png``.
     """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)  # the examples' output/<name>/ may not exist yet
-    if isinstance(cmp.model, BarModel):
-        return save_fig2(cmp, out_dir)
-    paths = []
-    if hasattr(cmp.model, "nodal_displacements"):
-        for variant in ("classical", "ddcm"):
-            name = _structure_formulation(cmp, variant)
-            if name is not None:
-                paths.append(save_figure(figure_structure(cmp, variant, name),
-                                         out_dir / f"structure_{variant}.png"))
-    paths.append(save_figure(figure_contact_history(cmp), out_dir / "contact_history.png"))
-    return paths
+    return cmp.model.save_figures(cmp, out_dir)

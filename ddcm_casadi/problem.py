@@ -1,6 +1,6 @@
 """Symbolic complementarity problems built from a :class:`~ddcm_casadi.model.ContactModel`.
 
-Two kinds arise from one model (see ``formulations.md``):
+Two kinds arise from one model (``docs/formulations.md`` states the maths):
 
 ``mcp`` (classical)
     Find ``x, p`` with ``F(x, p) = 0`` and ``g(x) >= 0, p >= 0, g p = 0``.
@@ -8,28 +8,97 @@ Two kinds arise from one model (see ``formulations.md``):
     ``min_x f(x)`` subject to ``h(x, p) = 0`` and ``g(x) >= 0, p >= 0, g p = 0``.
 
 Everything is nondimensional: unknowns, residual rows, gaps, pressures and the objective are divided
-by the model's reference scales, so formulations and solvers see O(1) numbers for any units. A
-formulation only sees a :class:`ComplementarityProblem`; it never needs the mechanical model.
+by reference scales derived from each problem (:meth:`ContactModel.scales_for`: a linear solve
+with ``E`` for the classical problem, with the data's modulus for the projection, never with the
+metric), so formulations and solvers see O(1) numbers for any units. A formulation only sees a
+:class:`ComplementarityProblem`; it never needs the mechanical model. Its parameters are named
+(:class:`Parameters`): a formulation extends them with its own (smoothing, multipliers, ...) and
+packs values by name, never by position.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Mapping
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from .linalg import to_casadi
+from .metric import weighted_distance2
 from .model import ContactModel
 
 
-def to_casadi(A: sp.spmatrix) -> ca.DM:
-    """A scipy sparse matrix as a sparse CasADi ``DM`` (same pattern, no densification)."""
-    A = sp.csc_matrix(A)
-    A.sort_indices()
-    sparsity = ca.Sparsity(A.shape[0], A.shape[1], A.indptr.tolist(), A.indices.tolist())
-    return ca.DM(sparsity, A.data.tolist())
+class Parameters:
+    """Named CasADi parameters, packed in order into one vector (no hidden layouts).
+
+    >>> P = Parameters(gap0=1, f=2)
+    >>> Q = P.extend(mu=1)                 # a formulation's own parameters after the problem's
+    >>> Q.pack(P.pack(gap0=[0.1], f=[0, 1]), mu=0.0)
+    array([0.1, 0. , 1. , 0. ])
+
+    Parameters
+    ----------
+    **sizes : int
+        Name and length of each parameter, in order.
+    """
+
+    def __init__(self, _symbols: Mapping[str, ca.SX] | None = None, **sizes: int) -> None:
+        symbols = dict(_symbols or {})
+        for name, n in sizes.items():
+            if name in symbols:
+                raise ValueError(f"parameter {name!r} is defined twice")
+            symbols[name] = ca.SX.sym(name, int(n))
+        self.symbols = symbols
+        self.names = tuple(symbols)
+        offsets = np.cumsum([0] + [s.numel() for s in symbols.values()])
+        self._slices = {n: slice(int(a), int(b)) for n, a, b in zip(self.names, offsets[:-1], offsets[1:])}
+        self.size = int(offsets[-1])
+        self.vector = ca.vertcat(*symbols.values()) if symbols else ca.SX(0, 1)
+
+    def __getitem__(self, name: str) -> ca.SX:
+        return self.symbols[name]
+
+    def extend(self, **sizes: int) -> "Parameters":
+        """These parameters followed by new ones (the same symbols)."""
+        return Parameters(self.symbols, **sizes)
+
+    def pack(self, _base: np.ndarray | None = None, **values) -> np.ndarray:
+        """One vector (or, with 2-D values, one column per case) from values by name.
+
+        ``_base`` is a packed vector of a prefix of these parameters (those of the problem a
+        formulation extended); every other name must be given.
+        """
+        given = 0 if _base is None else np.asarray(_base, float).shape[0]
+        names = [n for n in self.names if self._slices[n].start >= given]
+        if _base is not None and given not in {self._slices[n].start for n in self.names} | {self.size}:
+            raise ValueError(f"a base vector of {given} values does not end on a parameter")
+        missing = [n for n in names if n not in values]
+        unknown = sorted(set(values) - set(names))
+        if missing or unknown:
+            raise ValueError(f"parameters: missing {missing}, unknown {unknown}")
+        parts = [] if _base is None else [np.asarray(_base, float)]
+        cols = max((np.asarray(v).shape[1] for v in values.values() if np.ndim(v) == 2), default=None)
+        for n in names:
+            v = np.asarray(values[n], dtype=float)
+            size = self._slices[n].stop - self._slices[n].start
+            if cols is None:
+                v = np.broadcast_to(v.ravel() if v.ndim else v, (size,))
+            else:
+                v = np.broadcast_to(v.reshape(size, -1) if v.ndim == 2 else v.reshape(size, 1), (size, cols))
+            parts.append(v)
+        if cols is not None and parts and parts[0].ndim == 1:
+            parts[0] = np.repeat(parts[0][:, None], cols, axis=1)
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    def get(self, packed: np.ndarray, name: str) -> np.ndarray:
+        """The value of ``name`` in a packed vector."""
+        return np.asarray(packed)[self._slices[name]]
+
+    def prefix(self, packed: np.ndarray, upto: "Parameters") -> np.ndarray:
+        """The part of a packed vector that holds the parameters of ``upto`` (a prefix)."""
+        return np.asarray(packed)[:upto.size]
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,10 +112,13 @@ class ComplementarityProblem:
         Smooth unknowns (scaled).
     p : casadi.SX
         One multiplier per pair: the scaled contact pressures.
-    params : casadi.SX
-        Parameters (load step, assigned data), in physical units.
+    parameters : Parameters
+        Named parameters (load step; assigned data), in physical units.
     residual : casadi.SX
         ``mcp``: ``F(x, p)``, as many rows as ``x``. ``mpcc``: equality constraints ``h(x, p)``.
+    residual_terms : casadi.SX
+        Per row of ``residual``, the size of the terms that cancel in it (``|K u| + |G^T a p| +
+        |f|`` and the like): residual tests are relative to it (:meth:`relative_residual`).
     objective : casadi.SX or None
         ``mpcc`` only: the scaled squared distance.
     gap : casadi.SX
@@ -56,14 +128,16 @@ class ComplementarityProblem:
     contact_stiffness : float
         Reference stiffness (Pa/m) in which penalty parameters are given.
     fb_alpha, fb_beta : float
-        Default Fischer-Burmeister scalings (1/m and 1/Pa), as in the paper.
+        Default Fischer-Burmeister scalings (1/m and 1/Pa), as in the paper (``beta = 1/c`` for the
+        projection, ``1/E`` for the classical problem).
     """
 
     kind: Literal["mcp", "mpcc"]
     x: ca.SX
     p: ca.SX
-    params: ca.SX
+    parameters: Parameters
     residual: ca.SX
+    residual_terms: ca.SX
     objective: ca.SX | None
     gap: ca.SX
     gap_ref: float
@@ -71,6 +145,11 @@ class ComplementarityProblem:
     contact_stiffness: float
     fb_alpha: float
     fb_beta: float
+
+    @property
+    def params(self) -> ca.SX:
+        """All parameters as one symbolic vector (in the order of :attr:`parameters`)."""
+        return self.parameters.vector
 
     @property
     def n_x(self) -> int:
@@ -84,6 +163,14 @@ class ComplementarityProblem:
         """A physical contact stiffness (Pa/m) in the problem's scaled units."""
         return gamma * self.gap_ref / self.pressure_ref
 
+    def relative_residual(self, residual: np.ndarray, terms: np.ndarray) -> float:
+        """``max_i |r_i| / max(1, max_j t_j)``: relative to the terms that cancel when they are
+        larger than the scale unit (a stiff, heavily loaded structure), scaled-absolute else."""
+        r = np.abs(np.asarray(residual, float))
+        if not r.size:
+            return 0.0
+        return float(np.max(r)) / max(1.0, float(np.max(np.abs(terms), initial=0.0)))
+
 
 @dataclass(frozen=True, eq=False)
 class ProblemPair:
@@ -93,85 +180,96 @@ class ProblemPair:
     classical: ComplementarityProblem | None
     projection: ComplementarityProblem | None
 
+    def _problem(self, kind: str) -> ComplementarityProblem:
+        return self.classical if kind == "mcp" else self.projection
+
     def step_params(self, step: int) -> np.ndarray:
-        return np.concatenate([self.model.gap_offsets[step], self.model.loads[step]])
+        """Parameters of the classical problem at a load step."""
+        m = self.model
+        return self.classical.parameters.pack(gap0=m.gap_offsets[step], f=m.loads[step])
 
     def projection_params(self, step: int, strain_star: np.ndarray, stress_star: np.ndarray) -> np.ndarray:
-        """Parameters of the ``Z_E`` projection; with ``(m, k)`` data arrays, a ``(n_params, k)`` matrix."""
+        """Parameters of the ``Z_E`` projection: the load step and the assigned data, flat and
+        point-major (``m k`` values each). With ``(m k, N)`` arrays, an ``(n_params, N)`` matrix
+        (one column per data assignment)."""
+        m = self.model
         strain_star, stress_star = np.asarray(strain_star, float), np.asarray(stress_star, float)
-        if strain_star.ndim == 2:
-            k = strain_star.shape[1]
-            return np.vstack([np.repeat(self.step_params(step)[:, None], k, axis=1), strain_star, stress_star])
-        return np.concatenate([self.step_params(step), strain_star, stress_star])
+        if strain_star.ndim < 2 or self.model.strain_components > 1:
+            strain_star, stress_star = strain_star.reshape(-1), stress_star.reshape(-1)
+        return self.projection.parameters.pack(gap0=m.gap_offsets[step], f=m.loads[step],
+                                               strain_star=strain_star, stress_star=stress_star)
+
+    def scales(self, kind: str) -> dict:
+        """The reference scales of the ``"mcp"`` (classical) or ``"mpcc"`` (projection) problem."""
+        return self.model.scales_for("classical" if kind == "mcp" else "ddcm")
 
     def fields(self, kind: str, x: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
-        """Physical displacement, contact pressure, strain and stress from scaled unknowns."""
-        s = self.model.scales
+        """Physical displacement, contact pressure, strain and stress from scaled unknowns
+        (strain and stress flat and point-major: ``m k`` values)."""
+        s = self.scales(kind)
         n = self.model.n_dofs
         u = s["displacement"] * np.asarray(x[:n])
         pressure = s["stress"] * np.asarray(p)
         strain = self.model.strain(u)
         if kind == "mpcc":
-            stress = s["stress"] * np.asarray(x[n:n + self.model.n_points])
+            stress = s["stress"] * np.asarray(x[n:])
         else:
             stress = self.model.youngs_modulus * strain
         return dict(u=u, p=pressure, strain=strain, stress=stress)
 
     def scaled_start(self, kind: str, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None):
         """Scaled unknowns ``(x, p)`` from physical fields (for warm starts)."""
-        s = self.model.scales
+        s = self.scales(kind)
         x = [np.asarray(u) / s["displacement"]]
         if kind == "mpcc":
-            x.append(np.asarray(stress) / s["stress"])
+            x.append(np.asarray(stress).reshape(-1) / s["stress"])
         return np.concatenate(x), np.asarray(p) / s["stress"]
+
+
+def _common(model: ContactModel, s: dict, u: ca.SX, p: ca.SX, gap0: ca.SX, fb_beta: float) -> dict:
+    G = to_casadi(model.gap_operator)
+    gap = (ca.mtimes(G, u) + gap0) / s["displacement"]
+    return dict(gap=gap, gap_ref=s["displacement"], pressure_ref=s["stress"],
+                contact_stiffness=model.contact_stiffness, fb_alpha=1.0 / (0.01 * model.length_scale),
+                fb_beta=fb_beta)
 
 
 def build_problems(model: ContactModel) -> ProblemPair:
     """Build the classical MCP and the DDCM projection MPCC of ``model`` (each symbolically, once)."""
-    s = model.scales
-    n, m, nc = model.n_dofs, model.n_points, model.n_contacts
+    n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
     B = to_casadi(model.strain_operator)
-    G = to_casadi(model.gap_operator)
-    a = ca.DM(model.contact_area)
-    w = ca.DM(model.volumes)
-
-    gap0 = ca.SX.sym("gap0", nc)
-    load = ca.SX.sym("f", n)
-    u_hat = ca.SX.sym("u", n)
-    p_hat = ca.SX.sym("p", nc)
-    u = s["displacement"] * u_hat
-    p = s["stress"] * p_hat
-    gap = (ca.mtimes(G, u) + gap0) / s["displacement"]
-    contact_force = ca.mtimes(G.T, a * p)
-    common = dict(
-        gap=gap,
-        gap_ref=s["displacement"],
-        pressure_ref=s["stress"],
-        contact_stiffness=model.contact_stiffness,
-        fb_alpha=1.0 / (0.01 * model.length_scale),
-        fb_beta=1.0 / s["metric"],
-    )
+    Ga = to_casadi(model.gap_operator.T @ sp.diags(model.contact_area))  # contact forces G^T (a p)
+    w = ca.DM(np.repeat(model.volumes, k))
 
     classical = None
     if model.youngs_modulus is not None:
+        s = model.scales_for("classical")
+        P = Parameters(gap0=nc, f=n)
+        u_hat, p_hat = ca.SX.sym("u", n), ca.SX.sym("p", nc)
+        u, p = s["displacement"] * u_hat, s["stress"] * p_hat
         K = to_casadi(model.stiffness())
-        F = (ca.mtimes(K, u) - contact_force - load) / s["force"]
-        classical = ComplementarityProblem(kind="mcp", x=u_hat, p=p_hat, params=ca.vertcat(gap0, load),
-                                           residual=F, objective=None, **common)
+        terms = [ca.mtimes(K, u), ca.mtimes(Ga, p), P["f"]]
+        F = (terms[0] - terms[1] - terms[2]) / s["force"]
+        size = sum(ca.fabs(t) for t in terms) / s["force"]
+        classical = ComplementarityProblem(kind="mcp", x=u_hat, p=p_hat, parameters=P, residual=F,
+                                           residual_terms=size, objective=None,
+                                           **_common(model, s, u, p, P["gap0"], 1.0 / s["modulus"]))
 
     projection = None
     if model.dataset is not None:
-        c = ca.DM(model.metric)
-        eps_star = ca.SX.sym("strain_star", m)
-        sig_star = ca.SX.sym("stress_star", m)
-        sig_hat = ca.SX.sym("stress", m)
-        sig = s["stress"] * sig_hat
-        strain = ca.mtimes(B, u)
-        d2 = c * (strain - eps_star) ** 2 + (sig - sig_star) ** 2 / c
-        objective = 0.5 * ca.dot(w, d2) / s["energy"]
-        h = (ca.mtimes(B.T, w * sig) - contact_force - load) / s["force"]
+        s = model.scales_for("ddcm")
+        P = Parameters(gap0=nc, f=n, strain_star=m * k, stress_star=m * k)
+        u_hat, p_hat, sig_hat = ca.SX.sym("u", n), ca.SX.sym("p", nc), ca.SX.sym("stress", m * k)
+        u, p, sig = s["displacement"] * u_hat, s["stress"] * p_hat, s["stress"] * sig_hat
+        metrics, material = model.dataset.point_materials(m)
+        d2 = weighted_distance2(ca.mtimes(B, u) - P["strain_star"], sig - P["stress_star"], metrics, material,
+                                model.volumes)
+        objective = 0.5 * d2 / s["energy"]
+        terms = [ca.mtimes(B.T, w * sig), ca.mtimes(Ga, p), P["f"]]
+        h = (terms[0] - terms[1] - terms[2]) / s["force"]
+        size = sum(ca.fabs(t) for t in terms) / s["force"]
         projection = ComplementarityProblem(
-            kind="mpcc", x=ca.vertcat(u_hat, sig_hat), p=p_hat,
-            params=ca.vertcat(gap0, load, eps_star, sig_star),
-            residual=h, objective=objective, **common)
+            kind="mpcc", x=ca.vertcat(u_hat, sig_hat), p=p_hat, parameters=P, residual=h,
+            residual_terms=size, objective=objective,
+            **_common(model, s, u, p, P["gap0"], 1.0 / s["metric"]))
     return ProblemPair(model=model, classical=classical, projection=projection)

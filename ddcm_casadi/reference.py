@@ -31,7 +31,7 @@ import scipy.sparse as sp
 
 from .errors import InputError
 from .model import ContactModel
-from .problem import to_casadi
+from .linalg import to_casadi
 
 @contextlib.contextmanager
 def _quiet_stdout():

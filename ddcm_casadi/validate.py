@@ -26,20 +26,27 @@ class FixedPointReport:
     nearest: np.ndarray
 
 
-def nearest_by_brute_force(data, metric: np.ndarray, step) -> bool:
-    """Is each assigned datum the nearest one of its material's set (no KD-tree involved)?"""
-    sets = getattr(data, "datasets", None)
+def nearest_by_brute_force(data, step) -> bool:
+    """Is each assigned datum the nearest one of its material's set (no KD-tree involved)?
+
+    Every datum's distance is computed with the point's :class:`~ddcm_casadi.metric.Metric`.
+    """
+    n_points = len(step.data_index)
+    metrics, material = data.point_materials(n_points)
+    sets = getattr(data, "datasets", (data,))
+    offsets = getattr(data, "offsets", np.zeros(1, dtype=np.intp))
+    k = metrics[0].k
+    strain = np.asarray(step.strain, float).reshape(n_points, k)
+    stress = np.asarray(step.stress, float).reshape(n_points, k)
     ok = True
-    for i, (e, q, j) in enumerate(zip(step.strain, step.stress, step.data_index)):
-        if sets is None:
-            strain, stress, jj = data.strain, data.stress, j
-        else:
-            k = data.material[i]
-            strain, stress, jj = sets[k].strain, sets[k].stress, j - data.offsets[k]
-            if not 0 <= jj < strain.size:
-                return False  # assigned a datum of another material
-        c = metric[i]
-        d2 = c * (e - strain) ** 2 + (q - stress) ** 2 / c
+    for i, j in enumerate(step.data_index):
+        d = sets[material[i]]
+        jj = j - offsets[material[i]]
+        if not 0 <= jj < len(d):
+            return False  # assigned a datum of another material
+        e_all = d.strain.reshape(len(d), k)
+        s_all = d.stress.reshape(len(d), k)
+        d2 = metrics[material[i]].distance2(strain[i] - e_all, stress[i] - s_all)
         ok &= bool(d2[jj] <= d2.min() * (1 + 1e-12) + 1e-300)
     return ok
 
@@ -49,7 +56,7 @@ def check_fixed_points(problems: ProblemPair, result: PathResult, *,
     """Check every step of a DDCM path; ``exact`` may be passed to reuse its factorisations."""
     model = problems.model
     exact = exact or ExactEnumerator(problems.projection)
-    s = model.scales
+    s = problems.scales("mpcc")
     params = np.column_stack([problems.projection_params(st.step, st.strain_star, st.stress_star)
                               for st in result.steps])
     ex = exact.solve(params)  # every step in one call
@@ -58,5 +65,5 @@ def check_fixed_points(problems: ProblemPair, result: PathResult, *,
         f = problems.fields("mpcc", ex.x[:, i], ex.p[:, i])
         err_u.append(float(np.max(np.abs(step.u - f["u"]), initial=0.0)) / s["displacement"])
         err_p.append(float(np.max(np.abs(step.p - f["p"]), initial=0.0)) / s["stress"])
-    nearest = [nearest_by_brute_force(model.dataset, model.metric, step) for step in result.steps]
+    nearest = [nearest_by_brute_force(model.dataset, step) for step in result.steps]
     return FixedPointReport(np.array(err_u), np.array(err_p), np.array(nearest))

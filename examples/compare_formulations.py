@@ -27,9 +27,8 @@ def main(out_dir: str | None = None, *, n_data: int = 500):
     print("h [m]:", fb["load_parameter"][[0, 10, 20]], " p [Pa]:", fb["p"][[0, 10, 20], 0])
 
     if out_dir is not None:
-        from ddcm_casadi.plots import save_fig2
-
-        save_fig2(result, out_dir)
+        # The model draws the figures that suit it (for the bar, the paper's Fig. 2).
+        model.save_figures(result, out_dir)
     return result
 
 

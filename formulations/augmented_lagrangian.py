@@ -36,7 +36,8 @@ cannot be evaluated below ``|Hessian| * eps * |x|`` (3e-10 with ``|x| = 1``), ab
 the iterate lies on (``a_i = 0`` where ``a_i <= b_i``, else ``b_i = 0``): Newton on that smooth
 system (same tolerances), with pairs whose sign fails switching branch, accepted only if strictly
 complementary (``b_i > 0``, resp. ``a_i > 0``) or a B-stationary corner
-(:meth:`ddcm_casadi.formulations.ncp.FBSystem.branch_finish`, the last stage of every inner solve). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
+(:meth:`ddcm_casadi.solvers.active_set.ActiveSetSolver.branch_finish`, the last stage of every inner
+solve). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
 ``-grad b_i``), so the branch KKT point with its multiplier ``theta`` solves the ``Phi``-KKT
 system exactly, and ``lam = theta`` is a fixed point of the multiplier update (``c = 0``): the
 result is the exact projection, as at ordinary convergence.
@@ -55,7 +56,9 @@ import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
 from ddcm_casadi.solvers.evaluate import NumericFunction
+from ddcm_casadi.solvers.active_set import ActiveSetSolver
 from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
+from ddcm_casadi.solvers.uzawa import method_of_multipliers, uzawa
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
@@ -125,22 +128,25 @@ class AugmentedLagrangian(Formulation):
 
 
 class _BuiltAL(BuiltFormulation):
+    """The inner systems; the loops are :func:`ddcm_casadi.solvers.uzawa.uzawa` (classical) and
+    :func:`ddcm_casadi.solvers.uzawa.method_of_multipliers` (DDCM)."""
+
     def __init__(self, problem: ComplementarityProblem, opts: AugmentedLagrangian.Options, gamma: float) -> None:
         super().__init__(problem)
         self.opts = opts
         self._nc = problem.n_pairs
         if problem.kind == "mcp":
-            mult = ca.SX.sym("multiplier", problem.n_pairs)
-            mu = ca.SX.sym("mu")
-            p_of_x = plus(mult - gamma * problem.gap, mu)
+            P = problem.parameters.extend(multiplier=problem.n_pairs, mu=1)
+            self.parameters = P
+            p_of_x = plus(P["multiplier"] - gamma * problem.gap, P["mu"])
             r = ca.substitute(problem.residual, problem.p, p_of_x)
-            P = ca.vertcat(problem.params, mult, mu)
-            self._update = NumericFunction(ca.Function("uzawa", [problem.x, P], [p_of_x]))
-            self._rj = NumericFunction(ca.Function("al_rj", [problem.x, P], [r, ca.jacobian(r, problem.x)]))
-            self._r = NumericFunction(ca.Function("al_r", [problem.x, P], [r]))
+            self._update = NumericFunction(ca.Function("uzawa", [problem.x, P.vector], [p_of_x]))
+            self._rj = NumericFunction(ca.Function("al_rj", [problem.x, P.vector], [r, ca.jacobian(r, problem.x)]))
+            self._r = NumericFunction(ca.Function("al_r", [problem.x, P.vector], [r]))
             self._jac = SparseJacobian(self._rj)
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)
+            self.solver = ActiveSetSolver(self.system, predictor=False)
             # The inner solver reads these names from its options.
             self._inner = _InnerOptions(opts.newton_tol, opts.residual_tol, opts.max_iter, opts.smoothing)
 
@@ -150,86 +156,59 @@ class _BuiltAL(BuiltFormulation):
         return self._solve_mpcc(params, x0, p0, state or {})
 
     def _solve_mcp(self, params, x0, p0) -> LocalSolution:
-        o = self.opts
-        lam = np.maximum(np.asarray(p0, float), 0.0)
-        z = np.asarray(x0, float)
-        newton_its, converged, message = 0, False, "maximum multiplier updates reached"
-        lams, fs = [], []
-        for k in range(1, o.max_updates + 1):
-            P = np.concatenate([params, lam])
-            res, mu, _ = smoothed_newton_solve(self._rj, self._r, z, P, smoothing=o.smoothing, jacobian=self._jac,
-                                               tol=o.newton_tol, residual_tol=o.residual_tol, max_iter=o.max_iter)
-            newton_its += res.iterations
-            if not res.converged:
-                message = f"inner Newton failed at update {k}: {res.message}"
-                break
-            z = res.z
-            lam_T = np.asarray(self._update(z, np.append(P, 0.0)), float).ravel()
+        o, P = self.opts, self.parameters
+
+        def inner(lam, z):
+            return smoothed_newton_solve(self._rj, self._r, z, lambda mu: P.pack(params, multiplier=lam, mu=mu),
+                                         smoothing=o.smoothing, jacobian=self._jac, tol=o.newton_tol,
+                                         residual_tol=o.residual_tol, max_iter=o.max_iter)[0]
+
+        def update(z, lam):
+            return np.asarray(self._update(z, P.pack(params, multiplier=lam, mu=0.0)), float).ravel()
+
+        def done(z, lam_T):
             # F(x, lam_T) = 0 holds by construction; stop on the pairs themselves (scale-free in gamma).
             residual, comp, pen, _ = self.metrics(z, lam_T, params)
-            if comp <= o.tol and pen <= o.tol and residual <= o.residual_tol:
-                lam, converged, message = lam_T, True, "converged"
-                break
-            lam = self._anderson(lams, fs, lam, lam_T)
-        return self._finish(z, lam, params, converged=converged, iterations=newton_its, outer=k,
-                            message=message)
+            return comp <= o.tol and pen <= o.tol and residual <= o.residual_tol
 
-    def _anderson(self, lams: list, fs: list, lam: np.ndarray, lam_T: np.ndarray) -> np.ndarray:
-        """Next multiplier: the Uzawa update ``lam_T``, Anderson-accelerated (depth ``anderson``).
-
-        Uzawa contracts by about ``(E/l0) / (E/l0 + gamma)`` per update, so small ``gamma`` needs
-        thousands of plain updates; Anderson mixing of the last iterates restores a few.
-        """
-        depth = self.opts.anderson
-        lams.append(lam)
-        fs.append(lam_T - lam)
-        if depth == 0 or len(lams) < 2:
-            return lam_T
-        del lams[:-depth - 1], fs[:-depth - 1]
-        dF = np.diff(np.array(fs), axis=0).T
-        dL = np.diff(np.array(lams), axis=0).T
-        coef = np.linalg.lstsq(dF, fs[-1], rcond=None)[0]
-        candidate = lam_T - (dL + dF) @ coef
-        return np.maximum(candidate, 0.0) if np.all(np.isfinite(candidate)) else lam_T
+        out = uzawa(inner, update, done, np.asarray(x0, float), np.maximum(np.asarray(p0, float), 0.0),
+                    anderson=o.anderson, max_updates=o.max_updates)
+        return self._finish(out.z, out.multiplier, params, converged=out.converged, iterations=out.inner_iterations,
+                            outer=out.updates, message=out.message)
 
     def _solve_mpcc(self, params, x0, p0, state) -> LocalSolution:
-        o = self.opts
-        lam = np.asarray(state.get("lam", np.zeros(self._nc)), float)
-        z = self.system.start(x0, p0, state)
-        nx, nc = self.problem.n_x, self._nc
-        newton_its, converged, message = 0, False, "maximum multiplier updates reached"
-        x, p, st = z[:nx], z[nx:nx + nc], {}
-        rho, c_prev = o.rho, np.inf
-        for k in range(1, o.max_updates + 1):
-            P = np.concatenate([params, lam, [rho]])
-            x, p, st, res, mu, _ = self.system.solve(z, P, self._inner)
-            newton_its += res.iterations
-            if not res.converged:  # after smoothing, corner polish and the branch finish
-                message = f"inner Newton failed at update {k}: {res.message}"
-                break
-            z = res.z
-            c = np.asarray(self.system.phi(z, np.concatenate([P, [0.0], np.zeros(nc)])), float).ravel()
-            if float(np.max(np.abs(c), initial=0.0)) > o.tol:
-                # A projection onto the corner g = p = 0 needs an unbounded multiplier: the updates
-                # would only creep. Finish on the biactive branch when it is B-stationary.
-                corner = self.system.polish_corner(z, P, self._inner)
-                if corner is not None:
-                    newton_its += corner.iterations
-                    z = corner.z
-                    x, p, st = self.system.split(z)
-                    c = np.asarray(self.system.phi(z, np.concatenate([P, [0.0], np.zeros(nc)])), float).ravel()
-            lam = np.asarray(st["theta"], float).copy()  # = lam + rho c at the inner solution
-            c_norm = float(np.max(np.abs(c), initial=0.0))
+        o, system = self.opts, self.system
+        base = lambda lam, rho: system.base_parameters.pack(params, lam=lam, rho=rho)  # noqa: E731
+
+        def inner(lam, rho, z):
+            _, _, st, res, _, _ = self.solver.solve(z, base(lam, rho), self._inner)
+            return res.z, st, res
+
+        def constraint(z, lam, rho):
+            return np.asarray(system.phi(z, system.pack(base(lam, rho))), float).ravel()
+
+        def polish(z, lam, rho):
+            # A projection onto the corner g = p = 0 needs an unbounded multiplier: the updates
+            # would only creep. Finish on the biactive branch when it is B-stationary.
+            corner = self.solver.polish_corner(z, base(lam, rho), self._inner)
+            if corner is not None:
+                corner.state = system.split(corner.z)[2]
+            return corner
+
+        def done(z):
+            x, p, _ = system.split(z)
             _, comp, pen, _ = self.metrics(x, p, params)
-            if comp <= o.tol and pen <= o.tol:  # on the pairs: c's scale depends on gamma
-                converged, message = True, "converged"
-                break
-            if c_norm > 0.25 * c_prev:
-                rho = min(rho * o.rho_growth, o.rho_max)
-            c_prev = c_norm
-        st = dict(st, lam=lam, rho=rho)
-        return self._finish(x, p, params, converged=converged, iterations=newton_its, outer=k, state=st,
-                            message=message)
+            return comp <= o.tol and pen <= o.tol  # on the pairs: c's scale depends on gamma
+
+        out = method_of_multipliers(inner, constraint=constraint, polish=polish,
+                                    multiplier=lambda st: st["theta"], done=done,
+                                    z0=system.start(x0, p0, state),
+                                    lam0=np.asarray(state.get("lam", np.zeros(self._nc)), float), rho0=o.rho,
+                                    rho_growth=o.rho_growth, rho_max=o.rho_max, tol=o.tol, max_updates=o.max_updates)
+        x, p, st = system.split(out.z)
+        st = dict(st, lam=out.multiplier, rho=out.extra["rho"])
+        return self._finish(x, p, params, converged=out.converged, iterations=out.inner_iterations,
+                            outer=out.updates, state=st, message=out.message)
 
 
 class _InnerOptions:

@@ -59,19 +59,23 @@ class LocalSolution:
 
 
 class Metrics:
-    """Residual, gap and objective evaluation for one problem (one CasADi Function)."""
+    """Residual, gap and objective evaluation for one problem (one CasADi Function).
+
+    The residual is relative to the terms that cancel in it
+    (:meth:`~ddcm_casadi.problem.ComplementarityProblem.relative_residual`).
+    """
 
     def __init__(self, problem: ComplementarityProblem) -> None:
         obj = problem.objective if problem.objective is not None else ca.SX(0)
+        self._problem = problem
         self._f = NumericFunction(ca.Function("metrics", [problem.x, problem.p, problem.params],
-                                              [problem.residual, problem.gap, obj]))
+                                              [problem.residual, problem.residual_terms, problem.gap, obj]))
 
     def __call__(self, x, p, params) -> tuple[float, float, float, float]:
-        res, gap, obj = self._f(x, p, params)
-        res = np.asarray(res, dtype=float).ravel()
+        res, terms, gap, obj = self._f(x, p, params)
         gap = np.asarray(gap, dtype=float).ravel()
         p = np.asarray(p, dtype=float).ravel()
-        residual = float(np.max(np.abs(res))) if res.size else 0.0
+        residual = self._problem.relative_residual(res, terms)
         comp = float(np.max(np.abs(np.minimum(gap, p)))) if gap.size else 0.0
         pen = float(np.max(np.maximum(0.0, -gap))) if gap.size else 0.0
         return residual, comp, pen, float(obj[0]) if obj.size else 0.0
@@ -154,6 +158,11 @@ class BuiltFormulation(ABC):
 
     def reset(self) -> None:
         """Forget caches (factorisations) and counters, for cold-start measurements."""
+
+    @property
+    def stats(self) -> dict:
+        """Solver counters (e.g. ``predicted`` and ``newton`` projections), if the solver keeps any."""
+        return {}
 
     @abstractmethod
     def solve(self, params: np.ndarray, x0: np.ndarray, p0: np.ndarray,

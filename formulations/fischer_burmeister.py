@@ -17,7 +17,8 @@ instead: at ``a^2 + b^2 + 2 mu^2 = 0`` the square root is evaluated as
 ``sqrt(s + 1) - 1`` (same value, 0), whose derivatives are ``dPhi/da = dPhi/db = -1`` and whose
 second derivatives are finite (Facchinei & Pang, the element with ``(xi, zeta) = (0, 0)``). If
 Newton with ``mu = 0`` fails, a smoothing continuation ``mu -> 0`` is run from the last iterate
-(:func:`ddcm_casadi.solvers.newton.smoothed_newton_solve`). A projection that lands on the corner
+(:func:`ddcm_casadi.solvers.newton.smoothed_newton_solve`; the loops are in
+:mod:`ddcm_casadi.solvers.active_set`). A projection that lands on the corner
 ``g = p = 0`` of ``Z_E`` is finished on the biactive branch and accepted only if B-stationary
 (see :class:`ddcm_casadi.formulations.ncp.FBSystem`).
 Newton is globalised by an Armijo line search on ``0.5 ||r||^2``.
@@ -37,6 +38,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.solvers.active_set import ActiveSetSolver
 from ddcm_casadi.solvers.newton import SMOOTHING
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
@@ -100,14 +102,18 @@ class _BuiltFB(BuiltFormulation):
         super().__init__(problem)
         self.opts = opts
         self.system = FBSystem(problem, (opts.alpha or problem.fb_alpha) * problem.gap_ref,
-                               (opts.beta or problem.fb_beta) * problem.pressure_ref,
-                               predictor=opts.active_set_predictor)
+                               (opts.beta or problem.fb_beta) * problem.pressure_ref)
+        self.solver = ActiveSetSolver(self.system, predictor=opts.active_set_predictor)
 
     def reset(self) -> None:
-        self.system.reset()
+        self.solver.reset()
+
+    @property
+    def stats(self) -> dict:
+        return dict(self.solver.stats)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
-        x, p, st, res, mu, stages = self.system.solve(self.system.start(x0, p0, state), params, self.opts)
+        x, p, st, res, mu, stages = self.solver.solve(self.system.start(x0, p0, state), params, self.opts)
         sol = self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
                            state=st, message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
         if sol.converged and sol.complementarity > self.opts.comp_tol:

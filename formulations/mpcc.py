@@ -31,8 +31,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from ddcm_casadi.complementarity import BIACTIVE, b_stationarity, identify, imposes_gap, imposes_pressure, signs_hold
 from ddcm_casadi.problem import ComplementarityProblem
 from ddcm_casadi.solvers.evaluate import NumericFunction
+from ddcm_casadi.solvers.homotopy import scholtes_homotopy
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .registry import register
@@ -92,15 +94,16 @@ class _BuiltMPCC(BuiltFormulation):
         super().__init__(problem)
         self.opts = opts
         nx, nc = problem.n_x, problem.n_pairs
-        tau = ca.SX.sym("tau")
         w = ca.vertcat(problem.x, problem.p)
         objective = problem.objective if problem.kind == "mpcc" else ca.SX(0)
+        self.parameters = problem.parameters.extend(tau=1)
+        tau = self.parameters["tau"]
         g = ca.vertcat(problem.residual, problem.gap, problem.gap * problem.p - tau)
         ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
                  "acceptable_tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500,
                  "mu_strategy": "adaptive"}
         ipopt.update(dict(opts.ipopt))
-        self._solver = ca.nlpsol("mpcc", "ipopt", {"x": w, "p": ca.vertcat(problem.params, tau),
+        self._solver = ca.nlpsol("mpcc", "ipopt", {"x": w, "p": self.parameters.vector,
                                                    "f": objective, "g": g},
                                  {"ipopt": ipopt, "print_time": False, "error_on_fail": False})
         ne = problem.residual.numel()
@@ -119,60 +122,37 @@ class _BuiltMPCC(BuiltFormulation):
         o = self.opts
         nx = self._nx
         w = np.concatenate([x0, np.maximum(p0, 0.0)])
-        lam_x = lam_g = None
-        tau, last_good_tau = o.tau0, None
-        iterations = steps = 0
-        converged, message = False, "maximum homotopy steps reached"
-        comp_prev, stalls = np.inf, 0
-        while steps < o.max_homotopy:
-            steps += 1
-            args = dict(x0=w, p=np.append(params, tau), lbx=self._lbx, lbg=self._lbg, ubg=self._ubg)
-            if lam_x is not None:
-                args.update(lam_x0=lam_x, lam_g0=lam_g)
+        if (state or {}).get("on_branch"):
+            # The start is a branch solution (e.g. the exact global branch of a projection):
+            # the relaxed homotopy would forget its branch (with tau0 both g and p may open), so
+            # its branch NLP is solved first, accepted only if its signs hold and it is B-stationary.
+            polished, iters, ok = self._branch_nlp(w, params, 0.0)
+            if ok:
+                return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
+                                    outer=1, message="converged (branch NLP from the start's branch)")
+
+        def relaxed(w, tau, warm):
+            args = dict(x0=w, p=self.parameters.pack(params, tau=tau), lbx=self._lbx, lbg=self._lbg, ubg=self._ubg)
+            if warm is not None:
+                args.update(lam_x0=warm[0], lam_g0=warm[1])
             sol = self._solver(**args)
             stats = self._solver.stats()
-            iterations += int(stats.get("iter_count", 0))
+            its = int(stats.get("iter_count", 0))
             if stats["return_status"] not in _OK:
-                if last_good_tau is None or lam_x is None:
-                    if last_good_tau is None and tau < 1.0:
-                        tau = min(1.0, tau * 100.0)  # recovery: relax more and retry
-                        lam_x = lam_g = None
-                        continue
-                    message = f"IPOPT: {stats['return_status']}"
-                    break
-                # recovery: back off from the last good point, cold start, smaller reduction
-                tau = np.sqrt(tau * last_good_tau)
-                lam_x = lam_g = None
-                continue
-            w = np.asarray(sol["x"], float).ravel()
-            lam_x = np.asarray(sol["lam_x"], float).ravel()
-            lam_g = np.asarray(sol["lam_g"], float).ravel()
-            last_good_tau = tau
+                return False, stats["return_status"], None, its
+            return (True, np.asarray(sol["x"], float).ravel(),
+                    (np.asarray(sol["lam_x"], float).ravel(), np.asarray(sol["lam_g"], float).ravel()), its)
+
+        def measure(w):
             residual, comp, _, _ = self.metrics(w[:nx], w[nx:], params)
-            if comp <= o.comp_tol and residual <= o.residual_tol:
-                converged, message = True, "converged"
-                if self._near_corner(w, params, tau):
-                    # min(g, p) <= comp_tol bounds only the smaller of the two: near a corner the
-                    # larger may still be far from 0. Finish on the identified branch.
-                    polished, iters, ok = self._branch_nlp(w, params, tau)
-                    iterations += iters
-                    if ok:
-                        w, message = polished, "converged (branch NLP polish)"
-                break
-            stalls = stalls + 1 if comp > 0.5 * comp_prev else 0
-            comp_prev = comp
-            if stalls >= 2 or tau * o.tau_factor < o.tau_min:
-                message = "homotopy stalled"
-                break
-            tau *= o.tau_factor
-        if not converged and last_good_tau is not None:
-            w, iters, ok = self._branch_nlp(w, params, last_good_tau)
-            iterations += iters
-            steps += 1
-            if ok:
-                converged, message = True, "converged (branch NLP)"
-        return self._finish(w[:nx], w[nx:], params, converged=converged, iterations=iterations, outer=steps,
-                            message=message)
+            return residual, comp
+
+        out = scholtes_homotopy(relaxed, measure=measure, branch_nlp=lambda w, tau: self._branch_nlp(w, params, tau),
+                                near_corner=lambda w, tau: self._near_corner(w, params, tau), w0=w, tau0=o.tau0,
+                                tau_factor=o.tau_factor, tau_min=o.tau_min, comp_tol=o.comp_tol,
+                                residual_tol=o.residual_tol, max_homotopy=o.max_homotopy)
+        return self._finish(out.w[:nx], out.w[nx:], params, converged=out.converged, iterations=out.iterations,
+                            outer=out.steps, message=out.message)
 
     def _near_corner(self, w, params, tau) -> bool:
         """Is some pair within the branch NLP's biactive identification ``10 sqrt(tau)`` of a corner?"""
@@ -193,12 +173,13 @@ class _BuiltMPCC(BuiltFormulation):
         nx, nc, ne = self._nx, self._nc, self._ne
         gap = np.asarray(self._gap(w, params), float).ravel()
         p = w[nx:]
-        on_gap = gap <= p
         tol = 10.0 * np.sqrt(tau) + 100.0 * float(np.max(np.minimum(np.abs(gap), np.abs(p)), initial=0.0))
-        both = (np.abs(gap) <= tol) & (np.abs(p) <= tol)
+        part = identify(gap, p, biactive_tol=tol)
+        on_gap = gap <= p
+        both = part == BIACTIVE
         iters = 0
         # Biactive first, then the identified branch, then ambiguous pairs all in contact / all free.
-        candidates = [(on_gap | both, ~on_gap | both), (on_gap, ~on_gap),
+        candidates = [(imposes_gap(part), imposes_pressure(part)), (on_gap, ~on_gap),
                       (on_gap | both, ~on_gap & ~both), (on_gap & ~both, ~on_gap | both)]
         tried = set()
         for fix_gap, fix_p in candidates:
@@ -218,13 +199,13 @@ class _BuiltMPCC(BuiltFormulation):
                 continue
             w_new = np.asarray(sol["x"], float).ravel()
             lam = np.asarray(sol["lam_g"], float).ravel()
-            bi = fix_gap & fix_p
-            lam_gap, lam_p = lam[ne:ne + nc][bi], lam[ne + nc:][bi]
-            lam_tol = 1e-8 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
-            b_stationary = not (np.any(lam_gap > lam_tol) or np.any(lam_p > lam_tol))
+            # CasADi's lam_g is the multiplier of f + lam^T g: the convention of b_stationarity.
+            wrong_gap, wrong_p = b_stationarity(lam[ne:ne + nc], lam[ne + nc:], fix_gap & fix_p)
             residual, comp, pen, _ = self.metrics(w_new[:nx], w_new[nx:], params)
-            signs_ok = pen <= self.opts.comp_tol and float(np.min(w_new[nx:], initial=0.0)) >= -self.opts.comp_tol
-            if b_stationary and signs_ok and comp <= self.opts.comp_tol and residual <= self.opts.residual_tol:
+            gap_new = np.asarray(self._gap(w_new, params), float).ravel()
+            ok = (not (wrong_gap.any() or wrong_p.any()) and signs_hold(gap_new, w_new[nx:], self.opts.comp_tol)
+                  and comp <= self.opts.comp_tol and residual <= self.opts.residual_tol)
+            if ok:
                 return w_new, iters, True
             if not both.any():
                 break

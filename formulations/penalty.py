@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.solvers.active_set import ActiveSetSolver
 from ddcm_casadi.solvers.evaluate import NumericFunction
 from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
 
@@ -102,21 +103,23 @@ class _BuiltPenalty(BuiltFormulation):
     def __init__(self, problem: ComplementarityProblem, opts: Penalty.Options, gamma: float) -> None:
         super().__init__(problem)
         self.opts = opts
-        mu = ca.SX.sym("mu")
-        p_of_x = gamma * plus(-problem.gap, mu)
+        P = problem.parameters.extend(mu=1)
+        self.parameters = P
+        p_of_x = gamma * plus(-problem.gap, P["mu"])
         r = ca.substitute(problem.residual, problem.p, p_of_x)
-        P = ca.vertcat(problem.params, mu)
-        self._rj = NumericFunction(ca.Function("penalty_rj", [problem.x, P], [r, ca.jacobian(r, problem.x)]))
-        self._r = NumericFunction(ca.Function("penalty_r", [problem.x, P], [r]))
-        self._p = NumericFunction(ca.Function("penalty_p", [problem.x, P], [p_of_x]))
+        self._rj = NumericFunction(ca.Function("penalty_rj", [problem.x, P.vector], [r, ca.jacobian(r, problem.x)]))
+        self._r = NumericFunction(ca.Function("penalty_r", [problem.x, P.vector], [r]))
+        self._p = NumericFunction(ca.Function("penalty_p", [problem.x, P.vector], [p_of_x]))
         self._jac = SparseJacobian(self._rj)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         o = self.opts
-        res, mu, stages = smoothed_newton_solve(self._rj, self._r, np.asarray(x0, float), params,
+        P = self.parameters
+        res, mu, stages = smoothed_newton_solve(self._rj, self._r, np.asarray(x0, float),
+                                                lambda mu: P.pack(params, mu=mu),
                                                 smoothing=o.smoothing, jacobian=self._jac, tol=o.tol,
                                                 residual_tol=o.residual_tol, max_iter=o.max_iter)
-        p = np.asarray(self._p(res.z, np.append(params, 0.0)), float).ravel()
+        p = np.asarray(self._p(res.z, P.pack(params, mu=0.0)), float).ravel()
         return self._finish(res.z, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
                             message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
 
@@ -129,15 +132,20 @@ class _BuiltCompliantProjection(BuiltFormulation):
         self.opts = opts
         compliant_gap = problem.gap + problem.p / gamma
         self.system = FBSystem(problem, problem.fb_alpha * problem.gap_ref, problem.fb_beta * problem.pressure_ref,
-                               gap=compliant_gap, predictor=opts.active_set_predictor)
+                               gap=compliant_gap)
+        self.solver = ActiveSetSolver(self.system, predictor=opts.active_set_predictor)
         self._pairs = NumericFunction(ca.Function("compliant_pairs", [problem.x, problem.p, problem.params],
                                                   [ca.fmin(compliant_gap, problem.p)]))
 
     def reset(self) -> None:
-        self.system.reset()
+        self.solver.reset()
+
+    @property
+    def stats(self) -> dict:
+        return dict(self.solver.stats)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
-        x, p, st, res, mu, stages = self.system.solve(self.system.start(x0, p0, state), params, self.opts)
+        x, p, st, res, mu, stages = self.solver.solve(self.system.start(x0, p0, state), params, self.opts)
         sol = self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
                            state=st, message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
         # The penalty law itself (the compliant pairs) must hold, as FB checks its pairs.

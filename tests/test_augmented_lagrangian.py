@@ -61,5 +61,6 @@ def test_ddcm_projection_onto_a_tiny_contact_pressure(paper):
     w = paper.load_parameter[last] - paper.length  # the contact branch is the nearer: u = w, p = -sig
     assert abs(f["u"][0] - w) <= 1e-12 and abs(f["p"][0] + sig) <= 1e-8 * abs(sig)
     z = np.concatenate([sol.x, sol.p, sol.state["eta"], sol.state["theta"], np.zeros(1)])
-    phi = built.system.phi(z, np.concatenate([params, sol.state["lam"], [sol.state["rho"], 0.0, 0.0]]))
+    system = built.system
+    phi = system.phi(z, system.pack(system.base_parameters.pack(params, lam=sol.state["lam"], rho=sol.state["rho"])))
     assert abs(float(phi[0])) <= 1e-12

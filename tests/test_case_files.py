@@ -19,10 +19,12 @@ import pytest
 import scipy.sparse as sp
 
 from ddcm_casadi import formulations
+from ddcm_casadi.bar import BarModel
 from ddcm_casadi.cli import EXIT_INPUT
 from ddcm_casadi.config import load_case
 from ddcm_casadi.data import MaterialDataset, PointData
-from ddcm_casadi.model import BarModel, ContactModel
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.model import ContactModel
 from ddcm_casadi.truss import StoppedBarModel, TrussModel
 
 from .test_bad_input import assert_input_error, case_toml, run_cli
@@ -358,3 +360,21 @@ def test_triangle_is_valid(tmp_path: Path, fmt: str) -> None:
     """The base of the bad-input cases is itself valid (so each case fails for its own reason)."""
     case = load_case(write_case(tmp_path, triangle(), fmt))
     assert case.model.n_dofs == 3 and case.model.n_contacts == 1 and case.model.n_steps == 3
+
+
+def test_case_kinds_register_their_own_sections():
+    """Each model kind declares its section and the sections only it accepts; the paper's bar is
+    the default, listed first (the order of the 'known:' list in messages)."""
+    from ddcm_casadi.config import case_from_dict, case_kinds
+
+    kinds = {k.section: k for k in case_kinds()}
+    assert [k.section for k in case_kinds()] == ["bar", "structure"]
+    assert kinds["bar"].default and kinds["bar"].own_sections == ["obstacle", "stops"]
+    assert kinds["structure"].own_sections == ["path", "obstacles"]
+    with pytest.raises(InputError) as exc:
+        case_from_dict({"foo": {}}, source="x.toml")
+    assert str(exc.value) == ("unknown section [foo] in x.toml; known: bar, obstacle, stops, structure, path, "
+                              "obstacles, data, ddcm, formulations")
+    with pytest.raises(InputError) as exc:
+        case_from_dict({"obstacle": {}, "path": {}}, source="x.toml")
+    assert str(exc.value) == "missing section [structure] in x.toml"  # a kind's own section names it

@@ -71,7 +71,7 @@ def test_predictor_is_used_along_a_path():
     built = formulations.get("fischer_burmeister").build(problems.projection)
     path = DDCMSolver(problems, built).solve()
     assert path.converged
-    stats = built.system.stats
+    stats = built.stats
     outer = sum(s.outer_iterations for s in path.steps)
     assert stats["predicted"] + stats["newton"] == outer
     assert stats["predicted"] >= outer // 2, stats

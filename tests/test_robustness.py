@@ -121,7 +121,7 @@ def test_ddcm_with_ten_contact_pairs(name):
     opts = formulations.get(name).options
     comp_tol = opts.tol if name == "augmented_lagrangian" else opts.comp_tol
     for s in r.steps:
-        assert nearest_by_brute_force(model.dataset, model.metric, s)
+        assert nearest_by_brute_force(model.dataset, s)
         assert s.residual <= opts.residual_tol  # the equilibrium rows of the converged Newton system
         if name != "penalty":
             assert s.complementarity <= comp_tol and s.penetration <= comp_tol
@@ -139,4 +139,4 @@ def test_ddcm_with_nine_stops_at_their_corner(name):
     r = compare(model, [name], variants=["ddcm"])["ddcm", name]
     assert r.converged, [(s.step, s.message) for s in r.steps if not s.converged]
     for s in r.steps:
-        assert nearest_by_brute_force(model.dataset, model.metric, s)
+        assert nearest_by_brute_force(model.dataset, s)

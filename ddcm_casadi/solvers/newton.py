@@ -1,19 +1,22 @@
 """Damped (semismooth) Newton with a merit-function line search and scipy's sparse LU.
 
 The residual and its sparse Jacobian come from one CasADi ``Function`` built once per problem;
-the linear algebra is scipy's SuperLU on the CasADi sparsity pattern (no dense N x N matrices).
+the linear algebra is :func:`ddcm_casadi.linalg.factorize` (scipy's SuperLU by default) on the
+CasADi sparsity pattern (no dense N x N matrices).
 Convergence is declared when the relative increment (as in the paper) *and* the residual are small.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..linalg import SingularMatrix, factorize
 from .evaluate import NumericFunction
 
 
@@ -45,15 +48,32 @@ class SparseJacobian:
 def solve_linear(J: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray:
     """Sparse LU solve; a singular (semismooth) Jacobian falls back to a tiny Levenberg shift."""
     try:
-        d = spla.splu(J).solve(rhs)
+        d = factorize(J).solve(rhs)
         if np.all(np.isfinite(d)):
             return d
-    except RuntimeError:
+    except SingularMatrix:
         pass
     scale = max(float(abs(J).max()), 1.0) if J.nnz else 1.0
     shift = 1e-12 * scale
     Jt = J.T.tocsc()
     return spla.spsolve((Jt @ J + shift * sp.identity(J.shape[0], format="csc")).tocsc(), Jt @ rhs)
+
+
+#: Roundoff allowance, in machine epsilons, on the terms that cancel in a residual row.
+ROUNDOFF_ULPS = 64
+
+
+def roundoff_floor(J: sp.csc_matrix, z: np.ndarray) -> float:
+    """The smallest residual that can be evaluated at ``z``: ``64 eps max_i (|J| |z|)_i``.
+
+    ``|J| |z|`` is the size of the linear terms that cancel in each row (for a stiff penalty
+    ``gamma g`` with ``g ~ 0`` it is ``gamma |u|``); below that the residual is roundoff, and an
+    absolute tolerance in scaled units could never be met. Newton accepts a residual at this
+    floor when its increment has converged.
+    """
+    if not z.size or not J.nnz:
+        return 0.0
+    return ROUNDOFF_ULPS * float(np.finfo(float).eps) * float(np.max(abs(J) @ np.abs(z)))
 
 
 def newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params: np.ndarray, *,
@@ -70,7 +90,8 @@ def newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params
     tol : float
         Tolerance on the relative increment ``||dz||_inf / max(1, ||z||_inf)`` (the paper's test).
     residual_tol : float
-        Tolerance on ``||r||_inf``; both tests must pass.
+        Tolerance on ``||r||_inf``; both tests must pass. A residual at the roundoff floor of
+        its terms (:func:`roundoff_floor`) passes too.
     """
     to_csc = jacobian or SparseJacobian(rj)
     z = np.array(z0, dtype=float)
@@ -96,16 +117,16 @@ def newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params
             t = 1.0  # no decrease: take the full (semismooth) step; cycles are caught below
         history.append(z)
         z = z + t * dz
-        if len(history) >= 2 and np.max(np.abs(z - history[-2])) <= 1e-13 * (1.0 + np.max(np.abs(z))):
-            # Newton returned to the iterate of two steps ago: it cycles between two pieces
-            # of a nonsmooth residual (a solution at a kink). Let the caller smooth.
-            return NewtonResult(z, False, it, rnorm, increment, "cycling between pieces")
         increment = float(np.max(np.abs(t * dz))) / max(1.0, float(np.max(np.abs(z)))) if z.size else 0.0
         res, J = rj(z, params)
         res = np.asarray(res, dtype=float).ravel()
         rnorm = float(np.max(np.abs(res))) if res.size else 0.0
-        if increment <= tol and rnorm <= residual_tol:
+        if increment <= tol and (rnorm <= residual_tol or rnorm <= roundoff_floor(to_csc(J), z)):
             return NewtonResult(z, True, it, rnorm, increment, "converged")
+        if len(history) >= 2 and np.max(np.abs(z - history[-2])) <= 1e-13 * (1.0 + np.max(np.abs(z))):
+            # Newton returned to the iterate of two steps ago: it cycles between two pieces
+            # of a nonsmooth residual (a solution at a kink). Let the caller smooth.
+            return NewtonResult(z, False, it, rnorm, increment, "cycling between pieces")
     return NewtonResult(z, False, max_iter, rnorm, increment, "maximum iterations reached")
 
 
@@ -113,19 +134,21 @@ def newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params
 SMOOTHING = (1e-2, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 0.0)
 
 
-def smoothed_newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params: np.ndarray, *,
-                          smoothing: tuple = SMOOTHING, try_plain: bool = True,
-                          **kw) -> tuple[NewtonResult, float, int]:
-    """Newton on a nonsmooth system whose smoothing parameter ``mu`` is the last parameter.
+def smoothed_newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray,
+                          pack: Callable[[float], np.ndarray], *, smoothing: tuple = SMOOTHING,
+                          try_plain: bool = True, **kw) -> tuple[NewtonResult, float, int]:
+    """Newton on a nonsmooth system with a smoothing parameter ``mu``.
 
-    First ``mu = 0`` (generalised Jacobian). If that fails (a solution at a kink makes semismooth
-    Newton cycle between pieces), a continuation ``mu -> 0`` along ``smoothing`` is run, each
-    stage warm-started. Returns ``(result, mu, stages)`` where ``result`` is the last converged
-    stage (or the last attempt) and ``mu`` its smoothing parameter; ``result.converged`` is True
-    only if the unsmoothed problem (``mu = 0``) was solved.
+    ``pack(mu)`` gives the system's parameter vector for a smoothing ``mu`` (the caller knows
+    where ``mu`` sits among its named parameters). First ``mu = 0`` (generalised Jacobian). If
+    that fails (a solution at a kink makes semismooth Newton cycle between pieces), a
+    continuation ``mu -> 0`` along ``smoothing`` is run, each stage warm-started. Returns
+    ``(result, mu, stages)`` where ``result`` is the last converged stage (or the last attempt)
+    and ``mu`` its smoothing parameter; ``result.converged`` is True only if the unsmoothed
+    problem (``mu = 0``) was solved.
     """
     if try_plain:
-        res = newton_solve(rj, r, z0, np.append(params, 0.0), **kw)
+        res = newton_solve(rj, r, z0, pack(0.0), **kw)
         if res.converged:
             return res, 0.0, 0
     else:  # the caller has already tried mu = 0
@@ -135,7 +158,7 @@ def smoothed_newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarra
     best, best_mu, stages = res, 0.0, 0
     for mu in smoothing:
         stages += 1
-        trial = newton_solve(rj, r, z, np.append(params, mu), **kw)
+        trial = newton_solve(rj, r, z, pack(mu), **kw)
         iterations += trial.iterations
         if trial.converged:
             z, best, best_mu = trial.z, trial, mu

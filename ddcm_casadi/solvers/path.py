@@ -140,7 +140,8 @@ class DDCMSolver:
         model = problems.model
         self.exact = (ExactEnumerator(problems.projection, max_pairs=enumerate_pairs)
                       if model.n_contacts <= enumerate_pairs else None)
-        self.global_search = global_search and self.exact is not None and model.n_points == 1
+        self.global_search = (global_search and self.exact is not None and model.n_points == 1
+                              and model.strain_components == 1)
 
     def _project(self, params, x0, p0, state):
         """Projection onto Z_E, restarted on the exact global branch if it may have stopped elsewhere.
@@ -167,7 +168,7 @@ class DDCMSolver:
         tol = 1e-10 + 1e-8 * abs(obj)
         is_global = bool(sol.converged and sol.objective <= obj + tol)
         if not is_global:
-            alt = self.built.solve(params, xe, pe, None)
+            alt = self.built.solve(params, xe, pe, {"on_branch": True})
             if alt.converged and (not sol.converged or alt.objective < sol.objective):
                 sol = alt
             is_global = bool(sol.converged and (not alt.converged or sol.objective <= alt.objective + tol))
@@ -180,7 +181,8 @@ class DDCMSolver:
         problems, model = self.problems, self.problems.model
         data = model.dataset
         out = PathResult("ddcm", formulation_name)
-        index = data.nearest(np.zeros(model.n_points), np.zeros(model.n_points))
+        origin = np.zeros(model.n_points * model.strain_components)
+        index = data.nearest(origin, origin)
         x = np.zeros(problems.projection.n_x)
         p = np.zeros(problems.projection.n_pairs)
         state = None
@@ -242,7 +244,7 @@ class DDCMSolver:
         data, problems = self.problems.model.dataset, self.problems
         P = problems.projection_params(k, data.strain[None, :], data.stress[None, :])
         ex = self.exact.solve(P)
-        energy = problems.model.scales["energy"]
+        energy = problems.scales("mpcc")["energy"]
         j = int(np.argmin(ex.objective))
         best = float(ex.objective[j])
         mine = float(ex.objective[int(step.data_index[0])])
