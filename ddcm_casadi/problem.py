@@ -117,8 +117,9 @@ class ComplementarityProblem:
     residual : casadi.SX
         ``mcp``: ``F(x, p)``, as many rows as ``x``. ``mpcc``: equality constraints ``h(x, p)``.
     residual_terms : casadi.SX
-        Per row of ``residual``, the size of the terms that cancel in it (``|K u| + |G^T a p| +
-        |f|`` and the like): residual tests are relative to it (:meth:`relative_residual`).
+        Per row of ``residual``, the size of the terms that cancel in it, before they cancel
+        (``|K| |u| + |G^T a| |p| + |f|`` and the like): residual tests are relative to it
+        (:meth:`relative_residual`).
     objective : casadi.SX or None
         ``mpcc`` only: the scaled squared distance.
     gap : casadi.SX
@@ -238,8 +239,8 @@ def build_problems(model: ContactModel) -> ProblemPair:
     """Build the classical MCP and the DDCM projection MPCC of ``model`` (each symbolically, once)."""
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
     B = to_casadi(model.strain_operator)
-    Ga = to_casadi(model.gap_operator.T @ sp.diags(model.contact_area))  # contact forces G^T (a p)
-    w = ca.DM(np.repeat(model.volumes, k))
+    GtA = model.gap_operator.T @ sp.diags(model.contact_area)  # contact forces G^T (a p)
+    Ga, Gabs = to_casadi(GtA), to_casadi(abs(GtA))
 
     classical = None
     if model.youngs_modulus is not None:
@@ -247,10 +248,10 @@ def build_problems(model: ContactModel) -> ProblemPair:
         P = Parameters(gap0=nc, f=n)
         u_hat, p_hat = ca.SX.sym("u", n), ca.SX.sym("p", nc)
         u, p = s["displacement"] * u_hat, s["stress"] * p_hat
-        K = to_casadi(model.stiffness())
-        terms = [ca.mtimes(K, u), ca.mtimes(Ga, p), P["f"]]
-        F = (terms[0] - terms[1] - terms[2]) / s["force"]
-        size = sum(ca.fabs(t) for t in terms) / s["force"]
+        K = model.stiffness()
+        F = (ca.mtimes(to_casadi(K), u) - ca.mtimes(Ga, p) - P["f"]) / s["force"]
+        # |K| |u| + |G^T a| |p| + |f|: the terms before they cancel (roundoff is relative to them).
+        size = (ca.mtimes(to_casadi(abs(K)), ca.fabs(u)) + ca.mtimes(Gabs, ca.fabs(p)) + ca.fabs(P["f"])) / s["force"]
         classical = ComplementarityProblem(kind="mcp", x=u_hat, p=p_hat, parameters=P, residual=F,
                                            residual_terms=size, objective=None,
                                            **_common(model, s, u, p, P["gap0"], 1.0 / s["modulus"]))
@@ -265,9 +266,9 @@ def build_problems(model: ContactModel) -> ProblemPair:
         d2 = weighted_distance2(ca.mtimes(B, u) - P["strain_star"], sig - P["stress_star"], metrics, material,
                                 model.volumes)
         objective = 0.5 * d2 / s["energy"]
-        terms = [ca.mtimes(B.T, w * sig), ca.mtimes(Ga, p), P["f"]]
-        h = (terms[0] - terms[1] - terms[2]) / s["force"]
-        size = sum(ca.fabs(t) for t in terms) / s["force"]
+        BtW = model.strain_operator.T @ sp.diags(np.repeat(model.volumes, k))
+        h = (ca.mtimes(to_casadi(BtW), sig) - ca.mtimes(Ga, p) - P["f"]) / s["force"]
+        size = (ca.mtimes(to_casadi(abs(BtW)), ca.fabs(sig)) + ca.mtimes(Gabs, ca.fabs(p)) + ca.fabs(P["f"])) / s["force"]
         projection = ComplementarityProblem(
             kind="mpcc", x=ca.vertcat(u_hat, sig_hat), p=p_hat, parameters=P, residual=h,
             residual_terms=size, objective=objective,

@@ -119,10 +119,12 @@ def test_new_kind_runs_through_the_cli_records(cmp, tmp_path):
 
 
 def test_new_kind_without_figures_of_its_own(cmp, tmp_path):
-    """The figures are the kind's choice: the base draws none, and plots.save_figures asks it."""
+    """The figures are the kind's choice: the base draws the contact-force history (it works for
+    any kind), and plots.save_figures asks the model."""
     from ddcm_casadi.plots import figure_contact_history, save_figures
 
-    assert save_figures(cmp, tmp_path) == []
+    assert [p.name for p in save_figures(cmp, tmp_path)] == ["contact_history.png"]
+    assert (tmp_path / "contact_history.png").stat().st_size > 0
     fig = figure_contact_history(cmp)  # the generic figure works for any kind
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert "pair 0" in labels and "closed form" in labels

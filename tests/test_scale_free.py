@@ -176,9 +176,12 @@ def test_classical_results_do_not_depend_on_the_dataset(case, data, name):
 PANELS = (40, 100, 500, 2000)
 DDCM_PANELS = (40, 100)
 LOAD_FACTORS = (0.5, 1.0)
-#: Data points of the DDCM runs, over 1.25 times the largest classical strain.
+#: Data points of the DDCM runs, from -DATA_RANGE[0] to DATA_RANGE[1] times the largest classical
+#: strain. The factors are "irrational" on purpose: member strains of the Warren truss are rational
+#: multiples of each other, and a grid through 0 and the largest strain would put many members
+#: exactly half-way between two data, where the nearest datum is a tie decided by roundoff.
 N_DATA = 2001
-DATA_MARGIN = 1.25
+DATA_RANGE = (1.2071067811865475, 1.3183098861837907)  # 1/2 + 1/sqrt(2), 1 + 1/pi
 C_OVER_E = 1.0
 
 
@@ -203,8 +206,8 @@ def _slender_reference(panels: int):
 
 @functools.lru_cache(maxsize=None)
 def _slender_dataset(panels: int) -> MaterialDataset:
-    r = DATA_MARGIN * float(np.max(np.abs(_slender_reference(panels)["strain"])))
-    return MaterialDataset.hookean(E, -r, r, N_DATA, c=C_OVER_E * E)
+    e = float(np.max(np.abs(_slender_reference(panels)["strain"])))
+    return MaterialDataset.hookean(E, -DATA_RANGE[0] * e, DATA_RANGE[1] * e, N_DATA, c=C_OVER_E * E)
 
 
 def _far_plane_nodes(panels: int) -> list[int]:
