@@ -182,7 +182,7 @@ def _ddcm_fixed_points(name: str, cmp) -> list[Check]:
         tol = EXACT_TOL
         note = "exact projection (branch enumeration) of the assigned data"
         if f == "penalty":
-            # Penalty projections tilt the contact branch (docs/formulations.md, Sec. 4).
+            # Penalty projections tilt the contact branch (docs/maths.md, Sec. 4).
             tol = _penalty_tilt(cmp, f)
             note = "penalty: tolerance c / (gamma l_e), the tilt of its contact branch"
         out.append(Check.make(f"{name} / ddcm / {f}", "max projection error (u, p), scaled",

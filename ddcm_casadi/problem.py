@@ -1,6 +1,6 @@
 """Symbolic complementarity problems built from a :class:`~ddcm_casadi.model.ContactModel`.
 
-Two kinds arise from one model (``docs/formulations.md`` states the maths):
+Two kinds arise from one model (``docs/maths.md`` states the maths):
 
 ``mcp`` (classical)
     Find ``x, p`` with ``F(x, p) = 0`` and ``g(x) >= 0, p >= 0, g p = 0``.

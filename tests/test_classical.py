@@ -1,4 +1,4 @@
-"""Classical variant against the closed forms of the paper's bar (formulations.md, Sec. 3)."""
+"""Classical variant against the closed forms of the paper's bar (docs/maths.md, Sec. 3)."""
 
 import numpy as np
 import pytest

@@ -1,6 +1,6 @@
 """DDCM variant: every step is a true fixed point, and the paper's local minimum is reported.
 
-Reference values come from the closed forms of docs/formulations.md, Sec. 3 (BarModel methods), not from
+Reference values come from the closed forms of docs/maths.md, Sec. 3 (BarModel methods), not from
 the branch enumeration the solver itself consults.
 """
 
@@ -54,7 +54,7 @@ def test_every_step_is_a_fixed_point(paper, paper_comparison, name):
 
 @pytest.mark.parametrize("name", ALL)
 def test_local_minimum_reported_at_the_papers_step(paper, paper_comparison, name):
-    """docs/formulations.md, Sec. 3: the alternating scheme stops at a local minimum at h = 0.992 m only."""
+    """docs/maths.md, Sec. 3: the alternating scheme stops at a local minimum at h = 0.992 m only."""
     r = paper_comparison["ddcm", name]
     local = [s.load_parameter for s in r.steps if s.global_optimum is False]
     assert local == [pytest.approx(0.992)]
