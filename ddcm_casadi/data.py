@@ -176,6 +176,23 @@ class MaterialDataset:
             stats["fallbacks"] = stats.get("fallbacks", 0) + int(uncertain.sum())
         return j
 
+    @property
+    def datasets(self) -> tuple["MaterialDataset"]:
+        """The data sets of the materials: this one (as :attr:`PointData.datasets`)."""
+        return (self,)
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """Where each material's data start in the global data index (as :attr:`PointData.offsets`)."""
+        return np.zeros(1, dtype=np.intp)
+
+    @property
+    def secant_modulus(self) -> float:
+        """``std(stress) / std(strain)`` (exactly ``E`` for Hookean data): the stiffness the data
+        follow, whatever the metric; the metric's own modulus for a set with no spread."""
+        se, ss = float(np.std(self.strain)), float(np.std(self.stress))
+        return ss / se if se > 0 and ss > 0 else self.metric.modulus
+
     def point_materials(self, n_points: int) -> tuple[list[Metric], np.ndarray]:
         """The metrics of the materials and the material of each of ``n_points`` points (one here)."""
         return [self.metric], np.zeros(n_points, dtype=np.intp)
@@ -303,6 +320,7 @@ class PointData:
         """Scalar metric ``c`` of each one-component material point."""
         metrics, material = self.point_materials(n_points)
         return np.array([m.c for m in metrics])[material]
+
 
     def describe(self) -> dict:
         """Sizes, metrics and strain ranges of the sets, and the material of each point."""

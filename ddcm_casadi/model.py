@@ -160,14 +160,8 @@ class ContactModel:
             if self.youngs_modulus is None:
                 raise InputError("this model has no Young's modulus (classical variant unavailable)")
             return self.youngs_modulus
-        metrics, material = self.dataset.point_materials(self.n_points)
-        sets = getattr(self.dataset, "datasets", (self.dataset,))
-        moduli = []
-        for d, mt in zip(sets, metrics):
-            se, ss = float(np.std(d.strain)), float(np.std(d.stress))
-            # A degenerate set (one datum, or no strain spread) says nothing: use the metric.
-            moduli.append(ss / se if se > 0 and ss > 0 else mt.modulus)
-        return np.asarray(moduli)[material]
+        _, material = self.dataset.point_materials(self.n_points)
+        return np.array([d.secant_modulus for d in self.dataset.datasets])[material]
 
     def scales_for(self, kind: str) -> dict:
         """Reference magnitudes of the ``"classical"`` or the ``"ddcm"`` problem (cached).
@@ -203,9 +197,16 @@ class ContactModel:
         f = self.loads[load_step] if self.loads.size else np.zeros(self.n_dofs)
         penetration = np.maximum(-self.gap_offsets, 0.0)
         pen = float(np.max(penetration)) if penetration.size else 0.0
+        kappa = 1e3 * k_max / float(np.max(a)) if self.n_contacts else 0.0
         GA = G.T @ sp.diags(a) if self.n_contacts else None
-        # A stiff spring on every pair supports bodies that rest on their obstacles only.
-        spring = (K + (1e3 * k_max / float(np.max(a))) * (GA @ G)).tocsc() if self.n_contacts else K
+        spring_lu = None
+
+        def spring():  # K with a stiff spring on every pair (bodies resting on obstacles only)
+            nonlocal spring_lu
+            if spring_lu is None:
+                spring_lu = factorize(K + kappa * (GA @ G) if self.n_contacts else K)
+            return spring_lu
+
         u_f = np.zeros(self.n_dofs)
         strain = 0.0
         with np.errstate(over="ignore", invalid="ignore"):
@@ -213,13 +214,12 @@ class ContactModel:
                 try:
                     lu = factorize(K)
                 except SingularMatrix:
-                    lu = factorize(spring)
+                    lu = spring()
                 u_f = lu.solve(f)
                 strain = float(np.max(np.abs(B @ u_f), initial=0.0))
             if pen > 0:
                 worst = int(np.argmax(np.max(penetration, axis=1)))
-                kappa = 1e3 * k_max / float(np.max(a))
-                u_g = factorize(spring).solve(kappa * (GA @ penetration[worst]))
+                u_g = spring().solve(kappa * (GA @ penetration[worst]))
                 normal = float(np.max(np.abs(G @ u_g), initial=0.0))
                 if normal > 0:
                     strain = max(strain, float(np.max(np.abs(B @ u_g), initial=0.0)) * pen / normal)

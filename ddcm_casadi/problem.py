@@ -190,9 +190,9 @@ class ProblemPair:
         return self.classical.parameters.pack(gap0=m.gap_offsets[step], f=m.loads[step])
 
     def projection_params(self, step: int, strain_star: np.ndarray, stress_star: np.ndarray) -> np.ndarray:
-        """Parameters of the ``Z_E`` projection: the load step and the assigned data, flat and
-        point-major (``m k`` values each). With ``(m k, N)`` arrays, an ``(n_params, N)`` matrix
-        (one column per data assignment)."""
+        """Parameters of the ``Z_E`` projection: the load step and the assigned data, per point
+        (``(m,)`` or ``(m, k)``, flattened point-major). For one-component points, ``(m, N)``
+        arrays give an ``(n_params, N)`` matrix, one column per data assignment."""
         m = self.model
         strain_star, stress_star = np.asarray(strain_star, float), np.asarray(stress_star, float)
         if strain_star.ndim < 2 or self.model.strain_components > 1:
@@ -227,8 +227,7 @@ class ProblemPair:
         return np.concatenate(x), np.asarray(p) / s["stress"]
 
 
-def _common(model: ContactModel, s: dict, u: ca.SX, p: ca.SX, gap0: ca.SX, fb_beta: float) -> dict:
-    G = to_casadi(model.gap_operator)
+def _common(model: ContactModel, G: ca.DM, s: dict, u: ca.SX, gap0: ca.SX, fb_beta: float) -> dict:
     gap = (ca.mtimes(G, u) + gap0) / s["displacement"]
     return dict(gap=gap, gap_ref=s["displacement"], pressure_ref=s["stress"],
                 contact_stiffness=model.contact_stiffness, fb_alpha=1.0 / (0.01 * model.length_scale),
@@ -238,7 +237,7 @@ def _common(model: ContactModel, s: dict, u: ca.SX, p: ca.SX, gap0: ca.SX, fb_be
 def build_problems(model: ContactModel) -> ProblemPair:
     """Build the classical MCP and the DDCM projection MPCC of ``model`` (each symbolically, once)."""
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
-    B = to_casadi(model.strain_operator)
+    B, G = to_casadi(model.strain_operator), to_casadi(model.gap_operator)
     GtA = model.gap_operator.T @ sp.diags(model.contact_area)  # contact forces G^T (a p)
     Ga, Gabs = to_casadi(GtA), to_casadi(abs(GtA))
 
@@ -254,7 +253,7 @@ def build_problems(model: ContactModel) -> ProblemPair:
         size = (ca.mtimes(to_casadi(abs(K)), ca.fabs(u)) + ca.mtimes(Gabs, ca.fabs(p)) + ca.fabs(P["f"])) / s["force"]
         classical = ComplementarityProblem(kind="mcp", x=u_hat, p=p_hat, parameters=P, residual=F,
                                            residual_terms=size, objective=None,
-                                           **_common(model, s, u, p, P["gap0"], 1.0 / s["modulus"]))
+                                           **_common(model, G, s, u, P["gap0"], 1.0 / s["modulus"]))
 
     projection = None
     if model.dataset is not None:
@@ -272,5 +271,5 @@ def build_problems(model: ContactModel) -> ProblemPair:
         projection = ComplementarityProblem(
             kind="mpcc", x=ca.vertcat(u_hat, sig_hat), p=p_hat, parameters=P, residual=h,
             residual_terms=size, objective=objective,
-            **_common(model, s, u, p, P["gap0"], 1.0 / s["metric"]))
+            **_common(model, G, s, u, P["gap0"], 1.0 / s["metric"]))
     return ProblemPair(model=model, classical=classical, projection=projection)

@@ -33,8 +33,7 @@ def nearest_by_brute_force(data, step) -> bool:
     """
     n_points = len(step.data_index)
     metrics, material = data.point_materials(n_points)
-    sets = getattr(data, "datasets", (data,))
-    offsets = getattr(data, "offsets", np.zeros(1, dtype=np.intp))
+    sets, offsets = data.datasets, data.offsets
     k = metrics[0].k
     strain = np.asarray(step.strain, float).reshape(n_points, k)
     stress = np.asarray(step.stress, float).reshape(n_points, k)

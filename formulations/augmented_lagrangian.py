@@ -191,9 +191,7 @@ class _BuiltAL(BuiltFormulation):
             # A projection onto the corner g = p = 0 needs an unbounded multiplier: the updates
             # would only creep. Finish on the biactive branch when it is B-stationary.
             corner = self.solver.polish_corner(z, base(lam, rho), self._inner)
-            if corner is not None:
-                corner.state = system.split(corner.z)[2]
-            return corner
+            return None if corner is None else (corner.z, system.split(corner.z)[2], corner.iterations)
 
         def done(z):
             x, p, _ = system.split(z)

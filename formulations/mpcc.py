@@ -139,8 +139,8 @@ class _BuiltMPCC(BuiltFormulation):
             stats = self._solver.stats()
             its = int(stats.get("iter_count", 0))
             if stats["return_status"] not in _OK:
-                return False, stats["return_status"], None, its
-            return (True, np.asarray(sol["x"], float).ravel(),
+                return f"IPOPT: {stats['return_status']}", w, None, its
+            return ("", np.asarray(sol["x"], float).ravel(),
                     (np.asarray(sol["lam_x"], float).ravel(), np.asarray(sol["lam_g"], float).ravel()), its)
 
         def measure(w):

@@ -29,8 +29,9 @@ def scholtes_homotopy(relaxed: Callable, *, measure: Callable[[np.ndarray], tupl
                       max_homotopy: int) -> HomotopyResult:
     """Solve relaxed problems along ``tau <- tau_factor tau`` until ``max |min(g, p)| <= comp_tol``.
 
-    ``relaxed(w, tau, warm) -> (status_ok, w, warm, iterations)`` solves one relaxed NLP from
-    ``w`` with warm multipliers ``warm`` (``None``: cold). A failed relaxed solve is retried:
+    ``relaxed(w, tau, warm) -> (status, w, warm, iterations)`` solves one relaxed NLP from
+    ``w`` with warm multipliers ``warm`` (``None``: cold); ``status`` is ``""`` on success, else
+    the solver's reason. A failed relaxed solve is retried:
     before any success with a larger ``tau`` (up to 1), after one from the geometric mean of the
     failed and the last good ``tau``, cold-started. The homotopy stops on the complementarity
     residual (``measure(w) -> (residual, comp)``), not on a step count; a converged point near a
@@ -46,14 +47,14 @@ def scholtes_homotopy(relaxed: Callable, *, measure: Callable[[np.ndarray], tupl
     comp_prev, stalls = np.inf, 0
     while steps < max_homotopy:
         steps += 1
-        ok, w_new, warm_new, its = relaxed(w, tau, warm)
+        status, w_new, warm_new, its = relaxed(w, tau, warm)
         iterations += its
-        if not ok:
+        if status:
             if last_good_tau is None or warm is None:
                 if last_good_tau is None and tau < 1.0:
                     tau, warm = min(1.0, tau * 100.0), None  # recovery: relax more and retry
                     continue
-                message = f"IPOPT: {w_new}"  # the caller's status text
+                message = status
                 break
             # recovery: back off from the last good point, cold start, smaller reduction
             tau, warm = np.sqrt(tau * last_good_tau), None

@@ -74,7 +74,7 @@ def uzawa(inner: Callable[[np.ndarray, np.ndarray], Any], update: Callable[[np.n
 
 def method_of_multipliers(inner: Callable[[np.ndarray, float, np.ndarray], tuple], *,
                           constraint: Callable[[np.ndarray, np.ndarray, float], np.ndarray],
-                          polish: Callable[[np.ndarray, np.ndarray, float], Any],
+                          polish: Callable[[np.ndarray, np.ndarray, float], tuple | None],
                           multiplier: Callable[[dict], np.ndarray],
                           done: Callable[[np.ndarray], bool], z0: np.ndarray, lam0: np.ndarray, rho0: float,
                           rho_growth: float, rho_max: float, tol: float, max_updates: int) -> LoopResult:
@@ -85,8 +85,8 @@ def method_of_multipliers(inner: Callable[[np.ndarray, float, np.ndarray], tuple
     ``lam <- lam + rho c``, read from the inner solution's multipliers (``multiplier(state)``,
     the primal-dual form gives it directly). ``rho`` grows by ``rho_growth`` whenever an update
     fails to reduce ``||c||_inf`` by 4x. When ``||c|| > tol`` after an inner solve, ``polish(z,
-    lam, rho)`` may return a better point (e.g. a B-stationary corner) or ``None``. Stops when
-    ``done(z)``.
+    lam, rho)`` may return a better point ``(z, state, iterations)`` (e.g. a B-stationary
+    corner) or ``None``. Stops when ``done(z)``.
     """
     lam, z, rho, c_prev = np.asarray(lam0, float), np.asarray(z0, float), float(rho0), np.inf
     its, converged, message, state, k = 0, False, "maximum multiplier updates reached", {}, 0
@@ -100,8 +100,8 @@ def method_of_multipliers(inner: Callable[[np.ndarray, float, np.ndarray], tuple
         if float(np.max(np.abs(c), initial=0.0)) > tol:
             polished = polish(z, lam, rho)
             if polished is not None:
-                its += polished.iterations
-                z, state = polished.z, polished.state
+                z, state, spent = polished
+                its += spent
                 c = constraint(z, lam, rho)
         lam = np.asarray(multiplier(state), float).copy()  # = lam + rho c at the inner solution
         c_norm = float(np.max(np.abs(c), initial=0.0))
