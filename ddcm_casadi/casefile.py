@@ -71,6 +71,7 @@ class CaseKind:
     section: str
     sections: dict[str, frozenset[str]]
     arrays: frozenset[str]
+    tables: frozenset[str]
     parse: CaseParser
     uses: str
     default_name: str
@@ -86,7 +87,8 @@ _KINDS: dict[str, CaseKind] = {}
 
 
 def register_case_kind(section: str, *, sections: Mapping[str, set[str]], parse: CaseParser, uses: str,
-                       arrays: set[str] | frozenset[str] = frozenset(), default_name: str | None = None,
+                       arrays: set[str] | frozenset[str] = frozenset(), tables: set[str] | frozenset[str] = frozenset(),
+                       default_name: str | None = None,
                        default: bool = False) -> None:
     """Register a model kind of case files.
 
@@ -105,6 +107,9 @@ def register_case_kind(section: str, *, sections: Mapping[str, set[str]], parse:
         refuses them (e.g. ``"[obstacle] positions"``).
     arrays : set of str
         Which of ``sections`` are arrays of tables (``[[stops]]``).
+    tables : set of str
+        Which of ``sections`` may be one table or an array of tables (``[material]`` or
+        ``[[material]]``), as ``[data]`` may.
     default_name : str, optional
         Model name when the document has no file name (default: ``section``).
     default : bool
@@ -127,7 +132,7 @@ def register_case_kind(section: str, *, sections: Mapping[str, set[str]], parse:
     if default and any(k.default for k in _KINDS.values()):
         raise ValueError("a default case kind is registered already")
     _KINDS[section] = CaseKind(section=section, sections={k: frozenset(v) for k, v in sections.items()},
-                               arrays=frozenset(arrays), parse=parse, uses=uses,
+                               arrays=frozenset(arrays), tables=frozenset(tables), parse=parse, uses=uses,
                                default_name=default_name or section, default=default)
 
 
@@ -285,6 +290,7 @@ def _check_sections(doc: dict, source: str) -> None:
     """Known sections with known keys only; tables where tables belong."""
     known = _known_sections()
     arrays = set().union(*(k.arrays for k in _KINDS.values()))
+    either = {"data"}.union(*(k.tables for k in _KINDS.values()))
     for section, value in doc.items():
         if section not in known:
             raise InputError(f"unknown section [{section}] in {source}; known: {', '.join(known)}")
@@ -293,9 +299,9 @@ def _check_sections(doc: dict, source: str) -> None:
             if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
                 raise InputError(f"[[{section}]] must be an array of tables")
             tables = value
-        elif section == "data" and isinstance(value, list):
+        elif section in either and isinstance(value, list):
             if not value or not all(isinstance(v, dict) for v in value):
-                raise InputError("[[data]] must be a table or a non-empty array of tables")
+                raise InputError(f"[[{section}]] must be a table or a non-empty array of tables")
             tables = value
         elif isinstance(value, dict):
             tables = [value]
@@ -412,15 +418,7 @@ def data_specs(doc: dict, *, base_dir: Path, default_modulus: Callable[[int], fl
                 raise InputError(f"[{label}] path must be a string")
             specs.append(DataSpec(label, c, path=base_dir / table["path"]))
             continue
-        hk = table["hookean"]
-        if not isinstance(hk, dict):
-            raise InputError(f"[{label}] hookean must be a table {{strain_min, strain_max, points}}")
-        unknown = sorted(set(hk) - _HOOKEAN)
-        if unknown:
-            raise InputError(f"unknown key {unknown[0]!r} in [{label}] hookean; known: {', '.join(sorted(_HOOKEAN))}")
-        missing = [key for key in ("strain_min", "strain_max", "points") if key not in hk]
-        if missing:
-            raise InputError(f"missing key {missing[0]!r} in [{label}] hookean")
+        hk = hookean_table(label, table["hookean"], _HOOKEAN)
         points = number(label, "hookean.points", hk["points"])
         if points != int(points) or points < 1:
             raise InputError(f"[{label}] hookean.points must be a positive integer, got {show(hk['points'])}")
@@ -439,6 +437,20 @@ def data_specs(doc: dict, *, base_dir: Path, default_modulus: Callable[[int], fl
             raise InputError(f"[{label}] hookean.strain_min must be <= strain_max, got [{lo}, {hi}]")
         specs.append(DataSpec(label, c, youngs_modulus=E, strain_min=lo, strain_max=hi, points=int(points)))
     return specs
+
+
+def hookean_table(label: str, hk: Any, known: set[str]) -> dict:
+    """``[label] hookean``: a table with ``strain_min``, ``strain_max``, ``points`` and only the
+    ``known`` keys."""
+    if not isinstance(hk, dict):
+        raise InputError(f"[{label}] hookean must be a table {{strain_min, strain_max, points}}")
+    unknown = sorted(set(hk) - known)
+    if unknown:
+        raise InputError(f"unknown key {unknown[0]!r} in [{label}] hookean; known: {', '.join(sorted(known))}")
+    missing = [key for key in ("strain_min", "strain_max", "points") if key not in hk]
+    if missing:
+        raise InputError(f"missing key {missing[0]!r} in [{label}] hookean")
+    return hk
 
 
 def data_set_count(doc: dict) -> int:

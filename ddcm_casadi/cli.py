@@ -162,7 +162,8 @@ def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
     """
     if cmp.model.scalar:
         return None
-    return {f"{variant}/{name}": cmp.fields(variant, name) for (variant, name) in cmp.results}
+    model = cmp.model
+    return {f"{variant}/{name}": model.results_fields(cmp.fields(variant, name)) for (variant, name) in cmp.results}
 
 
 def versions() -> dict:
@@ -203,8 +204,7 @@ def run(argv: list[str] | None = None) -> int:
         write_csv_atomic(out / "results.csv", rows)
         write_json_atomic(out / "results.json", doc)
         written = ["results.csv", "results.json"]
-        if draw:
-            written += [p.name for p in case.model.save_figures(cmp, out)]
+        written += [str(p.relative_to(out)) for p in case.model.save_outputs(cmp, out, figures=draw)]
         print(f"wrote {', '.join(written)} to {out}", file=sys.stderr)
     failed = [r for r in cmp.results.values() if not r.converged]
     if failed:

@@ -1,7 +1,8 @@
 """Case files for ``ddcm-compare --config``: TOML (``.toml``) or JSON (``.json``), one schema.
 
-A case is either the paper's bar (``[bar]``), optionally split into N elements with fixed stops,
-or a pin-jointed truss in 1-D, 2-D or 3-D (``[structure]``). Both share ``[data]``, ``[ddcm]``
+A case is the paper's bar (``[bar]``), optionally split into N elements with fixed stops,
+a pin-jointed truss in 1-D, 2-D or 3-D (``[structure]``), or a continuum in 2-D (plane strain) or
+3-D meshed with triangles or tetrahedra (``[mesh]``). They share ``[data]``, ``[ddcm]``
 and ``[formulations.NAME]``.
 
 Each model kind parses its own sections next to its model (the ``[bar]`` format is
@@ -35,11 +36,12 @@ from __future__ import annotations
 # The model kinds register their case sections when imported (the paper's bar is the default).
 from . import bar as _bar
 from . import truss as _truss
+from .continuum import case as _continuum
 from .bar import paper_bar
 from .casefile import Case, case_from_dict, case_kinds, load_case, register_case_kind
 
 if __doc__ is not None:  # None under python -OO
-    __doc__ += _bar.CASE_FORMAT + _truss.CASE_FORMAT
+    __doc__ += _bar.CASE_FORMAT + _truss.CASE_FORMAT + _continuum.CASE_FORMAT
 
 
 def default_case() -> Case:

@@ -215,6 +215,27 @@ class MaterialDataset:
         return cls(strain, e * strain, c)
 
     @classmethod
+    def hookean_grid(cls, stiffness, strain_min: float, strain_max: float, points_per_axis: int, *,
+                     c) -> "MaterialDataset":
+        """A linear law ``stress = D strain`` sampled on a regular grid of ``points_per_axis^k``
+        strain states in ``[strain_min, strain_max]^k`` (Mandel components; ``D`` a ``k x k``
+        matrix, e.g. :func:`~ddcm_casadi.metric.isotropic_elasticity`). The data spacing is
+        ``(strain_max - strain_min) / (points_per_axis - 1)`` in every component."""
+        D = np.atleast_2d(np.asarray(stiffness, dtype=float))
+        k = D.shape[0]
+        n = int(points_per_axis)
+        if D.shape != (k, k) or not np.all(np.isfinite(D)):
+            raise InputError(f"a Hookean data set needs a finite square stiffness, got shape {D.shape}")
+        if n < 1 or float(n) ** k > MAX_DATA_POINTS:
+            raise InputError(f"points per axis must be between 1 and {int(MAX_DATA_POINTS ** (1 / k))} "
+                             f"for {k} components (at most {MAX_DATA_POINTS} points), got {points_per_axis!r}")
+        if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
+            raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
+        axis = np.linspace(strain_min, strain_max, n)
+        strain = np.stack(np.meshgrid(*([axis] * k), indexing="ij"), axis=-1).reshape(-1, k)
+        return cls(strain, strain @ D.T, c)
+
+    @classmethod
     def from_csv(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
         """Read a CSV file with the header ``strain,stress`` (one component per point) or
         ``strain_1,...,strain_k,stress_1,...,stress_k`` (``k`` Mandel components; ``c`` then a

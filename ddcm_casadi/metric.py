@@ -121,27 +121,70 @@ class Metric:
 
     @classmethod
     def isotropic(cls, youngs_modulus: float, poisson_ratio: float, dimension: int) -> "Metric":
-        """The isotropic elasticity tensor in Mandel notation as the metric.
-
-        ``dimension`` 1: ``E``; 2: plane strain (3 x 3); 3: 6 x 6. ``C = 2 mu I + lambda m m^T``
-        on the normal components (``m`` ones on the normal components), ``2 mu`` on the shear ones.
-        """
+        """The isotropic elasticity tensor in Mandel notation as the metric
+        (:func:`isotropic_elasticity`; ``dimension`` 1 gives ``E``)."""
         E, nu = float(youngs_modulus), float(poisson_ratio)
         if not (math.isfinite(E) and E > 0):
             raise InputError(f"youngs_modulus must be finite and positive, got {youngs_modulus!r}")
         if not (math.isfinite(nu) and -1.0 < nu < 0.5):
             raise InputError(f"poisson_ratio must be in (-1, 0.5), got {poisson_ratio!r}")
-        if dimension == 1:
-            return cls(E)
-        if dimension not in (2, 3):
+        if dimension not in COMPONENTS:
             raise InputError(f"dimension must be 1, 2 or 3, got {dimension!r}")
-        lam = E * nu / ((1 + nu) * (1 - 2 * nu))
-        mu = E / (2 * (1 + nu))
-        k = COMPONENTS[dimension]
-        normal = dimension
-        C = 2 * mu * np.eye(k)
-        C[:normal, :normal] += lam
-        return cls(C)
+        return cls(isotropic_elasticity(E, nu, dimension)[0])
+
+    @classmethod
+    def estimated(cls, strain, stress) -> "Metric":
+        r"""A metric estimated from data (as ddfenics does): the least-squares fit of
+        ``stress = C strain`` over the data, symmetrised,
+
+        .. math::  C = \operatorname{sym}\big(S^T E (E^T E)^{-1}\big)
+
+        with ``E``, ``S`` the ``(N, k)`` strain and stress columns (for Hookean data ``C`` is the
+        elasticity tensor to roundoff).
+
+        Raises
+        ------
+        InputError
+            Data that do not determine ``C`` (fewer independent strains than components) or an
+            estimate that is not positive definite.
+        """
+        E = np.asarray(strain, dtype=float)
+        S = np.asarray(stress, dtype=float)
+        E = E.reshape(E.shape[0], -1)
+        S = S.reshape(S.shape[0], -1)
+        k = E.shape[1]
+        if E.shape[0] < k or np.linalg.matrix_rank(E) < k:
+            raise InputError(f"cannot estimate the metric: the data's strains do not span {k} components")
+        X, *_ = np.linalg.lstsq(E, S, rcond=None)  # S ~ E X, so C = X^T
+        C = 0.5 * (X + X.T)
+        try:
+            return cls(C)
+        except InputError:
+            raise InputError("the metric estimated from the data is not positive definite; give [data] c") from None
+
+
+def isotropic_elasticity(youngs_modulus, poisson_ratio, dimension: int) -> np.ndarray:
+    r"""Isotropic elasticity matrices in Mandel notation, one per value: ``(m, k, k)``.
+
+    ``dimension`` 1: ``E`` (a bar); 2: plane strain (``k = 3``); 3: ``k = 6``. With the Lame
+    constants ``lambda = E nu / ((1 + nu)(1 - 2 nu))``, ``mu = E / (2 (1 + nu))``:
+
+    .. math::  C = 2 \mu I + \lambda\, m m^T ,
+
+    ``m`` one on the normal components and zero on the (``sqrt 2``-scaled) shear ones, so that
+    ``sigma = C eps`` component by component in Mandel notation. This is the one place the
+    formula is written (the classical law of continua, the isotropic metric, Hookean data).
+    """
+    E = np.atleast_1d(np.asarray(youngs_modulus, dtype=float))
+    nu = np.broadcast_to(np.asarray(poisson_ratio, dtype=float), E.shape)
+    k = COMPONENTS[dimension]
+    if dimension == 1:
+        return E[:, None, None].copy()
+    lam = E * nu / ((1 + nu) * (1 - 2 * nu))
+    mu = E / (2 * (1 + nu))
+    C = 2 * mu[:, None, None] * np.eye(k)
+    C[:, :dimension, :dimension] += lam[:, None, None]
+    return C
 
 
 def block_diagonal(blocks: np.ndarray) -> sp.csr_matrix:

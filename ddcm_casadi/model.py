@@ -76,7 +76,7 @@ class ContactModel:
     name: str = "model"
     load_parameter_name: str = "load parameter"
     strain_components: int = 1
-    _scales: dict = field(init=False, repr=False)
+    _cache: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         B = sp.csr_matrix(self.strain_operator, dtype=float)
@@ -123,7 +123,7 @@ class ContactModel:
                          gap_offsets=g0, loads=f, load_parameter=lp, youngs_modulus=E,
                          length_scale=L).items():
             object.__setattr__(self, k, v)
-        object.__setattr__(self, "_scales", {})
+        object.__setattr__(self, "_cache", {})
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -181,10 +181,10 @@ class ContactModel:
         classical number. The projection's energy unit is ``sum(w) (c eps^2 + sigma^2 / c) / 2``
         with the metric ``c`` (its largest eigenvalue), the size of a distance at these scales.
         """
-        cached = self._scales.get(kind)
+        cached = self._cache.get(kind)
         if cached is None:
             cached = self._reference_scales(kind)
-            self._scales[kind] = cached
+            self._cache[kind] = cached
         return dict(cached)
 
     def _reference_scales(self, kind: str) -> dict:
@@ -256,14 +256,29 @@ class ContactModel:
         return s["modulus"] / s["length"]
 
     # -------------------------------------------------------------- mechanics
+    def material_matrix(self) -> sp.csr_matrix:
+        """The classical law ``stress = D strain`` of every material point: sparse ``(m k, m k)``,
+        block diagonal (cached). One component per point: ``D = diag(E)``; a model kind whose
+        points carry several components (continua) overrides this."""
+        D = self._cache.get("material_matrix")
+        if D is None:
+            if self.youngs_modulus is None:
+                raise InputError("this model has no Young's modulus (classical variant unavailable)")
+            if self.strain_components != 1:
+                raise InputError("a classical law for several strain components is not available for this model")
+            D = sp.diags(self.youngs_modulus).tocsr()
+            self._cache["material_matrix"] = D
+        return D
+
+    def stress(self, strain: np.ndarray) -> np.ndarray:
+        """Classical stresses ``D strain`` (flat, point-major, as :meth:`strain` gives them)."""
+        return self.material_matrix() @ np.asarray(strain)
+
     def stiffness(self) -> sp.csr_matrix:
-        """Classical stiffness ``K = B^T W E B`` (sparse)."""
-        if self.youngs_modulus is None:
-            raise InputError("this model has no Young's modulus (classical variant unavailable)")
-        if self.strain_components != 1:
-            raise InputError("a classical law for several strain components is not available for this model")
+        """Classical stiffness ``K = B^T W D B`` (sparse; ``W`` the volumes on every component)."""
         B = self.strain_operator
-        return (B.T @ sp.diags(self.volumes * self.youngs_modulus) @ B).tocsr()
+        W = sp.diags(np.repeat(self.volumes, self.strain_components))
+        return (B.T @ (W @ self.material_matrix()) @ B).tocsr()
 
     def gap(self, u: np.ndarray, step: int) -> np.ndarray:
         return self.gap_operator @ np.asarray(u) + self.gap_offsets[step]
@@ -319,6 +334,17 @@ class ContactModel:
     def contact_pair_labels(self) -> list[str]:
         """A label per contact pair (legends)."""
         return [f"pair {j}" for j in range(self.n_contacts)]
+
+    def results_fields(self, fields: dict) -> dict:
+        """What ``results.json`` keeps of one run's per-step fields (:meth:`Comparison.fields`):
+        everything for bars and trusses; a model kind with large fields keeps a summary and
+        writes the fields elsewhere (:meth:`save_outputs`)."""
+        return fields
+
+    def save_outputs(self, cmp, out_dir, *, figures: bool = True) -> list:
+        """Write the outputs that suit this model kind besides ``results.csv``/``results.json``
+        (field files, figures unless ``figures`` is false); returns the paths."""
+        return self.save_figures(cmp, out_dir) if figures else []
 
     def save_figures(self, cmp, out_dir) -> list:
         """Draw the figures that suit this model kind into ``out_dir``; returns the paths.

@@ -215,7 +215,7 @@ class ProblemPair:
         if kind == "mpcc":
             stress = s["stress"] * np.asarray(x[n:])
         else:
-            stress = self.model.youngs_modulus * strain
+            stress = self.model.stress(strain)
         return dict(u=u, p=pressure, strain=strain, stress=stress)
 
     def scaled_start(self, kind: str, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None):

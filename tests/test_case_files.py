@@ -368,13 +368,15 @@ def test_case_kinds_register_their_own_sections():
     from ddcm_casadi.config import case_from_dict, case_kinds
 
     kinds = {k.section: k for k in case_kinds()}
-    assert [k.section for k in case_kinds()] == ["bar", "structure"]
+    assert [k.section for k in case_kinds()] == ["bar", "structure", "mesh"]
     assert kinds["bar"].default and kinds["bar"].own_sections == ["obstacle", "stops"]
     assert kinds["structure"].own_sections == ["path", "obstacles"]
+    assert kinds["mesh"].own_sections == ["material", "supports", "loads", "contact", "loading", "hertz"]
     with pytest.raises(InputError) as exc:
         case_from_dict({"foo": {}}, source="x.toml")
     assert str(exc.value) == ("unknown section [foo] in x.toml; known: bar, obstacle, stops, structure, path, "
-                              "obstacles, data, ddcm, formulations")
+                              "obstacles, mesh, material, supports, loads, contact, loading, hertz, data, ddcm, "
+                              "formulations")
     with pytest.raises(InputError) as exc:
         case_from_dict({"obstacle": {}, "path": {}}, source="x.toml")
     assert str(exc.value) == "missing section [structure] in x.toml"  # a kind's own section names it
