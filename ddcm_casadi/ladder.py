@@ -318,6 +318,20 @@ def rung_active_sets() -> list[Check]:
     return out
 
 
+def rung_hertz() -> list[Check]:
+    """Hertz in plane strain (:mod:`ddcm_casadi.continuum.validation`)."""
+    from .continuum.validation import rung_hertz as rung
+
+    return rung()
+
+
+def rung_continuum_ddcm() -> list[Check]:
+    """DDCM on a continuum against the data size (:mod:`ddcm_casadi.continuum.validation`)."""
+    from .continuum.validation import rung_continuum_ddcm as rung
+
+    return rung()
+
+
 RUNGS: dict[str, Callable] = {
     "paper bar (closed form)": rung_paper,
     "bar with stops (closed form)": rung_stops,
@@ -325,6 +339,8 @@ RUNGS: dict[str, Callable] = {
     "DDCM convergence with data size": rung_data_convergence,
     "4-member truss without contact": rung_no_contact,
     "active sets (enumeration)": rung_active_sets,
+    "Hertz contact in plane strain": rung_hertz,
+    "DDCM on a continuum with data size": rung_continuum_ddcm,
 }
 
 
