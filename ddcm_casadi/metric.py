@@ -123,14 +123,7 @@ class Metric:
     def isotropic(cls, youngs_modulus: float, poisson_ratio: float, dimension: int) -> "Metric":
         """The isotropic elasticity tensor in Mandel notation as the metric
         (:func:`isotropic_elasticity`; ``dimension`` 1 gives ``E``)."""
-        E, nu = float(youngs_modulus), float(poisson_ratio)
-        if not (math.isfinite(E) and E > 0):
-            raise InputError(f"youngs_modulus must be finite and positive, got {youngs_modulus!r}")
-        if not (math.isfinite(nu) and -1.0 < nu < 0.5):
-            raise InputError(f"poisson_ratio must be in (-1, 0.5), got {poisson_ratio!r}")
-        if dimension not in COMPONENTS:
-            raise InputError(f"dimension must be 1, 2 or 3, got {dimension!r}")
-        return cls(isotropic_elasticity(E, nu, dimension)[0])
+        return cls(isotropic_elasticity(youngs_modulus, poisson_ratio, dimension)[0])
 
     @classmethod
     def estimated(cls, strain, stress) -> "Metric":
@@ -173,10 +166,26 @@ def isotropic_elasticity(youngs_modulus, poisson_ratio, dimension: int) -> np.nd
 
     ``m`` one on the normal components and zero on the (``sqrt 2``-scaled) shear ones, so that
     ``sigma = C eps`` component by component in Mandel notation. This is the one place the
-    formula is written (the classical law of continua, the isotropic metric, Hookean data).
+    formula is written (the classical law of continua, the isotropic metric, Hookean data),
+    and the one place its arguments are checked.
+
+    Raises
+    ------
+    InputError
+        ``E`` not finite and positive, ``nu`` outside ``(-1, 0.5)``, or ``dimension`` not 1, 2, 3.
     """
-    E = np.atleast_1d(np.asarray(youngs_modulus, dtype=float))
-    nu = np.broadcast_to(np.asarray(poisson_ratio, dtype=float), E.shape)
+    try:
+        E = np.atleast_1d(np.asarray(youngs_modulus, dtype=float))
+        nu = np.broadcast_to(np.asarray(poisson_ratio, dtype=float), E.shape)
+    except (TypeError, ValueError):
+        raise InputError(f"youngs_modulus and poisson_ratio must be numbers, got {youngs_modulus!r}, "
+                         f"{poisson_ratio!r}") from None
+    if not np.all(np.isfinite(E) & (E > 0)):
+        raise InputError(f"youngs_modulus must be finite and positive, got {youngs_modulus!r}")
+    if not np.all(np.isfinite(nu) & (nu > -1.0) & (nu < 0.5)):
+        raise InputError(f"poisson_ratio must be in (-1, 0.5), got {poisson_ratio!r}")
+    if dimension not in COMPONENTS:
+        raise InputError(f"dimension must be 1, 2 or 3, got {dimension!r}")
     k = COMPONENTS[dimension]
     if dimension == 1:
         return E[:, None, None].copy()

@@ -2,6 +2,7 @@
 bodies, the Hertz check, and bad input (docs/maths.md, sections 7 and 8)."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from ddcm_casadi.continuum import (Ball, Circle, Contact, Material, Plane, Spher
 from ddcm_casadi.continuum import fem
 from ddcm_casadi.data import MaterialDataset
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.ladder import EXACT_TOL  # solver tolerances 1e-9..1e-11 scaled: results agree to 1e-8
 from ddcm_casadi.metric import Metric, isotropic_elasticity
 from ddcm_casadi.reference import ContactQP
 
@@ -91,8 +93,8 @@ def test_compression_patch_test_every_formulation(dim, degree):
             gamma = cmp.formulations[ALL.index(name)].penalty_stiffness(cmp.problems.classical)
             if gamma is not None:
                 expected = _penalty_expected(exact, M / 0.01, gamma)
-            # Every pair carries the same pressure; roundoff is relative to the largest pressure
-            tol = 1e-8 * M * 3e-6 / 0.01
+            # Every pair carries the same pressure; relative to the largest pressure
+            tol = EXACT_TOL * M * 3e-6 / 0.01
             assert np.max(np.abs(s.p - expected)) <= tol, (name, s.step)
 
 
@@ -107,7 +109,7 @@ def test_classical_agrees_with_the_qp_reference(dim):
     for name in EXACT:
         r = cmp.results[("classical", name)]
         assert r.converged
-        assert np.max(np.abs(r.array("p") - ref.p)) <= 1e-6 * scale, name
+        assert np.max(np.abs(r.array("p") - ref.p)) <= EXACT_TOL * scale, name
 
 
 def _indented(dim: int, *, data=None):
@@ -127,8 +129,8 @@ def _indented(dim: int, *, data=None):
 # ----------------------------------------------------------- every formulation, both variants
 @pytest.mark.parametrize("dim", [2, 3])
 def test_every_formulation_and_variant_on_a_small_body(dim, tmp_path):
-    """All formulations converge in both variants; the exact ones agree with each other, and
-    DDCM on Hookean data is within the data's resolution of the classical pressure."""
+    """All formulations converge in both variants and the exact ones agree with each other
+    (DDCM accuracy against data size is the ddcm-validate rung)."""
     C = isotropic_elasticity(E, NU, dim)[0]
     points = 9 if dim == 2 else 5
     data = MaterialDataset.hookean_grid(C, -5e-4, 5e-4, points, c=Metric(C))
@@ -141,7 +143,7 @@ def test_every_formulation_and_variant_on_a_small_body(dim, tmp_path):
         # relative to the largest pressure, or to the problem's stress unit if none is larger
         scale = max(float(np.max(np.abs(ref))), model.scales_for(variant)["stress"])
         for name in EXACT:
-            assert np.max(np.abs(cmp.results[(variant, name)].array("p") - ref)) <= 1e-6 * scale, (variant, name)
+            assert np.max(np.abs(cmp.results[(variant, name)].array("p") - ref)) <= EXACT_TOL * scale, (variant, name)
     # outputs: VTU series and figures, small JSON fields
     written = model.save_outputs(cmp, tmp_path)
     names = {p.name for p in written}
@@ -158,7 +160,7 @@ def test_hertz_2d_on_the_example_mesh():
     one element of the contact zone (the accuracy a nodal contact can resolve)."""
     from ddcm_casadi.config import load_case
 
-    case = load_case("examples/cases/hertz2d.toml")
+    case = load_case(Path(__file__).resolve().parent.parent / "examples" / "cases" / "hertz2d.toml")
     model = case.model
     cmp = compare(model, ["fischer_burmeister"], variants=["classical"])
     r = cmp.results[("classical", "fischer_burmeister")]
@@ -167,7 +169,6 @@ def test_hertz_2d_on_the_example_mesh():
     h = mesh.mesh_size(model.mesh)[0]
     assert m["error_p0"] <= 0.02
     assert abs(m["a_fe"] - m["a_hertz"]) <= h
-    assert m["error_l2"] <= 0.05
 
 
 def test_hertz_formulas():

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -93,8 +94,8 @@ class Discretisation:
     def points_per_element(self) -> int:
         return self.basis.X.shape[1]
 
-    def vector_dofs(self) -> np.ndarray:
-        """``(d, N_scalar)``: the vector dofs at each scalar dof's location (one per component)."""
+    @cached_property
+    def _vector_dofs(self) -> np.ndarray:
         sb, vb = self.scalar_basis, self.basis
         out = np.full((self.dimension, sb.N), -1, dtype=np.int64)
         for name in ("nodal_dofs", "facet_dofs", "edge_dofs", "interior_dofs"):
@@ -104,6 +105,11 @@ class Discretisation:
         if np.any(out < 0):  # pragma: no cover - an element with dofs of another kind
             raise InputError("cannot map the scalar dofs of this element to its vector dofs")
         return out
+
+    def vector_dofs(self) -> np.ndarray:
+        """``(d, N_scalar)``: the vector dofs at each scalar dof's location (one per component;
+        computed once)."""
+        return self._vector_dofs
 
     def dof_locations(self) -> np.ndarray:
         """``(N_scalar, d)`` coordinates of the scalar dofs (nodes, then edge midpoints)."""

@@ -272,15 +272,10 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
     has_data = [m.data is not None for m in materials]
     E = nu = None
     if all(has_law):
-        E_mat, nu_mat = [], []
-        for mat in materials:
-            if not (np.isfinite(mat.youngs_modulus) and mat.youngs_modulus > 0):
-                raise InputError(f"youngs_modulus must be finite and positive, got {mat.youngs_modulus!r}")
-            if mat.poisson_ratio is None or not (-1.0 < float(mat.poisson_ratio) < 0.5):
-                raise InputError(f"poisson_ratio must be in (-1, 0.5), got {mat.poisson_ratio!r}")
-            E_mat.append(float(mat.youngs_modulus))
-            nu_mat.append(float(mat.poisson_ratio))
-        E, nu = np.array(E_mat)[point_region], np.array(nu_mat)[point_region]
+        for mat in materials:  # checks each law, with the values the user gave
+            isotropic_elasticity(mat.youngs_modulus, mat.poisson_ratio, d)
+        E = np.array([m.youngs_modulus for m in materials], dtype=float)[point_region]
+        nu = np.array([m.poisson_ratio for m in materials], dtype=float)[point_region]
     elif any(has_law):
         raise InputError("give youngs_modulus and poisson_ratio for every material, or for none (DDCM only)")
     dataset = None

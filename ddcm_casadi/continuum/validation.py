@@ -25,20 +25,17 @@ EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "cases" / "hertz2d.
 E, NU, R = 200e9, 0.3, 0.05
 
 
-def hertz_block(levels: int, *, degree: int = 1, n_steps: int = 3):
-    """The half block of the Hertz example (20 mm x 20 mm, R = 50 mm), graded ``levels`` times
-    over the contact zone (element size ``2 mm / 2^levels`` there)."""
-    from . import mesh
-    from .hertz import HertzReference
-    from .model import Contact, Material, Support, continuum_model
-    from .obstacles import Circle
+def hertz_block(levels: int, *, degree: int = 1):
+    """The Hertz example (``examples/cases/hertz2d.toml``) with ``degree`` elements and ``levels``
+    gradings of the contact zone (element size ``2 mm / 2^levels`` there), classical only."""
+    from ..casefile import read_document
+    from ..config import case_from_dict  # the public entry: registers the case kinds
 
-    body = mesh.refine_near(mesh.rectangle(0.02, 0.02, nx=10, ny=10, origin=(0.0, -0.02)), (0.0, 0.0), 0.0015,
-                            levels=levels, shrink=1.0, buffer=3)
-    return continuum_model(body, degree=degree, materials=[Material(youngs_modulus=E, poisson_ratio=NU)],
-                           supports=[Support("xmin", "x"), Support("ymin", "xy")],
-                           contacts=[Contact(Circle((0.0, R), R, travel=np.linspace(0.0, 4e-5, n_steps)), "ymax")],
-                           reference=HertzReference(E, NU, force_factor=2.0), name=f"hertz P{degree} L{levels}")
+    doc = read_document(EXAMPLE)
+    doc.pop("data", None)
+    doc["mesh"]["degree"] = degree
+    doc["mesh"]["refine_near"]["levels"] = levels
+    return case_from_dict(doc, base_dir=EXAMPLE.parent, source=f"hertz P{degree} L{levels}.toml").model
 
 
 def _fit(h, e) -> float:
@@ -49,7 +46,7 @@ def rung_hertz(*, levels=(2, 3, 4, 5)) -> list[Check]:
     from ..config import load_case
 
     out = []
-    model = load_case(EXAMPLE).model
+    model = load_case(EXAMPLE).model  # the example as it is, with its default mesh
     r = compare(model, [FB], variants=("classical",))["classical", FB]
     m = model.reference.measure(model, r.steps[-1].p)
     name = "Hertz 2-D, example mesh (P2) / classical / fischer_burmeister"
@@ -73,8 +70,9 @@ def rung_hertz(*, levels=(2, 3, 4, 5)) -> list[Check]:
         e = np.array([row[1][key] for row in rows])
         rate = _fit(h, e) if ok and np.all(e > 0) else float("nan")
         # Linear elements resolve the square-root edge of the pressure at rate 1/2 at least
-        # (code_aster asserts 0.5 for the pressure in L2); a rate <= 0 means no convergence.
-        out.append(Check.make(name, f"fitted rate of the {label} error (d log e / d log h), >= 0.5", rate, 1.0, 0.5,
+        # (code_aster asserts 0.5 for the pressure in L2); a rate <= 0 means no convergence. The
+        # window [0.5, 2.5] is a lower bound: 2 is the best rate of P1 even for smooth fields.
+        out.append(Check.make(name, f"fitted rate of the {label} error (d log e / d log h), >= 0.5", rate, 1.5, 1.0,
                               note=seq if key == "error_l2" else ""))
     return out
 
@@ -105,7 +103,7 @@ def rung_continuum_ddcm(*, points=(9, 17, 33, 65)) -> list[Check]:
     N = np.array(points, float) ** 3
     slope = _fit(N, np.array(errs)) if all(e > 0 for e in errs) else float("nan")
     note = ("errors " + ", ".join(f"N={int(n)}: {e:.2e}" for n, e in zip(N, errs))
-            + f"; expected -1/3: the error follows the data spacing, N^(-1/k) with k = 3 Mandel components")
+            + "; expected -1/3: the error follows the data spacing, N^(-1/k) with k = 3 Mandel components")
     name = "2-D indented block / ddcm / fischer_burmeister"
     return [Check.make(name, "converged data sizes", sum(conv), len(points), 0),
             Check.make(name, "fitted rate d log(error u) / d log(N)", slope, -1.0 / 3.0, 0.15, note=note)]
