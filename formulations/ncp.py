@@ -158,27 +158,31 @@ class FBSystem:
     def branch_system(self):
         """The system with each pair on one piece: ``-a_i = 0`` (``branch_i = 1``) or ``-b_i = 0``.
 
-        ``mpcc``: the KKT system of the piece, multiplier ``theta_i``, ``nu = 0``. ``mcp``:
-        ``F = 0`` and the pieces. Built once, when first needed. Returns ``(rj, r, jacobian,
-        linear)``; ``linear`` says that the Jacobian depends on neither the unknowns nor the
-        parameters (then one factorisation serves every solve on the same pieces). Built with the
-        system when the predictor is on, else on first use (most solves never need it).
+        ``mpcc``: the KKT system of the piece, multiplier ``theta_i``; ``nu = 0`` except on the
+        pairs selected by the parameter ``corner``, which are held at the biactive corner with
+        the rows of the corner system (``a_i = 0`` with ``theta_i``, ``b_i = 0`` with ``nu_i``,
+        the sign convention of :meth:`corner_multipliers`). ``mcp``: ``F = 0`` and the pieces.
+        Built once, when first needed. Returns ``(rj, r, jacobian, linear)``; ``linear`` says that
+        the Jacobian depends on neither the unknowns nor the problem's parameters (then one
+        factorisation serves every solve on the same pieces). Built with the system when the
+        predictor is on, else on first use (most solves never need it).
         """
         if self._branch is None:
             problem, a, b, z, eta, theta, nu = self._pieces
-            P = problem.parameters.extend(branch=self.nc)
+            P = problem.parameters.extend(branch=self.nc, corner=self.nc)
             self.piece_parameters = P
-            branch = P["branch"]
+            branch, sel = P["branch"], P["corner"]
             piece = -(branch * a + (1 - branch) * b)
             if problem.kind == "mcp":
                 r = ca.vertcat(problem.residual, piece)
             else:
-                lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, piece)
-                r = ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, piece, nu)
+                first = sel * a + (1 - sel) * piece
+                lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, first) + ca.dot(nu, sel * b)
+                r = ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, first,
+                               sel * b + (1 - sel) * nu)
             J = ca.jacobian(r, z)
             linear = not ca.depends_on(J, ca.vertcat(z, problem.params))
             rj = NumericFunction(ca.Function("fb_branch_rj", [z, P.vector], [r, J]))
             self._branch = (rj, NumericFunction(ca.Function("fb_branch_r", [z, P.vector], [r])), SparseJacobian(rj),
                             linear)
         return self._branch
-

@@ -96,14 +96,15 @@ class ActiveSetSolver:
         x, p, st = system.split(best.z)
         return x, p, st, best, mu, stages
 
-    def _solve_piece(self, z, P, branch, kw) -> NewtonResult | None:
-        """Newton on the piece system ``branch`` (``P``: the problem's parameter values); for a
-        linear model with a cached factorisation. ``None`` if the piece system is singular."""
+    def _solve_piece(self, z, P, branch, held, kw) -> NewtonResult | None:
+        """Newton on the piece system ``branch`` with the pairs ``held`` at the corner (``P``: the
+        problem's parameter values); for a linear model with a cached factorisation. ``None`` if
+        the piece system is singular."""
         rj, r, jac, linear = self.system.branch_system()
-        Pb = self.system.piece_parameters.pack(P, branch=branch)
+        Pb = self.system.piece_parameters.pack(P, branch=branch, corner=held.astype(float))
         if not linear:
             return newton_solve(rj, r, z, Pb, **dict(kw, jacobian=jac))
-        key = branch.tobytes()
+        key = branch.tobytes() + held.tobytes()
         lu = self._lu.pop(key, None)
         if lu is None:
             res, J = rj(z, Pb)
@@ -161,29 +162,33 @@ class ActiveSetSolver:
 
         A sign-consistent result is accepted if strictly complementary; with biactive pairs (signs
         hold to 1e-12 relative) it is accepted for ``mcp`` (any sign-consistent point solves the
-        pairs) and, for ``mpcc``, only after the corner polish finds it B-stationary. If the
-        iteration cycles, the pairs that switched back and forth are the biactive candidates: the
-        corner polish on them decides. A piece solve that misses its tolerance still chooses the
-        switches but is never accepted. ``None`` if a piece is singular, the corner is not
-        B-stationary or ``max_switches`` is reached. Returns ``(result, spent)``, ``spent`` the
-        linear solves and Newton steps (counted also when it fails).
+        pairs), and for ``mpcc`` those pairs are *held* at the corner as below. If the
+        iteration cycles, the pairs that switched back and forth are the biactive candidates: they
+        are held at the corner (``a_i = b_i = 0``, in the same linear piece system) while the
+        others go on switching; a result with held pairs is accepted only if B-stationary, and a
+        held pair whose multiplier says otherwise is released onto the piece it points to. A piece
+        solve that misses its tolerance still chooses the switches but is never accepted. ``None``
+        if a piece is singular, a corner is released too often or ``max_switches`` is reached.
+        Returns ``(result, spent)``, ``spent`` the linear solves and Newton steps (counted also
+        when it fails).
         """
         if not np.all(np.isfinite(z)):
             return None, 0
-        P = self.system.problem_values(base)
+        system = self.system
+        P = system.problem_values(base)
         kw = dict(tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
-        a, b = self.system.ab(z, P)
+        a, b = system.ab(z, P)
         branch = (identify(a, b) == CONTACT).astype(float)
-        seen, total, flips, releases = set(), 0, np.zeros(self.system.nc, dtype=int), 3
-        closest, violation = None, np.inf  # the iterate with the smallest sign violation
+        held = np.zeros(system.nc, dtype=bool)
+        seen, total, flips, releases = set(), 0, np.zeros(system.nc, dtype=int), 3
         for _ in range(max_switches):
-            seen.add(branch.tobytes())
-            res = self._solve_piece(z, P, branch, kw)
+            seen.add(branch.tobytes() + held.tobytes())
+            res = self._solve_piece(z, P, branch, held, kw)
             if res is None or not np.all(np.isfinite(res.z)):
                 return None, total
             total += res.iterations
-            other = self._signs(res.z, P, branch)
-            roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other), initial=0.0)))
+            other = np.where(held, np.inf, self._signs(res.z, P, branch))
+            roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other[~held]), initial=0.0)))
             worst = -float(np.min(other, initial=np.inf))
             if not res.converged:
                 # An ill-conditioned piece (a far-off start) may miss residual_tol; its solution
@@ -191,35 +196,44 @@ class ActiveSetSolver:
                 if worst <= roundoff:
                     return None, total
             elif np.all(other > 0):
-                res.iterations, res.message = total, "converged (active set)"
-                return res, total
-            elif worst <= roundoff:
-                if not self.system.corner:  # mcp: signs hold to roundoff; the caller checks the residual
+                if not held.any():
                     res.iterations, res.message = total, "converged (active set)"
                     return res, total
-                res, total, _ = self._corner_after(res.z, base, np.abs(other) <= roundoff, kw, total)
-                return res, total
-            if worst < violation:
-                closest, violation = res.z, worst
+                wrong_theta, wrong_nu = b_stationarity(*system.corner_multipliers(res.z), held)
+                if not (wrong_theta.any() or wrong_nu.any()):
+                    res.iterations, res.message = total, "converged (biactive corner)"
+                    return res, total
+                if releases == 0:
+                    return None, total
+                # Not B-stationary: leave the corner along the piece its multipliers point to.
+                releases -= 1
+                held &= ~(wrong_theta | wrong_nu)
+                branch = np.where(wrong_theta, 0.0, np.where(wrong_nu, 1.0, branch))
+                z, seen, flips[:] = res.z, set(), 0
+                continue
+            elif worst <= roundoff:
+                if not system.corner:  # mcp: signs hold to roundoff; the caller checks the residual
+                    res.iterations, res.message = total, "converged (active set)"
+                    return res, total
+                if releases == 0:
+                    return None, total
+                # Biactive to roundoff: hold those pairs at the corner (accepted if B-stationary).
+                releases -= 1
+                held |= np.abs(other) <= roundoff
+                z, seen, flips[:] = res.z, set(), 0
+                continue
             z = res.z
             switch = other < 0
             flips += switch
             branch = np.where(switch, 1.0 - branch, branch)
-            if branch.tobytes() in seen:
+            if branch.tobytes() + held.tobytes() in seen:
                 # Cycling between pieces: the solution is at the corner of the pairs that switch
                 # back and forth, if anywhere.
-                if not self.system.corner:
+                if not system.corner or releases == 0:
                     return None, total
-                res, total, wrong = self._corner_after(closest, base, flips >= 2, kw, total)
-                if res is not None or wrong is None or releases == 0:
-                    return res, total
-                # Not B-stationary: leave the corner along the piece its multipliers point to
-                # (an active-set step), then go on switching.
                 releases -= 1
-                z, wrong_theta, wrong_nu = wrong
-                branch = np.where(wrong_theta, 0.0, np.where(wrong_nu, 1.0, branch))
+                held |= flips >= 2
                 seen, flips[:] = set(), 0
-                closest, violation = None, np.inf
         return None, total
 
     def _corner_after(self, z, base, selection, kw, iterations):
