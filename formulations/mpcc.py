@@ -65,6 +65,12 @@ class MPCC(Formulation):
             Smallest ``tau``; below it (or when the homotopy stalls) the branch NLP is solved.
         max_homotopy : int
             Maximum number of IPOPT solves along the homotopy (with recoveries).
+        early_branch : int
+            After each relaxed solve, also try the branch NLP of the branch identified there
+            (``g_i = 0`` where ``g_i <= p_i``, else ``p_i = 0``; mpecopt's phase II), at most this
+            many times while it fails; 0: only when the homotopy converges near a corner or stalls.
+            An accepted branch solution passes the same tests (signs, B-stationarity,
+            ``comp_tol``, ``residual_tol``) as at the end of the homotopy.
         ipopt : dict
             Extra IPOPT options passed through unchanged (copied).
         """
@@ -75,6 +81,7 @@ class MPCC(Formulation):
         comp_tol: float = 1e-11
         residual_tol: float = 1e-10
         max_homotopy: int = 30
+        early_branch: int = 2
         ipopt: dict = field(default_factory=dict)
 
     def _validate(self) -> None:
@@ -150,7 +157,8 @@ class _BuiltMPCC(BuiltFormulation):
         out = scholtes_homotopy(relaxed, measure=measure, branch_nlp=lambda w, tau: self._branch_nlp(w, params, tau),
                                 near_corner=lambda w, tau: self._near_corner(w, params, tau), w0=w, tau0=o.tau0,
                                 tau_factor=o.tau_factor, tau_min=o.tau_min, comp_tol=o.comp_tol,
-                                residual_tol=o.residual_tol, max_homotopy=o.max_homotopy)
+                                residual_tol=o.residual_tol, max_homotopy=o.max_homotopy,
+                                early_branch=o.early_branch)
         return self._finish(out.w[:nx], out.w[nx:], params, converged=out.converged, iterations=out.iterations,
                             outer=out.steps, message=out.message)
 

@@ -23,7 +23,7 @@ _EXPORTS = {
     "continuum_model": "model", "ContinuumModel": "model", "Material": "model", "Support": "model",
     "Traction": "model", "BodyForce": "model", "Contact": "model",
     "Plane": "obstacles", "Ball": "obstacles", "Circle": "obstacles", "Sphere": "obstacles",
-    "Cylinder": "obstacles", "SignedDistance": "obstacles",
+    "Cylinder": "obstacles", "FlatPunch": "obstacles", "SignedDistance": "obstacles",
     "HertzReference": "hertz",
 }
 

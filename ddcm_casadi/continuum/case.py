@@ -13,7 +13,7 @@ from ..data import MaterialDataset
 from ..errors import InputError
 from ..metric import COMPONENTS, Metric, isotropic_elasticity
 from .hertz import HertzReference
-from .obstacles import Ball, Cylinder, Plane
+from .obstacles import Ball, Cylinder, FlatPunch, Plane
 
 # scikit-fem and meshio are imported when a [mesh] case is parsed, not when the kind registers:
 # the paper's example does not pay for them.
@@ -49,9 +49,10 @@ Continua
 
     [[contact]]                  # a rigid obstacle and the boundary that may touch it
     boundary = "ymax"
-    obstacle = "circle"          # plane, circle (2-D), sphere (3-D), cylinder (3-D)
+    obstacle = "circle"          # plane, circle (2-D), sphere (3-D), cylinder (3-D), punch
     radius = 0.05                # circle/sphere/cylinder; center = [..] (circle/sphere)
-    center = [0.0, 0.05]         # plane: point, normal; cylinder: point, axis
+    center = [0.0, 0.05]         # plane: point, normal; cylinder: point, axis;
+                                 # punch: center (of its face), normal, half_width, edge_radius
     direction = [0.0, -1.0]      # direction of travel
     travel = [0.0, 1e-5, 2e-5]   # m, one value per step (or one number: standing still)
 
@@ -75,7 +76,7 @@ e33, sqrt(2) e23, sqrt(2) e13, sqrt(2) e12]``. The result is
 _MESH = {"shape", "size", "divisions", "origin", "radius", "center", "refine", "path", "degree", "refine_near"}
 _HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus", "poisson_ratio"}
 _SHAPES = ("rectangle", "box", "disc", "half_disc", "ball")
-_OBSTACLES = ("plane", "circle", "sphere", "cylinder")
+_OBSTACLES = ("plane", "circle", "sphere", "cylinder", "punch")
 
 
 def _keys(label: str, table: dict, known: set) -> None:
@@ -159,11 +160,12 @@ def _obstacle(label: str, t: dict, d: int):
     if kind not in _OBSTACLES:
         raise InputError(f"[{label}] obstacle must be one of {', '.join(_OBSTACLES)}, got {show(kind)}")
     need = {"plane": ("point", "normal"), "circle": ("center", "radius"), "sphere": ("center", "radius"),
-            "cylinder": ("point", "axis", "radius")}[kind]
+            "cylinder": ("point", "axis", "radius"), "punch": ("center", "normal", "half_width")}[kind]
     for key in need:
         if key not in t:
             raise InputError(f"[{label}] a {kind} needs {key!r}")
-    allowed = set(need) | {"boundary", "obstacle", "direction", "travel", "name"}
+    allowed = set(need) | {"boundary", "obstacle", "direction", "travel", "name"} | (
+        {"edge_radius"} if kind == "punch" else set())
     extra = sorted(set(t) - allowed)
     if extra:
         raise InputError(f"[{label}] a {kind} takes no {extra[0]!r}")
@@ -184,6 +186,10 @@ def _obstacle(label: str, t: dict, d: int):
     if kind == "plane":
         return Plane(point=vector(label, "point", t["point"], d), normal=vector(label, "normal", t["normal"], d),
                      **common)
+    if kind == "punch":
+        return FlatPunch(center=vector(label, "center", t["center"], d), normal=vector(label, "normal", t["normal"], d),
+                         half_width=positive(label, "half_width", t["half_width"]),
+                         edge_radius=number(label, "edge_radius", t.get("edge_radius", 0.0)), **common)
     if kind == "cylinder":
         return Cylinder(point=vector(label, "point", t["point"], 3), axis=vector(label, "axis", t["axis"], 3),
                         radius=positive(label, "radius", t["radius"]), **common)
@@ -330,8 +336,8 @@ casefile.register_case_kind(
     "mesh",
     sections={"mesh": _MESH, "material": {"region", "youngs_modulus", "poisson_ratio", "data"},
               "supports": {"boundary", "fix"}, "loads": {"boundary", "traction", "body_force", "region"},
-              "contact": {"boundary", "obstacle", "radius", "center", "point", "normal", "axis", "direction",
-                          "travel", "name"},
+              "contact": {"boundary", "obstacle", "radius", "center", "point", "normal", "axis", "half_width",
+                          "edge_radius", "direction", "travel", "name"},
               "loading": {"load_factors"}, "hertz": {"obstacle", "force_factor"}},
     arrays={"supports", "loads", "contact"}, tables={"material"}, parse=parse_case,
     uses="[material], [[supports]] and [[contact]]", default_name="continuum")

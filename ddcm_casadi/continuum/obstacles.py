@@ -16,7 +16,7 @@ assumption: the obstacle's travel and the displacements are small against its cu
 
 Obstacles: :class:`Plane`, :class:`Ball` (a circle in 2-D, i.e. a cylinder in plane strain; a
 sphere in 3-D), :class:`Cylinder` (3-D, a finite axis direction, infinite length) and
-:class:`SignedDistance` (any function).
+:class:`FlatPunch` (a flat punch with rounded edges, 2-D or 3-D) and :class:`SignedDistance` (any function).
 """
 
 from __future__ import annotations
@@ -193,6 +193,86 @@ class Ball(Obstacle):
 
     def drawing(self, step_travel: float) -> dict:
         return dict(kind="circle", center=tuple(self.center + self.offset(step_travel)), radius=self.radius)
+
+
+@dataclass(frozen=True, eq=False)
+class FlatPunch(Obstacle):
+    r"""A rigid flat punch with rounded edges: a strip of half-width ``half_width`` (2-D, plane
+    strain) or a cylinder of radius ``half_width`` (3-D), its flat face through ``center`` with
+    outward normal ``normal`` (towards the body), the edge rounded with ``edge_radius``.
+
+    With the height above the face ``h = n . (x - c)`` and the lateral distance
+    ``rho = |x - c - h n|``, the punch is the set ``{rho <= a - r, h <= -r}`` grown by ``r``
+    (``a`` the half-width, ``r`` the edge radius), so its signed distance is
+
+    .. math::  \phi = |\max(q, 0)| + \min(\max(q_1, q_2), 0) - r ,\qquad
+               q = (
+ho - (a - r),\; h + r) .
+
+    ``edge_radius = 0`` gives a sharp-edged punch, whose edge normal is not defined; a small
+    radius resolved by a few contact nodes is the usual model of a machined edge.
+    """
+
+    center: Sequence[float] = (0.0, 0.0)
+    normal: Sequence[float] = (0.0, 1.0)
+    half_width: float = 1.0
+    edge_radius: float = 0.0
+    kind = "punch"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center", _vector("punch center", self.center))
+        object.__setattr__(self, "normal", _unit("punch normal", self.normal, self.center.size))
+        object.__setattr__(self, "half_width", _radius(self.half_width))
+        r = float(self.edge_radius)
+        if not (math.isfinite(r) and 0.0 <= r <= self.half_width):
+            raise InputError(f"punch edge_radius must be in [0, half_width = {self.half_width:g}], got {self.edge_radius!r}")
+        object.__setattr__(self, "edge_radius", r)
+
+    @property
+    def dimension(self) -> int:
+        return self.center.size
+
+    def _local(self, x):
+        v = np.asarray(x, dtype=float) - self.center
+        h = v @ self.normal
+        lateral = v - h[:, None] * self.normal
+        rho = np.linalg.norm(lateral, axis=1)
+        q = np.column_stack([rho - (self.half_width - self.edge_radius), h + self.edge_radius])
+        return q, lateral, rho
+
+    def phi(self, x):
+        q, _, _ = self._local(np.atleast_2d(x))
+        return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0) - self.edge_radius
+
+    def grad_phi(self, x):
+        q, lateral, rho = self._local(np.atleast_2d(x))
+        out = np.maximum(q, 0.0)
+        norm = np.linalg.norm(out, axis=1)
+        inside = norm == 0.0  # the nearest face decides
+        out[inside] = np.where((q[inside, 0] > q[inside, 1])[:, None], [1.0, 0.0], [0.0, 1.0])
+        out /= np.linalg.norm(out, axis=1, keepdims=True)
+        e_rho = np.divide(lateral, rho[:, None], out=np.zeros_like(lateral), where=rho[:, None] > 0)
+        if np.any((out[:, 0] > 0) & (rho == 0)):
+            raise InputError(f"obstacle {self.name!r}: a contact node sits on the punch axis at its edge")
+        return out[:, :1] * e_rho + out[:, 1:] * self.normal
+
+    def describe(self) -> dict:
+        return dict(super().describe(), center=self.center.tolist(), normal=self.normal.tolist(),
+                    half_width=self.half_width, edge_radius=self.edge_radius)
+
+    def drawing(self, step_travel: float) -> dict | None:
+        if self.dimension != 2:
+            return None
+        a, r, n = self.half_width, self.edge_radius, self.normal
+        t = np.array([-n[1], n[0]])
+        # The outline in the face's frame (lateral, height): up the sides to 4 half-widths,
+        # round the edges (arcs about (+-(a - r), -r)) along the face.
+        s = np.linspace(0.0, 0.5 * np.pi, 12)
+        right = np.column_stack([a - r + r * np.sin(s), -r + r * np.cos(s)])
+        left = right[::-1] * [-1.0, 1.0]
+        pts = np.vstack([[(-a, -4 * a)], left, right, [(a, -4 * a)]])
+        c = self.center + self.offset(step_travel)
+        return dict(kind="outline", points=[tuple(c + x * t + y * n) for x, y in pts])
 
 
 def Circle(center, radius, **kw) -> Ball:

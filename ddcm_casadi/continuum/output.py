@@ -333,7 +333,7 @@ def _boundary_edges(tri: np.ndarray) -> np.ndarray:
 
 def _draw_obstacles(ax, obstacles: Sequence[Mapping[str, Any]], lo: np.ndarray,
                     hi: np.ndarray) -> None:
-    from matplotlib.patches import Circle
+    from matplotlib.patches import Circle, Polygon
 
     for i, ob in enumerate(obstacles):
         kind = ob.get("kind") if isinstance(ob, Mapping) else None
@@ -351,8 +351,13 @@ def _draw_obstacles(ax, obstacles: Sequence[Mapping[str, Any]], lo: np.ndarray,
             # long enough to cross the whole view from wherever the point lies
             half = 2.0 * (np.linalg.norm(hi - lo) + np.linalg.norm(p - (lo + hi) / 2))
             ax.plot(*np.array([p - half * t, p + half * t]).T, color="0.2", lw=1.5, zorder=0)
+        elif kind == "outline":
+            pts = _as_float(f"obstacles[{i}] points", ob.get("points"))
+            if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 3:
+                raise InputError(f"obstacles[{i}] outline needs at least 3 points (x, y)")
+            ax.add_patch(Polygon(pts, closed=True, facecolor="0.85", edgecolor="0.2", lw=1.0, zorder=0))
         else:
-            raise InputError(f"obstacles[{i}] must be a dict with kind 'circle' or 'plane'")
+            raise InputError(f"obstacles[{i}] must be a dict with kind 'circle', 'plane' or 'outline'")
 
 
 def figure_deformed_body(points: Any, cells: Any, *, displacement: Any, values: Any,
@@ -384,8 +389,9 @@ def figure_deformed_body(points: Any, cells: Any, *, displacement: Any, values: 
         deformed; they match the drawn mesh only if ``scale`` is 1).
     obstacles : list of dict, optional
         2-D rigid obstacles, drawn at their true position (not magnified) and clipped to the
-        body's view: ``{"kind": "circle", "center": (x, y), "radius": r}`` or
-        ``{"kind": "plane", "point": (x, y), "normal": (nx, ny)}``. Ignored in 3-D.
+        body's view: ``{"kind": "circle", "center": (x, y), "radius": r}``,
+        ``{"kind": "plane", "point": (x, y), "normal": (nx, ny)}`` or
+        ``{"kind": "outline", "points": [(x, y), ...]}`` (a closed polygon). Ignored in 3-D.
     title : str
         Title; " (displacements x <scale>)" is added.
 

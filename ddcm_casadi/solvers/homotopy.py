@@ -26,7 +26,7 @@ def scholtes_homotopy(relaxed: Callable, *, measure: Callable[[np.ndarray], tupl
                       branch_nlp: Callable[[np.ndarray, float], tuple[np.ndarray, int, bool]],
                       near_corner: Callable[[np.ndarray, float], bool], w0: np.ndarray, tau0: float,
                       tau_factor: float, tau_min: float, comp_tol: float, residual_tol: float,
-                      max_homotopy: int) -> HomotopyResult:
+                      max_homotopy: int, early_branch: int = 0) -> HomotopyResult:
     """Solve relaxed problems along ``tau <- tau_factor tau`` until ``max |min(g, p)| <= comp_tol``.
 
     ``relaxed(w, tau, warm) -> (status, w, warm, iterations)`` solves one relaxed NLP from
@@ -39,6 +39,12 @@ def scholtes_homotopy(relaxed: Callable, *, measure: Callable[[np.ndarray], tupl
     ``min(g, p) <= comp_tol`` bounds only the smaller of the two, and a stalled homotopy (two
     steps that do not halve ``comp``, or ``tau < tau_min``) ends with the branch NLP
     (``branch_nlp(w, tau) -> (w, iterations, accepted)``).
+
+    ``early_branch > 0``: after each successful relaxed solve that is not yet complementary, the
+    branch NLP of the identified branch is tried as well (phase II of mpecopt), at most
+    ``early_branch`` times while it fails; an accepted branch solution ends the homotopy. It is
+    held to the same tests as the final branch NLP (signs, B-stationarity, ``comp_tol``,
+    ``residual_tol``), so it changes the cost, not what counts as a solution.
     """
     w, warm = np.asarray(w0, float), None
     tau, last_good_tau = tau0, None
@@ -69,6 +75,13 @@ def scholtes_homotopy(relaxed: Callable, *, measure: Callable[[np.ndarray], tupl
                 if accepted:
                     w, message = polished, "converged (branch NLP polish)"
             break
+        if early_branch > 0:
+            polished, its, accepted = branch_nlp(w, tau)
+            iterations += its
+            if accepted:
+                w, converged, message = polished, True, "converged (branch NLP, identified early)"
+                break
+            early_branch -= 1
         stalls = stalls + 1 if comp > 0.5 * comp_prev else 0
         comp_prev = comp
         if stalls >= 2 or tau * tau_factor < tau_min:
