@@ -5,7 +5,10 @@ A case file (TOML or JSON, one schema) has one top-level section that names its 
 kind shares:
 
 - ``[data]`` or ``[[data]]``: material data sets (a CSV file, or generated Hookean data);
-- ``[ddcm]``: ``c`` (the default metric, Pa) and ``max_outer`` (alternating projections per step);
+- ``[ddcm]``: ``c`` (the default metric, Pa), ``max_outer`` (alternating projections per step) and
+  the search options ``start``, ``initial``, ``warm``, ``seed``, ``restarts``, ``improve``,
+  ``restart_neighbours``, ``greedy_*``, ``exact_max``, ``variant``, ``lcdd_neighbours``
+  (:class:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions`);
 - ``[formulations.NAME]``: options of one contact formulation (checked against the registry).
 
 A model kind registers itself with :func:`register_case_kind` (its section, the keys of its
@@ -39,11 +42,13 @@ else:  # pragma: no cover
 from .data import MAX_DATA_POINTS, MaterialDataset, check_positive
 from .errors import InputError
 from .model import ContactModel
+from .solvers.ddcm_options import KEYS as DDCM_OPTION_KEYS
+from .solvers.ddcm_options import DDCMOptions
 
 #: Keys of the sections every kind shares (``None``: checked elsewhere, here against the registry).
 COMMON_SECTIONS: dict[str, set[str] | None] = {
     "data": {"path", "hookean", "c"},
-    "ddcm": {"c", "max_outer"},
+    "ddcm": {"c", "max_outer"} | DDCM_OPTION_KEYS,
     "formulations": None,
 }
 _HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus"}
@@ -58,6 +63,8 @@ class Case:
     formulation_options: dict[str, dict] = field(default_factory=dict)
     ddcm_max_outer: int = 100
     source: str = "paper example"
+    #: ``[ddcm]`` start, seed, restarts, improve, ... (:class:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions`).
+    ddcm_options: DDCMOptions = field(default_factory=DDCMOptions)
 
 
 #: ``parse(doc, *, base_dir, source, name) -> Case`` of a model kind.
@@ -356,8 +363,11 @@ def case_from_dict(doc: dict, *, base_dir: Path = Path("."), source: str = "<dic
     """
     _check_sections(doc, source)
     kind = _kind_of(doc, source)
+    ddcm = DDCMOptions.from_mapping(doc.get("ddcm", {}))  # checked before any work
     name = Path(source).stem if source != "<dict>" else None
-    return kind.parse(doc, base_dir=base_dir, source=source, name=name or kind.default_name)
+    case = kind.parse(doc, base_dir=base_dir, source=source, name=name or kind.default_name)
+    case.ddcm_options = ddcm
+    return case
 
 
 # ----------------------------------------------------------------------------------- shared pieces

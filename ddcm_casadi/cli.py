@@ -6,6 +6,8 @@ stops, or a 1-D/2-D/3-D truss; the format is described in ddcm_casadi/config.py,
 kind's sections next to its parser in ddcm_casadi/bar.py and ddcm_casadi/truss.py). --out DIR
 writes results.csv, results.json (for models other than the one-unknown bar with the per-step
 fields of every run: nodal displacements, contact forces, ...) and the figures that suit the model.
+--set KEY=VALUE overrides one value of the case file (a dotted key and a TOML value, applied to
+the document before it is validated; see ddcm_casadi/overrides.py) and is recorded in results.json.
 """
 
 from __future__ import annotations
@@ -23,10 +25,11 @@ import scipy
 from ddcm_casadi import formulations as registry
 
 from . import __version__
-from .config import Case, default_case, load_case
+from .config import Case, default_case
 from .errors import DDCMError, InputError
 from .harness import VARIANTS, Comparison, compare
 from .io import prepare_output_dir, write_csv_atomic, write_json_atomic
+from .overrides import load_case_with_overrides
 
 EXIT_INPUT = 2
 EXIT_NOT_CONVERGED = 3
@@ -55,6 +58,9 @@ def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="ddcm-compare", description=__doc__,
                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", metavar="CASE", help="case file, .toml or .json (default: the paper's example)")
+    p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], dest="overrides",
+                   help="override a value of the case file: a dotted key (ddcm.c, data.0.c, "
+                        "formulations.penalty.gamma) and a TOML value; repeatable, needs --config")
     p.add_argument("--formulations", metavar="A,B", help=f"subset of: {','.join(registry.available())}")
     p.add_argument("--variants", metavar="A,B",
                    help=f"subset of: {','.join(VARIANTS)} (default: those the case supports)")
@@ -142,14 +148,15 @@ def parameters(case: Case, cmp: Comparison) -> dict:
         for the paper's bar ``length``, ``area``, ``youngs_modulus``, ``positions``; for any other
         model its ``name``, sizes, ``load_parameter_name`` and values, and the moduli, for trusses
         also ``dimension``, ``n_nodes``, ``n_members``), ``data`` (:func:`describe_dataset`),
-        ``ddcm_max_outer`` and ``formulations`` (options with their problem-dependent defaults
-        resolved, e.g. ``gamma_used``).
+        ``ddcm_max_outer``, ``ddcm`` (the search options,
+        :meth:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions.describe`) and ``formulations``
+        (options with their problem-dependent defaults resolved, e.g. ``gamma_used``).
     """
     m = case.model
     forms = {f.name: f.resolved_options(cmp.problems.classical) for f in cmp.formulations}
     # A dict display, not keywords: a model record may not clash with the run's own keys.
     return {"case": case.source, **m.describe(), "data": describe_dataset(m.dataset),
-            "ddcm_max_outer": case.ddcm_max_outer, "formulations": forms}
+            "ddcm_max_outer": case.ddcm_max_outer, "ddcm": case.ddcm_options.describe(), "formulations": forms}
 
 
 def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
@@ -173,7 +180,13 @@ def versions() -> dict:
 
 def run(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    case = load_case(args.config) if args.config else default_case()
+    if args.overrides and not args.config:
+        raise InputError("--set needs --config CASE (the paper's built-in example has no case file to override)")
+    overrides: dict = {}
+    if args.config:
+        case, overrides = load_case_with_overrides(args.config, args.overrides)
+    else:
+        case = default_case()
     names = _split(args.formulations, "--formulations") or registry.available()
     for n in names:
         if n not in registry.available():
@@ -191,13 +204,16 @@ def run(argv: list[str] | None = None) -> int:
     if not args.quiet:
         print(f"ddcm-compare: {case.source}: {case.model.n_steps} steps, "
               f"{len(names)} formulations x {len(variants)} variants", file=sys.stderr)
-    cmp = compare(case.model, selection, variants=variants, ddcm_max_outer=case.ddcm_max_outer, progress=progress)
+    cmp = compare(case.model, selection, variants=variants, ddcm_max_outer=case.ddcm_max_outer,
+                  ddcm=case.ddcm_options, progress=progress)
     print(cmp.table())
 
     if out is not None:
         # Build both records before writing either, so a failure here leaves no partial results.
         rows = cmp.rows()
         doc = dict(parameters=parameters(case, cmp), versions=versions(), summary=cmp.summary())
+        if overrides:
+            doc["parameters"]["overrides"] = overrides
         per_step = fields(cmp)
         if per_step is not None:
             doc["fields"] = per_step
@@ -215,15 +231,21 @@ def run(argv: list[str] | None = None) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
+def run_guarded(prog: str, run_command, argv: list[str] | None, *, interrupted: str = "interrupted") -> int:
+    """``run_command(argv)``, with an input error as one line ``prog: error: ...`` and exit status
+    :data:`EXIT_INPUT`, and Ctrl-C as ``prog: interrupted`` and status 130 (every command's ``main``)."""
     try:
-        return run(argv)
+        return run_command(argv)
     except DDCMError as exc:
-        print(f"ddcm-compare: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
-        print("ddcm-compare: interrupted", file=sys.stderr)
+        print(f"{prog}: {interrupted}", file=sys.stderr)
         return 130
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_guarded("ddcm-compare", run, argv)
 
 
 if __name__ == "__main__":  # pragma: no cover

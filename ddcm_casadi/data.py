@@ -117,6 +117,13 @@ class MaterialDataset:
         _, idx = self._tree.query(self._coords(strain, stress))
         return np.asarray(idx, dtype=np.intp)
 
+    def k_nearest(self, strain, stress, k: int) -> np.ndarray:
+        """Indices of the ``k`` data points nearest to each state, nearest first: ``(n, k)``
+        (``k`` is capped at the data set's size)."""
+        k = min(int(k), len(self))
+        _, idx = self._tree.query(self._coords(strain, stress), k=k)
+        return np.asarray(idx, dtype=np.intp).reshape(-1, k)
+
     def describe(self) -> dict:
         """Size, metric and strain range, for results files."""
         return dict(points=len(self), c=self.metric.describe(), components=self.k,
@@ -356,6 +363,17 @@ class PointData:
         for k, pts in enumerate(self._groups):
             if pts.size:
                 out[pts] = self.datasets[k].nearest(strain[pts], stress[pts]) + self.offsets[k]
+        return out
+
+    def k_nearest(self, strain, stress, k: int) -> np.ndarray:
+        """The ``k`` nearest data of each point in its own set (global indices, nearest first;
+        ``k`` capped at the smallest set's size)."""
+        strain, stress = self._per_point(strain), self._per_point(stress)
+        k = min(int(k), min(len(d) for d in self.datasets))
+        out = np.empty((strain.shape[0], k), dtype=np.intp)
+        for j, pts in enumerate(self._groups):
+            if pts.size:
+                out[pts] = self.datasets[j].k_nearest(strain[pts], stress[pts], k) + self.offsets[j]
         return out
 
     def nearest_warm(self, strain, stress, previous, **kw) -> np.ndarray:

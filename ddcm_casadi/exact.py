@@ -11,6 +11,14 @@ and reused for any number of right-hand sides (load steps, data points).
 This is independent of the formulations (no complementarity function, no IPOPT) and serves as the
 reference the tests and the DDCM driver check against. Its cost grows as ``3^nc``: it is meant for
 problems with few contact pairs (``max_pairs``).
+
+Many projections at once (the DDCM global optimum). When only a few parameters change between
+the projections, ``P = P0 + D c`` with ``D`` (n_params x r) and one ``c`` (r) per projection (the
+data assigned to the points), every branch's solution is affine in ``c``, ``z = z0 + Z c``, and its
+objective is the quadratic ``a0 + a1 . c + c^T A2 c / 2``: :meth:`ExactEnumerator.affine_family`
+solves each branch for ``r + 1`` right-hand sides only, and :meth:`AffineFamily.best` evaluates
+signs and objectives for millions of ``c`` with a few vector operations per branch (no solve
+per projection).
 """
 
 from __future__ import annotations
@@ -58,6 +66,45 @@ def _const(expr, args) -> sp.csc_matrix:
     out = ca.Function("c", args, [expr])(*[np.zeros(a.numel()) for a in args])
     colind, row = out.sparsity().get_ccs()
     return sp.csc_matrix((np.asarray(out.nonzeros(), float), row, colind), shape=out.shape)
+
+
+@dataclass
+class _AffineBranch:
+    """One branch's solution as an affine function of ``c``: gaps, pressures and objective."""
+
+    gap0: np.ndarray    # (nc,)
+    gap_c: np.ndarray   # (nc, r)
+    p0: np.ndarray      # (nc,)
+    p_c: np.ndarray     # (nc, r)
+    a0: float
+    a1: np.ndarray      # (r,)
+    A2: np.ndarray      # (r, r)
+
+
+@dataclass
+class AffineFamily:
+    """The exact projections of ``P0 + D c`` for any ``c`` (see :meth:`ExactEnumerator.affine_family`)."""
+
+    branches: list[_AffineBranch]
+    sign_tol: float
+
+    def best(self, c: np.ndarray, *, chunk: int = 1 << 20) -> np.ndarray:
+        """The exact projection's objective (scaled) for every column of ``c`` (r, N): the
+        smallest over the sign-feasible branches, ``inf`` where none is."""
+        c = np.asarray(c, float)
+        out = np.full(c.shape[1], np.inf)
+        for a in range(0, c.shape[1], chunk):
+            cc = c[:, a:a + chunk]
+            best = out[a:a + chunk]
+            for b in self.branches:
+                ok = np.ones(cc.shape[1], dtype=bool)
+                for g0, gc in ((b.gap0, b.gap_c), (b.p0, b.p_c)):
+                    for i in range(g0.size):
+                        ok &= g0[i] + gc[i] @ cc >= -self.sign_tol
+                obj = b.a0 + b.a1 @ cc + 0.5 * np.einsum("ik,ik->k", cc, b.A2 @ cc)
+                better = ok & (obj < best)
+                best[better] = obj[better]
+        return out
 
 
 class ExactEnumerator:
@@ -167,6 +214,49 @@ class ExactEnumerator:
             best_part[:, better] = np.asarray(part)[:, None]
         return ExactSolution(x=best_z[:self.nx], p=best_z[self.nx:], objective=best_obj,
                              partition=best_part, found=np.isfinite(best_obj))
+
+    def affine_family(self, base: np.ndarray, directions: np.ndarray) -> AffineFamily:
+        r"""Every branch of the projections of ``P = base + directions @ c``, affine in ``c``.
+
+        On a branch the KKT system is linear in the parameters: with ``z0`` its solution for
+        ``base`` and ``Z`` for the columns of ``directions`` (without the constant parts),
+        ``z(c) = z0 + Z c``; the gradient's parameter part is ``q(c) = q0 + Q c`` and
+        ``f(0; P)`` is quadratic in ``P``, so the objective
+        ``f = z^T H z / 2 + q^T z + f(0; P)`` is
+
+        .. math::  a_0 + a_1^T c + \tfrac12 c^T A_2 c,\quad
+                   A_2 = Z^T H Z + Z^T Q + Q^T Z + D^T F_{PP} D .
+
+        Only ``r + 1`` right-hand sides are solved per branch, whatever the number of ``c``.
+        """
+        if self.problem.kind != "mpcc":
+            raise InputError("an affine family of projections needs a projection (mpcc) problem")
+        base = np.asarray(base, float).reshape(-1, 1)
+        D = np.asarray(directions, float)
+        R0, g0, q0, f0 = self._affine_parts(base)
+        # The linear parts of R, g, grad f in the directions (no constants).
+        RD, gD, qD = self._R_P @ D, self._g_P @ D, self._q_P @ D
+        fD = self._f_P @ D + (base[:, 0] @ (self._f_PP @ D))
+        FDD = D.T @ (self._f_PP @ D)
+        out = []
+        for part in self.partitions:
+            lu, on_gap, on_p = self._factor(part)
+            if lu is None:
+                continue
+            rhs = np.hstack([np.vstack([-q0, -R0, -g0[on_gap], np.zeros((on_p.size, 1))]),
+                             np.vstack([-qD, -RD, -gD[on_gap], np.zeros((on_p.size, D.shape[1]))])])
+            sol = lu.solve(rhs)[:self.nz]
+            z0, Z = sol[:, 0], sol[:, 1:]
+            if not (np.all(np.isfinite(z0)) and np.all(np.isfinite(Z))):
+                continue
+            Hz0, HZ = self.H @ z0, self.H @ Z
+            a0 = 0.5 * z0 @ Hz0 + q0[:, 0] @ z0 + float(f0[0])
+            a1 = Z.T @ Hz0 + Z.T @ q0[:, 0] + qD.T @ z0 + fD
+            A2 = Z.T @ HZ + Z.T @ qD + qD.T @ Z + FDD
+            out.append(_AffineBranch(gap0=self.Gz @ z0 + g0[:, 0], gap_c=self.Gz @ Z + gD,
+                                     p0=z0[self.nx:], p_c=Z[self.nx:], a0=float(a0), a1=a1,
+                                     A2=0.5 * (A2 + A2.T)))
+        return AffineFamily(out, self.sign_tol)
 
     def branches(self, params: np.ndarray) -> list[Branch]:
         """Every sign-feasible partition's solution for one parameter vector.

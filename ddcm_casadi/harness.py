@@ -20,6 +20,7 @@ from ddcm_casadi.formulations.base import Formulation
 from .errors import InputError
 from .model import ContactModel
 from .problem import ProblemPair, build_problems
+from .solvers.ddcm_options import DDCMOptions
 from .solvers.path import DDCMSolver, PathResult, StepResult, solve_classical
 
 VARIANTS = ("classical", "ddcm")
@@ -171,7 +172,8 @@ class Comparison:
                                    data_index=int(s.data_index[0]))
                     row.update(distance=s.distance,
                                projection_error=s.projection_error, projection_global=s.projection_global,
-                               global_optimum=s.global_optimum, global_distance=s.global_distance)
+                               global_optimum=s.global_optimum, global_distance=s.global_distance,
+                               global_gap=s.global_gap, projections=s.projections)
                 if err is not None:
                     row.update(error_u=float(err["u"][s.step]), error_p=float(err["p"][s.step]))
                 row["message"] = s.message
@@ -207,7 +209,9 @@ class Comparison:
                            local_minimum_h=[s.load_parameter for s in r.steps if s.global_optimum is False],
                            global_checked=all(g is not None for g in glob),
                            projection_not_global_steps=[s.step for s in r.steps if s.projection_global is False],
-                           max_projection_error=_nanmax(r.array("projection_error")))
+                           max_projection_error=_nanmax(r.array("projection_error")),
+                           projections=int(sum(s.projections for s in r.steps)),
+                           max_global_gap=_nanmax(r.array("global_gap")))
             out.append(rec)
         return out
 
@@ -240,8 +244,21 @@ class Comparison:
         return "\n".join(lines)
 
 
+def as_ddcm_options(ddcm: DDCMOptions | Mapping | None) -> DDCMOptions:
+    """:class:`DDCMOptions` from options, a mapping of their names (copied), or ``None`` (defaults)."""
+    if ddcm is None or isinstance(ddcm, DDCMOptions):
+        return ddcm or DDCMOptions()
+    if not isinstance(ddcm, Mapping):
+        raise InputError(f"ddcm options must be DDCMOptions or a mapping, got {type(ddcm).__name__}")
+    unknown = sorted(set(ddcm) - {f.name for f in dataclasses.fields(DDCMOptions)})
+    if unknown:
+        raise InputError(f"unknown ddcm option {unknown[0]!r}")
+    return DDCMOptions(**dict(ddcm))
+
+
 def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] = VARIANTS,
             raise_on_failure: bool = False, ddcm_max_outer: int = 100, ddcm_search: str = "kdtree",
+            ddcm: DDCMOptions | None = None,
             progress: Callable[[str, str, StepResult], None] | None = None) -> Comparison:
     """Run every formulation in every variant along the model's load path.
 
@@ -259,6 +276,10 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     ddcm_search : {"kdtree", "warm"}
         Data search of the DDCM iterations: a cold KD-tree query, or the exact warm-started search
         from the previous assignment (:meth:`~ddcm_casadi.data.MaterialDataset.nearest_warm`).
+    ddcm : DDCMOptions, optional
+        Where DDCM steps start (also an explicit initial assignment), restarts, greedy
+        improvement, certificates and noise-robust variants
+        (:class:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions`; default: its defaults).
     progress : callable, optional
         Called as ``progress(variant, formulation, step_result)`` after every step.
 
@@ -272,6 +293,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         raise InputError(f"unknown variant {bad[0]!r}; choose from {', '.join(VARIANTS)}")
     if ddcm_search not in DDCMSolver.SEARCHES:
         raise InputError(f"unknown data search {ddcm_search!r}; known: {', '.join(DDCMSolver.SEARCHES)}")
+    ddcm = as_ddcm_options(ddcm)
     forms = resolve_formulations(formulations)
     problems = build_problems(model)
     out = Comparison(model=model, problems=problems, formulations=forms)
@@ -289,7 +311,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
                 r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb)
             else:
                 built = form.build(problems.projection)
-                solver = DDCMSolver(problems, built, max_outer=ddcm_max_outer, search=ddcm_search)
+                solver = DDCMSolver(problems, built, max_outer=ddcm_max_outer, search=ddcm_search, options=ddcm)
                 build = time.perf_counter() - t0
                 r = solver.solve(formulation_name=form.name, raise_on_failure=raise_on_failure, progress=cb)
             r.build_seconds = build

@@ -10,9 +10,13 @@ Both warm-start each step from the previous one. The DDCM driver alternates
 2. the projection onto the data (vectorised KD-tree nearest neighbour under the metric, or the
    warm-started exact search that starts from the previous assignment, ``search="warm"``),
 
-until the data assignment no longer changes. The first step starts from the data point nearest
-the origin. For one-element problems it also finds the global DDCM optimum by enumerating the data
-set and reports whether the alternating scheme reached it.
+until the data assignment no longer changes. Where each step starts, restarts from random
+assignments, a greedy global improvement after the fixed point, and the noise-robust variants are
+chosen by :class:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions` (by default the first step starts
+from the data point nearest the origin and every later step from the previous one's assignment).
+For one-element problems (and, with ``exact_max``, a few elements) it also finds the global DDCM
+optimum by enumerating the data assignments (closed forms, :mod:`ddcm_casadi.solvers.ddcm_search`)
+and reports whether the search reached it and the gap.
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ import numpy as np
 from ..errors import ConvergenceError, InputError
 from ..exact import ExactEnumerator
 from ..problem import ProblemPair
+from .ddcm_options import DDCMOptions
+from .ddcm_search import global_optimum, point_ranges, random_assignment, single_moves, start_assignment
 
 
 @dataclass
@@ -55,6 +61,10 @@ class StepResult:
     projection_global: bool | None = None
     global_optimum: bool | None = None
     global_distance: float = float("nan")
+    global_gap: float = float("nan")
+    projections: int = 0
+    runs: int = 0
+    improvements: int = 0
     projection_seconds: float = 0.0
     search_seconds: float = 0.0
 
@@ -119,18 +129,63 @@ def solve_classical(problems: ProblemPair, built, formulation_name: str, *, rais
     return out
 
 
+@dataclass
+class _Run:
+    """One alternating-projection run of one load step from one initial assignment."""
+
+    index: np.ndarray
+    sol: object
+    fields: dict
+    distance: float
+    converged: bool
+    message: str
+    outer: int
+    inner: int
+    t_project: float
+    t_search: float
+    error: float
+    is_global: bool | None
+
+    def better_than(self, other: "_Run") -> bool:
+        """Fixed points before anything else, then a strictly lower objective (beyond roundoff)."""
+        if self.converged != other.converged:
+            return self.converged
+        return self.distance < other.distance - 1e-12 * abs(other.distance)
+
+
 class DDCMSolver:
-    """Alternating projections for one model and one built projection formulation."""
+    """Alternating projections for one model and one built projection formulation.
+
+    Parameters
+    ----------
+    problems : ProblemPair
+        Needs the projection (a material data set).
+    built
+        The projection formulation, built.
+    max_outer : int
+        Alternating-projection iterations per run.
+    enumerate_pairs : int
+        Problems with at most this many contact pairs consult the exact branch enumeration.
+    global_search : bool
+        Report the global optimum where it can be enumerated.
+    search : {"kdtree", "warm"}
+        The data search.
+    options : DDCMOptions, optional
+        Starts, restarts, improvement, certificates, variant (default ``DDCMOptions()``).
+    """
 
     #: Data searches: a cold KD-tree query, or the warm-started exact search.
     SEARCHES = ("kdtree", "warm")
 
     def __init__(self, problems: ProblemPair, built, *, max_outer: int = 100, enumerate_pairs: int = 4,
-                 global_search: bool = True, search: str = "kdtree") -> None:
+                 global_search: bool = True, search: str = "kdtree", options: DDCMOptions | None = None) -> None:
         if problems.projection is None:
             raise InputError("the DDCM variant needs a material data set")
         if search not in self.SEARCHES:
             raise InputError(f"unknown data search {search!r}; known: {', '.join(self.SEARCHES)}")
+        if options is not None and not isinstance(options, DDCMOptions):
+            raise InputError(f"DDCM options must be a DDCMOptions, got {type(options).__name__}")
+        self.options = options if options is not None else DDCMOptions()
         self.search = search
         #: ``queries`` and ``fallbacks`` (uncertified states) of the warm search, accumulated.
         self.search_stats: dict = {}
@@ -138,10 +193,19 @@ class DDCMSolver:
         self.built = built
         self.max_outer = int(max_outer)
         model = problems.model
+        if self.options.initial is not None:
+            initial = np.asarray(self.options.initial, dtype=np.intp)
+            offset, size = point_ranges(model)
+            if initial.size != model.n_points:
+                raise InputError(f"ddcm option initial has {initial.size} indices, the model has "
+                                 f"{model.n_points} material points")
+            if np.any(initial < offset) or np.any(initial >= offset + size):
+                raise InputError("ddcm option initial: an index is outside its point's data set")
         self.exact = (ExactEnumerator(problems.projection, max_pairs=enumerate_pairs)
                       if model.n_contacts <= enumerate_pairs else None)
-        self.global_search = (global_search and self.exact is not None and model.n_points == 1
-                              and model.strain_components == 1)
+        n_assign = float(np.prod(point_ranges(model)[1].astype(float)))
+        self.global_search = (global_search and self.exact is not None
+                              and (model.n_points == 1 or n_assign <= self.options.exact_max))
 
     def _project(self, params, x0, p0, state):
         """Projection onto Z_E, restarted on the exact global branch if it may have stopped elsewhere.
@@ -176,77 +240,214 @@ class DDCMSolver:
         err = float(np.max(np.abs(np.concatenate([sol.x - xe, sol.p - pe])))) / scale
         return sol, is_global, err
 
+    def project_data(self, k: int, strain_star, stress_star, warm: tuple, cost: dict):
+        """The ``Z_E`` projection of step ``k``'s assigned material states (warm-started from
+        ``warm = (x, p, state)``): ``(solution, is_global, error, failure)``, ``failure`` the
+        message of a projection that did not converge, else ``""``. Adds its Newton iterations
+        and seconds to ``cost["inner"]`` and ``cost["t_project"]``."""
+        t0 = time.perf_counter()
+        params = self.problems.projection_params(k, strain_star, stress_star)
+        sol, is_global, err = self._project(params, *warm)
+        cost["inner"] += sol.iterations
+        cost["t_project"] += time.perf_counter() - t0
+        failed = "" if sol.converged else f"Z_E projection did not converge: {sol.message}"
+        return sol, is_global, err, failed
+
+    def _alternate(self, k: int, index: np.ndarray, x, p, state) -> tuple[_Run, tuple]:
+        """Alternate projections at step ``k`` from the assignment ``index`` (the Z_E solves
+        warm-started from ``x, p, state``). Returns the run and the last ``(x, p, state)``."""
+        problems, data = self.problems, self.problems.model.dataset
+        cost, t_search = dict(inner=0, t_project=0.0), 0.0
+        seen = {index.tobytes()}
+        converged, message = False, "maximum outer iterations reached"
+        for outer in range(1, self.max_outer + 1):
+            sol, is_global, err, failed = self.project_data(k, data.strain[index], data.stress[index], (x, p, state),
+                                                            cost)
+            if failed:
+                message = failed
+                break
+            x, p, state = sol.x, sol.p, sol.state
+            t1 = time.perf_counter()
+            f = problems.fields("mpcc", sol.x, sol.p)
+            if self.search == "warm":
+                new_index = data.nearest_warm(f["strain"], f["stress"], index, stats=self.search_stats)
+            else:
+                new_index = data.nearest(f["strain"], f["stress"])
+            t_search += time.perf_counter() - t1
+            if np.array_equal(new_index, index):
+                converged, message = True, "fixed point"
+                break
+            key = new_index.tobytes()
+            if key in seen:
+                message = "data assignment cycles"
+                index = new_index
+                break
+            seen.add(key)
+            index = new_index
+        f = problems.fields("mpcc", sol.x, sol.p)
+        d2 = data.distance2(f["strain"], f["stress"], index)
+        distance = float(0.5 * np.dot(self.problems.model.volumes, d2)) if sol.converged else float("inf")
+        run = _Run(index=index, sol=sol, fields=f, distance=distance, converged=converged, message=message,
+                   outer=outer, inner=cost["inner"], t_project=cost["t_project"], t_search=t_search, error=err, is_global=is_global)
+        return run, (x, p, state)
+
+    #: Single-point moves screened per sweep of the greedy search (points x candidates).
+    SCREEN_SIZE = 1_000_000
+
+    def _greedy_moves(self, k: int, best: _Run) -> list[np.ndarray]:
+        """Candidate assignments of one greedy sweep, most promising first.
+
+        With the exact branch enumeration (few contact pairs) every move of one of the
+        ``greedy_points`` worst points to another datum of its set (or, past
+        :attr:`SCREEN_SIZE` moves, to one of its nearest data) is screened by the exact objective
+        of its projection (closed forms, :func:`~ddcm_casadi.solvers.ddcm_search.single_moves`);
+        the moves that lower the objective come first, best first. Without it (as Datasolver.jl)
+        the worst points move to their ``greedy_neighbours`` next-nearest data.
+        """
+        opts, model = self.options, self.problems.model
+        data, f = model.dataset, best.fields
+        local = model.volumes * data.distance2(f["strain"], f["stress"], best.index)
+        order = np.argsort(-local, kind="stable")[:opts.greedy_points or model.n_points]
+        if self.exact is None or not opts.greedy_screen:
+            near = data.k_nearest(f["strain"], f["stress"], opts.greedy_neighbours + 1)
+            moves = []
+            for i in order:
+                for j in [j for j in near[i] if j != best.index[i]][:opts.greedy_neighbours]:
+                    trial = best.index.copy()
+                    trial[i] = j
+                    moves.append(trial)
+            return moves
+        offset, size = point_ranges(model)
+        per_point = self.SCREEN_SIZE // len(order)
+        if np.all(size[order] <= per_point) and np.unique(size[order]).size == 1:
+            cand = offset[order][:, None] + np.arange(size[order[0]])[None, :]
+        else:
+            pts = f["strain"].reshape(model.n_points, -1)[order], f["stress"].reshape(model.n_points, -1)[order]
+            cand = data.k_nearest(pts[0].ravel(), pts[1].ravel(), max(2, per_point))
+        obj, mine = single_moves(self.problems, self.exact, k, best.index, order, cand)
+        flat = np.argsort(obj, axis=None, kind="stable")
+        moves = []
+        for a in flat:
+            i, b = divmod(int(a), cand.shape[1])
+            if not obj[i, b] < mine - 1e-12 - 1e-9 * abs(mine):
+                break
+            trial = best.index.copy()
+            trial[order[i]] = cand[i, b]
+            moves.append(trial)
+            if len(moves) == opts.greedy_neighbours:
+                break
+        return moves
+
+    def _greedy(self, k: int, best: _Run, warm: tuple, visited: set, tally: dict) -> tuple[_Run, tuple]:
+        """Greedy global improvement after a fixed point (see :class:`DDCMOptions` ``improve``):
+        rerun the alternating scheme from the candidate moves of :meth:`_greedy_moves`, accept
+        only a strictly lower objective and start over from it. The objective never increases."""
+        budget = self.options.greedy_budget
+        trials = 0
+        while trials < budget:
+            improved = False
+            for trial in self._greedy_moves(k, best):
+                key = trial.tobytes()
+                if key in visited:
+                    continue
+                visited.add(key)
+                run, state = self._alternate(k, trial, *warm)
+                trials += 1
+                _count(tally, run)
+                visited.add(run.index.tobytes())
+                if run.converged and run.better_than(best):
+                    best, warm, improved = run, state, True
+                    tally["improvements"] += 1
+                    break
+                if trials >= budget:
+                    break
+            if not improved:
+                break
+        return best, warm
+
     def solve(self, *, formulation_name: str = "", raise_on_failure: bool = False,
               progress: Callable[[StepResult], None] | None = None) -> PathResult:
+        if self.options.variant != "plain":
+            from .noise_robust import solve_noise_robust
+
+            return solve_noise_robust(self, formulation_name=formulation_name, raise_on_failure=raise_on_failure,
+                                      progress=progress)
         problems, model = self.problems, self.problems.model
-        data = model.dataset
+        opts = self.options
         out = PathResult("ddcm", formulation_name)
-        origin = np.zeros(model.n_points * model.strain_components)
-        index = data.nearest(origin, origin)
-        x = np.zeros(problems.projection.n_x)
-        p = np.zeros(problems.projection.n_pairs)
-        state = None
+        warm = (np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None)
+        index = None
         t_all = time.perf_counter()
         for k in range(model.n_steps):
             t0 = time.perf_counter()
-            inner, t_project, t_search = 0, 0.0, 0.0
-            seen = {index.tobytes()}
-            converged, message = False, "maximum outer iterations reached"
-            for outer in range(1, self.max_outer + 1):
-                t1 = time.perf_counter()
-                params = problems.projection_params(k, data.strain[index], data.stress[index])
-                sol, is_global, err = self._project(params, x, p, state)
-                t_project += time.perf_counter() - t1
-                inner += sol.iterations
-                if not sol.converged:
-                    message = f"Z_E projection did not converge: {sol.message}"
-                    break
-                x, p, state = sol.x, sol.p, sol.state
-                t1 = time.perf_counter()
-                f = problems.fields("mpcc", sol.x, sol.p)
-                if self.search == "warm":
-                    new_index = data.nearest_warm(f["strain"], f["stress"], index, stats=self.search_stats)
+            if k == 0 and opts.initial is not None:
+                index = np.asarray(opts.initial, dtype=np.intp)
+            elif k == 0 or not opts.warm:
+                index = start_assignment(model, opts.start, k, np.random.default_rng((opts.seed, k, 0)))
+            tally = dict(projections=0, inner=0, runs=0, improvements=0, t_project=0.0, t_search=0.0)
+            best, best_warm = self._alternate(k, index, *warm)
+            _count(tally, best)
+            visited = {index.tobytes(), best.index.tobytes()}
+            for r in range(1, opts.restarts + 1):
+                rng = np.random.default_rng((opts.seed, k, r))
+                if opts.restart_neighbours:
+                    # A kick from the best state so far: each point at one of its K nearest data.
+                    f = best.fields
+                    near = model.dataset.k_nearest(f["strain"], f["stress"], opts.restart_neighbours)
+                    start = near[np.arange(near.shape[0]), rng.integers(0, near.shape[1], near.shape[0])]
                 else:
-                    new_index = data.nearest(f["strain"], f["stress"])
-                t_search += time.perf_counter() - t1
-                if np.array_equal(new_index, index):
-                    converged, message = True, "fixed point"
-                    break
-                key = new_index.tobytes()
-                if key in seen:
-                    message = "data assignment cycles"
-                    index = new_index
-                    break
-                seen.add(key)
-                index = new_index
-            f = problems.fields("mpcc", sol.x, sol.p)
-            d2 = data.distance2(f["strain"], f["stress"], index)
-            step = StepResult(step=k, load_parameter=float(model.load_parameter[k]), u=f["u"], p=f["p"],
-                              converged=converged, iterations=inner, outer_iterations=outer,
-                              residual=sol.residual, complementarity=sol.complementarity,
-                              penetration=sol.penetration, seconds=0.0, message=message,
-                              strain=f["strain"], stress=f["stress"], strain_star=data.strain[index].copy(),
-                              stress_star=data.stress[index].copy(), data_index=index.copy(),
-                              distance=float(0.5 * np.dot(model.volumes, d2)), projection_error=err,
-                              projection_global=is_global, projection_seconds=t_project, search_seconds=t_search)
-            if self.global_search:
+                    start = random_assignment(model, rng)
+                run, state = self._alternate(k, start, *warm)
+                _count(tally, run)
+                visited |= {start.tobytes(), run.index.tobytes()}
+                if run.better_than(best):
+                    best, best_warm = run, state
+                    tally["improvements"] += 1
+            if opts.improve == "greedy" and best.converged:
+                best, best_warm = self._greedy(k, best, best_warm, visited, tally)
+            step = self._step_result(k, best, tally)
+            if self.global_search and best.sol.converged:
                 self._global_optimum(k, step)
             step.seconds = time.perf_counter() - t0
             out.steps.append(step)
             if progress is not None:
                 progress(step)
             _check_convergence(step, raise_on_failure, f"ddcm/{formulation_name}")
+            index, warm = best.index, best_warm
         out.solve_seconds = time.perf_counter() - t_all
         return out
 
+    def _step_result(self, k: int, run: _Run, tally: dict) -> StepResult:
+        model, data, sol, f = self.problems.model, self.problems.model.dataset, run.sol, run.fields
+        index = run.index
+        distance = run.distance
+        if not np.isfinite(distance):  # a failed projection: report the distance of what it returned
+            distance = float(0.5 * np.dot(model.volumes, data.distance2(f["strain"], f["stress"], index)))
+        return StepResult(step=k, load_parameter=float(model.load_parameter[k]), u=f["u"], p=f["p"],
+                          converged=run.converged, iterations=tally["inner"], outer_iterations=run.outer,
+                          residual=sol.residual, complementarity=sol.complementarity,
+                          penetration=sol.penetration, seconds=0.0, message=run.message,
+                          strain=f["strain"], stress=f["stress"], strain_star=data.strain[index].copy(),
+                          stress_star=data.stress[index].copy(), data_index=index.copy(),
+                          distance=distance, projection_error=run.error,
+                          projection_global=run.is_global, projection_seconds=tally["t_project"],
+                          search_seconds=tally["t_search"], projections=tally["projections"], runs=tally["runs"],
+                          improvements=tally["improvements"])
+
     def _global_optimum(self, k: int, step: StepResult) -> None:
-        """One-element problems: the data point whose exact projection is nearest (enumeration)."""
-        data, problems = self.problems.model.dataset, self.problems
-        P = problems.projection_params(k, data.strain[None, :], data.stress[None, :])
-        ex = self.exact.solve(P)
-        energy = problems.scales("mpcc")["energy"]
-        j = int(np.argmin(ex.objective))
-        best = float(ex.objective[j])
-        mine = float(ex.objective[int(step.data_index[0])])
+        """The global optimum by enumeration of every data assignment (closed forms per branch)."""
+        best, mine = global_optimum(self.problems, self.exact, k, step.data_index)
+        energy = self.problems.scales("mpcc")["energy"]
         step.global_distance = best * energy
         step.global_optimum = bool(mine <= best + 1e-12 + 1e-9 * abs(best))
+        step.global_gap = step.distance - step.global_distance
+
+
+def _count(tally: dict, run: _Run) -> None:
+    """Add one run's cost to a step's tally."""
+    tally["projections"] += run.outer
+    tally["inner"] += run.inner
+    tally["runs"] += 1
+    tally["t_project"] += run.t_project
+    tally["t_search"] += run.t_search
+

@@ -1,0 +1,170 @@
+"""Options of the DDCM driver: where each load step starts, restarts, global improvement,
+certificates and the noise-robust variants (one frozen, keyword-only dataclass).
+
+>>> from ddcm_casadi.solvers.ddcm_options import DDCMOptions
+>>> opts = DDCMOptions(restarts=4, improve="greedy", seed=1)
+>>> opts.describe()["restarts"]
+4
+
+The same keys are read from a case file's ``[ddcm]`` section (:meth:`DDCMOptions.from_mapping`);
+every bad value is a one-line :class:`~ddcm_casadi.errors.InputError` naming the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from ..errors import InputError
+
+#: The initial data assignment of a load step (see :class:`DDCMOptions`).
+STARTS = ("origin", "elastic", "random")
+#: What is done after a fixed point.
+IMPROVEMENTS = ("none", "greedy")
+#: The data-driven scheme: plain distance minimisation, or a noise-robust variant.
+VARIANTS = ("plain", "lcdd")
+
+_INTS = {"seed": (0, 2**63 - 1), "restarts": (0, 10_000), "restart_neighbours": (0, 10**6), "greedy_neighbours": (1, 1000),
+         "greedy_points": (0, 10**9), "greedy_budget": (1, 10**6), "exact_max": (0, 10**9),
+         "lcdd_neighbours": (2, 64)}
+_CHOICES = {"start": STARTS, "improve": IMPROVEMENTS, "variant": VARIANTS}
+_BOOLS = ("warm", "greedy_screen")
+
+
+def _checked(name: str, value: Any, where: str) -> Any:
+    """One option's value, normalised, or a one-line :class:`InputError` (``where`` names it)."""
+    if name in _CHOICES:
+        if not isinstance(value, str) or value not in _CHOICES[name]:
+            raise InputError(f"{where} {name} must be one of {', '.join(map(repr, _CHOICES[name]))}, "
+                             f"got {value!r:.60}")
+        return value
+    if name in _BOOLS:
+        if not isinstance(value, (bool, np.bool_)):
+            raise InputError(f"{where} {name} must be true or false, got {value!r:.60}")
+        return bool(value)
+    if name in _INTS:
+        lo, hi = _INTS[name]
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+            raise InputError(f"{where} {name} must be an integer in {lo}..{hi}, got {value!r:.60}")
+        if not lo <= int(value) <= hi:
+            raise InputError(f"{where} {name} must be an integer in {lo}..{hi}, got {value!r:.60}")
+        return int(value)
+    if name == "initial":
+        if value is None:
+            return None
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) == 0:
+            raise InputError(f"{where} initial must be a non-empty list of data indices (one per point), "
+                             f"got {value!r:.60}")
+        out = []
+        for v in value:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or int(v) < 0:
+                raise InputError(f"{where} initial must hold non-negative integer data indices, got {v!r:.60}")
+            out.append(int(v))
+        return tuple(out)
+    raise InputError(f"{where}: unknown option {name!r}")  # pragma: no cover - fields are listed above
+
+
+@dataclass(frozen=True, kw_only=True)
+class DDCMOptions:
+    """How the DDCM driver searches for the double minimum ``min_{z in Z_E} min_{z* in Z_D} F``.
+
+    Parameters
+    ----------
+    start : {"origin", "elastic", "random"}
+        The data assignment the first load step starts from (and every step when ``warm`` is
+        False). ``origin``: every point at the datum nearest the zero state (the historical
+        default). ``elastic``: every point at the datum nearest the solution of the *linear*
+        contact problem whose material law is the metric, ``sigma = C eps``,
+        ``min_u 1/2 u^T K_C u - f^T u`` s.t. ``G u + g0 >= 0`` with ``K_C = B^T W C B``
+        (:func:`~ddcm_casadi.solvers.ddcm_search.elastic_state`). ``random``: every point at a
+        datum drawn uniformly from its data set, seeded by ``(seed, step)``.
+    initial : tuple of int, optional
+        An explicit initial assignment (global data indices, one per material point); it replaces
+        ``start`` at the first step.
+    warm : bool
+        Later steps start from the previous step's assignment (the default); False starts every
+        step from ``start``.
+    seed : int
+        Seed of the random start and of the restarts: the draws of step ``k`` and restart ``r`` use
+        ``numpy.random.default_rng((seed, k, r))``, so a run is reproducible and does not depend
+        on what other steps did.
+    restarts : int
+        Additional runs per load step from random assignments; the lowest objective is kept
+        (fixed points before non-converged runs). Each run is warm-started from the same previous
+        step, so the result is deterministic.
+    restart_neighbours : int
+        0: a restart draws every point's datum uniformly from its whole data set. ``K > 0``: from
+        the ``K`` data nearest the best state found so far at that step (a kick, as in iterated
+        local search: cheaper, and more effective when the data cover far more than the states).
+    improve : {"none", "greedy"}
+        ``greedy`` (after the greedy local search of Datasolver.jl): after the fixed point, take
+        the ``greedy_points`` points with the largest local distance ``w_i d_i^2`` (worst first),
+        move one to another datum and rerun the alternating scheme from there; accept the new
+        fixed point only if its objective is strictly lower, and start over from it; assignments
+        already visited are skipped; stop when no move improves or after ``greedy_budget`` reruns.
+        A descent method: the objective never increases. The moves tried per sweep (at most
+        ``greedy_neighbours``): with the exact branch enumeration (few contact pairs) the single-
+        point moves whose exact projection lowers the objective, best first, screened in closed
+        form over each point's data set (so a rerun is paid only for a move known to descend; on
+        a one-element problem this reaches the enumerated optimum); otherwise each point's
+        next-nearest data, as in Datasolver.jl.
+    greedy_neighbours, greedy_points, greedy_budget : int
+        See ``improve`` (``greedy_points = 0``: every point).
+    greedy_screen : bool
+        Screen the greedy moves in closed form where the branch enumeration is available (see
+        ``improve``); False always uses the next-nearest data (Datasolver.jl's moves).
+    exact_max : int
+        Compute the exact global optimum (a certificate; ``global_optimum``, ``global_gap``) by
+        enumerating every data assignment when there are at most this many (``N^m`` for ``m``
+        points); one-element problems are always enumerated (cheap closed forms). 0: one element only.
+    variant : {"plain", "lcdd"}
+        The data-driven scheme; ``lcdd`` (local convexity, He & Chen 2020) is noise-robust and
+        changes the solution, not only the search (:mod:`ddcm_casadi.solvers.noise_robust`).
+    lcdd_neighbours : int
+        LCDD: the local convex hull is that of the ``k`` nearest data (He & Chen 2020 use 5-6).
+    """
+
+    start: str = "origin"
+    initial: tuple[int, ...] | None = None
+    warm: bool = True
+    seed: int = 0
+    restarts: int = 0
+    restart_neighbours: int = 0
+    improve: str = "none"
+    greedy_neighbours: int = 3
+    greedy_points: int = 8
+    greedy_budget: int = 40
+    greedy_screen: bool = True
+    exact_max: int = 0
+    variant: str = "plain"
+    lcdd_neighbours: int = 5
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            object.__setattr__(self, f.name, _checked(f.name, getattr(self, f.name), "ddcm option"))
+
+    @classmethod
+    def from_mapping(cls, table: Mapping[str, Any], *, where: str = "[ddcm]") -> "DDCMOptions":
+        """Options from a case file's ``[ddcm]`` table (other keys, such as ``c``, are ignored
+        here); every value is checked and a bad one is a one-line error naming ``where key``."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        values = {k: _checked(k, v, where) for k, v in table.items() if k in names}
+        return cls(**values)
+
+    def replace(self, **changes) -> "DDCMOptions":
+        """A copy with ``changes`` (validated)."""
+        return dataclasses.replace(self, **changes)
+
+    def describe(self) -> dict:
+        """The options as plain values, for ``results.json``."""
+        d = dataclasses.asdict(self)
+        d["initial"] = None if self.initial is None else list(self.initial)
+        return d
+
+
+#: The keys of ``[ddcm]`` read by :meth:`DDCMOptions.from_mapping` (``c`` and ``max_outer`` are
+#: read by the case file itself).
+KEYS = frozenset(f.name for f in dataclasses.fields(DDCMOptions))

@@ -1,0 +1,215 @@
+"""Material data generated for studies: a law, a strain range, a size, noise and a seed.
+
+A sweep's ``[generate]`` table describes one data set of the base case, regenerated for every
+case (so a noise Monte Carlo or a data-size study needs no files):
+
+- ``law``: ``"hookean"`` (``stress = E strain``), ``"tanh"`` (``stress = s tanh(E strain / s)``,
+  saturating at the stress scale ``s = stress_scale``) or ``"cubic"``
+  (``stress = E strain (1 + beta strain^2)``); ``youngs_modulus`` ``E`` is the initial tangent;
+- ``strain_min``, ``strain_max``, ``points``: the strain range and the size ``n``;
+  ``sampling = "grid"`` (equally spaced, as the paper's data) or ``"random"`` (uniform, sorted);
+- ``noise`` ``eta >= 0`` and ``noise_kind``: ``"multiplicative"`` (``stress_i = stress(strain_i)
+  (1 + eta xi_i)``) or ``"additive"`` (``stress_i = stress(strain_i) + eta S xi_i``, ``S`` the
+  largest ``|stress|`` of the noiseless data), ``xi_i`` independent standard normal draws;
+  ``noise_on = "both"`` perturbs the strains the same way (additive: scaled by the largest
+  ``|strain|`` of the range);
+- ``seed``: the seed of the draws (``numpy.random.default_rng``); the same seed gives the same data;
+- ``table``: which ``[[data]]`` table of the case is replaced (default 0); its metric ``c`` is kept.
+
+Missing ``strain_min``, ``strain_max``, ``points`` and ``youngs_modulus`` are taken from that
+table's ``hookean`` entry when it has one. The data reach the case as a CSV file (written to a
+temporary folder on the worker, read back by the case file's own ``path`` reader), so they are
+validated exactly as any data file.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..data import MAX_DATA_POINTS
+from ..errors import InputError
+
+LAWS = ("hookean", "tanh", "cubic")
+SAMPLINGS = ("grid", "random")
+NOISE_KINDS = ("multiplicative", "additive")
+NOISE_ON = ("stress", "both")
+#: Keys of ``[generate]``.
+KEYS = ("law", "youngs_modulus", "strain_min", "strain_max", "points", "sampling", "noise", "noise_kind",
+        "noise_on", "seed", "stress_scale", "beta", "table")
+_FROM_HOOKEAN = ("strain_min", "strain_max", "points", "youngs_modulus")
+
+
+@dataclass(frozen=True)
+class DataGenerator:
+    """A validated ``[generate]`` table (see the module docstring for the meaning of each field)."""
+
+    law: str
+    youngs_modulus: float
+    strain_min: float
+    strain_max: float
+    points: int
+    sampling: str = "grid"
+    noise: float = 0.0
+    noise_kind: str = "multiplicative"
+    noise_on: str = "stress"
+    seed: int = 0
+    stress_scale: float | None = None
+    beta: float | None = None
+    table: int = 0
+
+    def law_stress(self, strain: np.ndarray) -> np.ndarray:
+        """The noiseless stress of the law at ``strain``."""
+        E = self.youngs_modulus
+        if self.law == "tanh":
+            return self.stress_scale * np.tanh(E * strain / self.stress_scale)
+        if self.law == "cubic":
+            return E * strain * (1.0 + self.beta * strain**2)
+        return E * strain
+
+    def sample(self) -> tuple[np.ndarray, np.ndarray]:
+        """The ``points`` data ``(strain, stress)``: sampled strains, the law, then the noise."""
+        rng = np.random.default_rng(self.seed)
+        n = self.points
+        if self.sampling == "random":
+            strain = np.sort(rng.uniform(self.strain_min, self.strain_max, n))
+        else:
+            strain = np.linspace(self.strain_min, self.strain_max, n)
+        stress = self.law_stress(strain)
+        if self.noise > 0:
+            xi = rng.standard_normal(n)
+            stress_scale = float(np.max(np.abs(stress))) or 1.0
+            stress = self._perturb(stress, xi, stress_scale)
+            if self.noise_on == "both":
+                strain_scale = max(abs(self.strain_min), abs(self.strain_max)) or 1.0
+                strain = self._perturb(strain, rng.standard_normal(n), strain_scale)
+        return strain, stress
+
+    def _perturb(self, values: np.ndarray, xi: np.ndarray, scale: float) -> np.ndarray:
+        if self.noise_kind == "additive":
+            return values + self.noise * scale * xi
+        return values * (1.0 + self.noise * xi)
+
+    def write_csv(self, path: Path) -> Path:
+        """The data as a CSV file with header ``strain,stress`` (17 significant digits: exact)."""
+        strain, stress = self.sample()
+        np.savetxt(path, np.column_stack([strain, stress]), delimiter=",", header="strain,stress",
+                   comments="", fmt="%.17g")
+        return path
+
+    def describe(self) -> dict:
+        """The resolved fields (for hashing and ``case.json``)."""
+        return asdict(self)
+
+
+def _number(key: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputError(f"[generate] {key} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _choice(key: str, value: Any, choices: tuple[str, ...]) -> str:
+    if value not in choices:
+        raise InputError(f"[generate] {key} must be one of {', '.join(choices)}, got {value!r}")
+    return value
+
+
+def _integer(key: str, value: Any, low: int, high: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < low or (high is not None and value > high):
+        span = f"in {low}..{high}" if high is not None else f">= {low}"
+        raise InputError(f"[generate] {key} must be an integer {span}, got {value!r}")
+    return value
+
+
+def data_table(doc: dict, index: int) -> dict | None:
+    """Table ``index`` of the case's ``[data]`` / ``[[data]]`` (``None`` if there is no such table)."""
+    data = doc.get("data")
+    tables = data if isinstance(data, list) else [data] if isinstance(data, dict) else []
+    return tables[index] if 0 <= index < len(tables) and isinstance(tables[index], dict) else None
+
+
+def generator_from_dict(table: Any, case_doc: dict) -> DataGenerator:
+    """Validate a ``[generate]`` table against the case document it will feed.
+
+    Parameters
+    ----------
+    table : dict
+        The ``[generate]`` table with the case's grid values applied.
+    case_doc : dict
+        The case document (for the defaults of the ``hookean`` entry of the target table).
+
+    Raises
+    ------
+    InputError
+        Unknown key, missing or invalid value (one line, naming the key).
+    """
+    if not isinstance(table, dict):
+        raise InputError("[generate] must be a table")
+    unknown = sorted(set(table) - set(KEYS))
+    if unknown:
+        raise InputError(f"unknown key {unknown[0]!r} in [generate]; known: {', '.join(sorted(KEYS))}")
+    g = dict(table)
+    index = _integer("table", g.get("table", 0), 0)
+    target = data_table(case_doc, index)
+    if target is None and index > 0:
+        raise InputError(f"[generate] table = {index}, but the case has no data table {index}")
+    hookean = target.get("hookean") if target is not None else None
+    for key in _FROM_HOOKEAN:
+        if key not in g and isinstance(hookean, dict) and key in hookean:
+            g[key] = hookean[key]
+    missing = [k for k in _FROM_HOOKEAN if k not in g]
+    if missing:
+        raise InputError(f"missing key {missing[0]!r} in [generate] (and in the case's data hookean table)")
+    law = _choice("law", g.get("law", "hookean"), LAWS)
+    E = _number("youngs_modulus", g["youngs_modulus"])
+    if E <= 0:
+        raise InputError(f"[generate] youngs_modulus must be positive, got {g['youngs_modulus']!r}")
+    lo, hi = _number("strain_min", g["strain_min"]), _number("strain_max", g["strain_max"])
+    if lo > hi:
+        raise InputError(f"[generate] strain_min must be <= strain_max, got [{lo}, {hi}]")
+    points = g["points"]
+    if isinstance(points, float) and points.is_integer():
+        points = int(points)  # 1e5 in a grid of sizes
+    points = _integer("points", points, 1, MAX_DATA_POINTS)
+    noise = _number("noise", g.get("noise", 0.0))
+    if noise < 0:
+        raise InputError(f"[generate] noise must be >= 0, got {g['noise']!r}")
+    stress_scale = beta = None
+    if law == "tanh":
+        if "stress_scale" not in g:
+            raise InputError("[generate] law = \"tanh\" needs stress_scale (Pa)")
+        stress_scale = _number("stress_scale", g["stress_scale"])
+        if stress_scale <= 0:
+            raise InputError(f"[generate] stress_scale must be positive, got {g['stress_scale']!r}")
+    if law == "cubic":
+        if "beta" not in g:
+            raise InputError("[generate] law = \"cubic\" needs beta")
+        beta = _number("beta", g["beta"])
+    for key, needed_by in (("stress_scale", "tanh"), ("beta", "cubic")):
+        if key in g and law != needed_by:
+            raise InputError(f"[generate] {key} applies to law = \"{needed_by}\" only, the law is {law!r}")
+    return DataGenerator(law=law, youngs_modulus=E, strain_min=lo, strain_max=hi, points=points,
+                         sampling=_choice("sampling", g.get("sampling", "grid"), SAMPLINGS), noise=noise,
+                         noise_kind=_choice("noise_kind", g.get("noise_kind", "multiplicative"), NOISE_KINDS),
+                         noise_on=_choice("noise_on", g.get("noise_on", "stress"), NOISE_ON),
+                         seed=_integer("seed", g.get("seed", 0), 0), stress_scale=stress_scale, beta=beta,
+                         table=index)
+
+
+def attach(case_doc: dict, generator: DataGenerator, csv_path: Path) -> dict:
+    """A copy of ``case_doc`` whose target data table reads ``csv_path`` (its metric ``c`` kept)."""
+    doc = copy.deepcopy(case_doc)
+    table = {"path": str(csv_path)}
+    old = data_table(doc, generator.table)
+    if old is not None and "c" in old:
+        table["c"] = old["c"]
+    if isinstance(doc.get("data"), list):
+        doc["data"][generator.table] = table
+    else:
+        doc["data"] = table
+    return doc

@@ -1,0 +1,336 @@
+"""Running a sweep on ``dask.distributed``: one task per case, one folder per finished case.
+
+Every case of a :class:`~ddcm_casadi.sweep.spec.SweepSpec` is one task, :func:`run_case`: a plain
+function of the case's resolved parameters (a small dict) that builds the case exactly as a case
+file (:func:`~ddcm_casadi.sweep.spec.build_case`), runs :func:`~ddcm_casadi.harness.compare` and
+returns small records (summary metrics and the per-step rows of ``results.csv``; never the
+fields). Workers need only the installed package; they write nothing.
+
+The client writes each finished case to ``DIR/cases/<id>/`` (``case.json``: parameters, status,
+message and metrics; for a case that ran, ``results.csv`` and ``results.json`` as ``ddcm-compare``
+writes them): the files go to a temporary folder that is then renamed, so a case folder is
+complete or absent. A rerun skips the cases whose folder exists (resumable after a crash, a
+Ctrl-C or a lost worker); ``force`` reruns every case, ``retry_failed`` the failed ones. A case
+that raises is recorded as failed with its message and does not stop the sweep; a task lost by
+the cluster (a worker killed more often than Dask retries it) is not recorded, so the next run
+runs it. ``DIR/sweep.csv`` and ``DIR/sweep.json`` are then written from the case folders, in
+the order of the spec, whatever the order in which the cases finished.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import tempfile
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterator
+
+from ..errors import DDCMError, InputError
+from ..io import prepare_output_dir, write_csv_atomic, write_json_atomic
+from .spec import SweepCase, SweepSpec, build_case
+from .table import case_rows, fits, summary_rows
+
+CASES = "cases"
+RECORD = "case.json"
+
+
+def _message(exc: BaseException) -> str:
+    text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+    return text if isinstance(exc, DDCMError) and text else f"{type(exc).__name__}: {text}"
+
+
+def run_case(task: dict) -> dict:
+    """Run one case (on a worker): build it, compare, and return small records.
+
+    Parameters
+    ----------
+    task : dict
+        ``case`` (the fields of a :class:`SweepCase`), ``base`` (the base case file, against
+        whose folder relative paths resolve), ``variants`` and ``formulations`` (lists, or
+        ``None`` for the defaults of ``ddcm-compare``).
+
+    Returns
+    -------
+    dict
+        ``status`` (``"ok"`` or ``"failed"``), ``error`` (the one-line message of a failed case),
+        ``rows`` (:func:`~ddcm_casadi.sweep.table.summary_rows`), ``results_rows`` and ``results``
+        (the content of ``results.csv`` and ``results.json``, without fields), ``seconds`` and
+        ``worker``.
+    """
+    from .. import formulations as registry
+    from ..cli import _variants, parameters, versions
+    from ..harness import compare
+
+    t0 = time.perf_counter()
+    try:
+        case = build_case(SweepCase(**task["case"]), Path(task["base"]))
+        variants = _variants(",".join(task["variants"]) if task["variants"] else None, case)
+        names = task["formulations"] or registry.available()
+        selection = {n: case.formulation_options.get(n, {}) for n in names}
+        # as ddcm-compare runs a case (ddcm_casadi.cli.run)
+        cmp = compare(case.model, selection, variants=variants, ddcm_max_outer=case.ddcm_max_outer,
+                      ddcm=case.ddcm_options)
+        out = dict(status="ok", error=None, rows=summary_rows(cmp), results_rows=cmp.rows(),
+                   results=dict(parameters=parameters(case, cmp), versions=versions(), summary=cmp.summary()))
+    except Exception as exc:  # noqa: BLE001 - any failure of a case is recorded and the sweep goes on
+        out = dict(status="failed", error=_message(exc), rows=[], results_rows=None, results=None)
+    out["seconds"] = time.perf_counter() - t0
+    out["worker"] = _worker()
+    return out
+
+
+def _worker() -> str | None:
+    try:
+        from distributed import get_worker
+
+        return get_worker().address
+    except (ImportError, ValueError):  # not on a dask worker (run in process)
+        return None
+
+
+# ---------------------------------------------------------------------------------- case folders
+def read_record(out: Path, case_id: str) -> dict | None:
+    """The ``case.json`` record of a finished case, or ``None`` (not run, or unreadable)."""
+    import json
+
+    path = out / CASES / case_id / RECORD
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def write_case(out: Path, case: SweepCase, spec: SweepSpec, result: dict) -> Path:
+    """Write a finished case to ``out/cases/<id>/`` atomically (a temporary folder, renamed)."""
+    cases = out / CASES
+    cases.mkdir(exist_ok=True)
+    record = dict(id=case.id, index=case.index, params=case.params, status=result["status"], error=result["error"],
+                  seconds=result["seconds"], worker=result["worker"],
+                  variants=list(spec.variants) if spec.variants else None,
+                  formulations=list(spec.formulations) if spec.formulations else None,
+                  case=case.doc, generate=case.generate, rows=result["rows"])
+    tmp = Path(tempfile.mkdtemp(dir=cases, prefix=f".{case.id}."))
+    try:
+        if result["results"] is not None:
+            write_csv_atomic(tmp / "results.csv", result["results_rows"])
+            write_json_atomic(tmp / "results.json", result["results"])
+        write_json_atomic(tmp / RECORD, record)
+        os.chmod(tmp, 0o777 & ~_umask())
+        final = cases / case.id
+        if final.exists():  # --force: move the old folder away first, so the new one lands whole
+            old = Path(tempfile.mkdtemp(dir=cases, prefix=f".{case.id}.old."))
+            os.replace(final, old / case.id)
+            os.replace(tmp, final)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return final
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _clean_partial(out: Path) -> None:
+    """Remove temporary folders left by an interrupted write (never a finished case)."""
+    cases = out / CASES
+    if cases.is_dir():
+        for p in cases.iterdir():
+            if p.name.startswith(".") and p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+
+
+# ----------------------------------------------------------------------------------------- dask
+def default_workers() -> int:
+    """The cores this process may use (the LocalCluster's default size)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
+@contextmanager
+def dask_client(*, workers: int | None = None, scheduler: str | None = None) -> Iterator:
+    """A ``distributed.Client``: on an existing scheduler, or on a LocalCluster of ``workers``
+    single-threaded worker processes (CasADi, IPOPT and MUMPS run one solve per process)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise InputError("ddcm-sweep needs dask.distributed: pip install 'ddcm-casadi[sweep]'") from None
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, ValueError) as exc:
+            raise InputError(f"cannot connect to the Dask scheduler at {scheduler}: {_message(exc)}") from None
+        with client:
+            yield client
+        return
+    n = workers or default_workers()
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+        yield client
+
+
+def n_workers(client) -> int:
+    """How many workers the client's scheduler has."""
+    return len(client.scheduler_info(n_workers=-1)["workers"])
+
+
+# ---------------------------------------------------------------------------------------- sweep
+@dataclass
+class SweepReport:
+    """What a call of :func:`run_sweep` did."""
+
+    out: Path
+    total: int
+    ran: int = 0
+    skipped: int = 0
+    failed: list[str] = field(default_factory=list)
+    lost: list[str] = field(default_factory=list)
+    workers: int | None = None
+    seconds: float = 0.0
+    fits: list[dict] = field(default_factory=list)
+    figures: list[str] = field(default_factory=list)
+
+
+#: ``progress(done, total, case, record_or_None, error_or_None)`` after each case of this run.
+Progress = Callable[[int, int, SweepCase, dict | None, str | None], None]
+
+
+def pending(spec: SweepSpec, out: Path, *, force: bool = False, retry_failed: bool = False) -> list[SweepCase]:
+    """The cases still to run: all with ``force``; else those without a finished folder (and the
+    failed ones with ``retry_failed``)."""
+    if force:
+        return list(spec.cases)
+    todo = []
+    for case in spec.cases:
+        record = read_record(out, case.id)
+        if record is None or (retry_failed and record.get("status") != "ok"):
+            todo.append(case)
+    return todo
+
+
+def run_sweep(spec: SweepSpec, out: str | Path, *, workers: int | None = None, scheduler: str | None = None,
+              force: bool = False, retry_failed: bool = False, figures: bool = True,
+              progress: Progress | None = None, versions: dict | None = None) -> SweepReport:
+    """Run the missing cases of ``spec`` on Dask and write ``sweep.csv``, ``sweep.json`` and figures.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The validated spec (:func:`~ddcm_casadi.sweep.spec.load_spec`).
+    out : str or Path
+        The output folder (created if needed).
+    workers : int, optional
+        Worker processes of the LocalCluster (default: the cores this process may use).
+    scheduler : str, optional
+        Address of an existing Dask scheduler; then ``workers`` is ignored.
+    force, retry_failed : bool
+        Rerun every case, or the failed ones too (by default a rerun skips finished cases).
+    figures : bool
+        Draw the spec's figures (matplotlib is imported only then).
+    progress : callable, optional
+        Called after every case of this run (see :data:`Progress`); an exception it raises
+        (e.g. ``KeyboardInterrupt``) cancels the remaining tasks, keeps the finished cases and
+        propagates.
+    versions : dict, optional
+        Extra entries of ``sweep.json``'s ``versions``.
+
+    Returns
+    -------
+    SweepReport
+    """
+    t0 = time.perf_counter()
+    out = Path(out)
+    todo = pending(spec, out, force=force, retry_failed=retry_failed) if out.is_dir() else list(spec.cases)
+    report = SweepReport(out=out, total=len(spec.cases), skipped=len(spec.cases) - len(todo))
+    if figures and spec.figures:
+        from . import figures as _figures  # noqa: F401 - a missing matplotlib fails before any work
+    if todo:
+        with dask_client(workers=workers, scheduler=scheduler) as client:
+            out = prepare_output_dir(out)
+            _clean_partial(out)
+            report.workers = n_workers(client)
+            _run(client, spec, todo, out, report, progress)
+    else:
+        out = prepare_output_dir(out)
+    report.seconds = time.perf_counter() - t0
+    finish(spec, out, report, figures=figures, versions=versions)
+    return report
+
+
+def _run(client, spec: SweepSpec, todo: list[SweepCase], out: Path, report: SweepReport,
+         progress: Progress | None) -> None:
+    from distributed import as_completed
+
+    variants = list(spec.variants) if spec.variants else None
+    formulations = list(spec.formulations) if spec.formulations else None
+    futures = {}
+    for case in todo:
+        task = dict(case=dict(id=case.id, index=case.index, params=case.params, doc=case.doc, generate=case.generate),
+                    base=str(spec.base.resolve()), variants=variants, formulations=formulations)
+        futures[client.submit(run_case, task, pure=False)] = case
+    done = 0
+    try:
+        for future in as_completed(futures):
+            case = futures[future]
+            record, error = None, None
+            try:
+                result = future.result()
+            except Exception as exc:  # noqa: BLE001 - a task lost by the cluster: rerun next time
+                error = _message(exc)
+                report.lost.append(case.id)
+            else:
+                write_case(out, case, spec, result)
+                record = read_record(out, case.id)
+                report.ran += 1
+                if result["status"] != "ok":
+                    report.failed.append(case.id)
+            done += 1
+            if progress is not None:
+                progress(done, len(todo), case, record, error)
+    except BaseException:
+        client.cancel(list(futures))
+        raise
+
+
+def finish(spec: SweepSpec, out: Path, report: SweepReport, *, figures: bool = True,
+           versions: dict | None = None) -> None:
+    """Write ``sweep.csv``, ``sweep.json`` and the figures from the finished case folders."""
+    from ..cli import versions as package_versions
+
+    records = [(case, read_record(out, case.id)) for case in spec.cases]
+    rows = [row for _, rec in records if rec is not None for row in case_rows(rec, spec.columns)]
+    report.fits = fits(rows, spec.figures, spec.columns)
+    if figures and spec.figures and rows:
+        from .figures import save_figures
+
+        report.figures = [p.name for p in save_figures(spec, rows, out)]
+    status = {case.id: (rec or {}).get("status", "missing") for case, rec in records}
+    doc = dict(spec=spec.document, spec_path=str(spec.path), base=str(spec.base), columns=spec.columns,
+               cases=len(spec.cases), finished=sum(s != "missing" for s in status.values()),
+               failed=sum(s == "failed" for s in status.values()), missing=sum(s == "missing" for s in status.values()),
+               ran=report.ran, skipped=report.skipped, lost=len(report.lost), workers=report.workers,
+               seconds=report.seconds, fits=report.fits, figures=report.figures,
+               versions={**package_versions(), **_dask_versions(), **(versions or {})},
+               case_index=[dict(id=case.id, params=case.params, status=status[case.id]) for case in spec.cases])
+    write_csv_atomic(out / "sweep.csv", rows)
+    write_json_atomic(out / "sweep.json", doc)
+
+
+def _dask_versions() -> dict:
+    try:
+        import dask
+        import distributed
+    except ImportError:
+        return {}
+    return {"dask": dask.__version__, "distributed": distributed.__version__}

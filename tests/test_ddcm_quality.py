@@ -1,0 +1,234 @@
+"""DDCM search options: starts, restarts, greedy improvement, certificates and LCDD.
+
+Reference values come from independent routes: the classical closed form of the paper's bar,
+brute-force enumeration of every data assignment through the per-column exact projection
+(:meth:`ExactEnumerator.solve`, one parameter column per assignment), and repeated runs.
+"""
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from ddcm_casadi import compare, formulations, paper_bar
+from ddcm_casadi.cli import main
+from ddcm_casadi.config import load_case
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.exact import ExactEnumerator
+from ddcm_casadi.problem import build_problems
+from ddcm_casadi.quality_rungs import noisy_dataset, noisy_paper_bar
+from ddcm_casadi.solvers.ddcm_options import DDCMOptions
+from ddcm_casadi.solvers.ddcm_search import elastic_state
+from ddcm_casadi.solvers.path import DDCMSolver
+from ddcm_casadi.truss import bar_chain
+
+FB = "fischer_burmeister"
+#: Roundoff of a distance: the enumerator expands quadratics whose terms are O(1) in scaled units.
+ROUNDOFF = 1e-9
+
+
+def _run(model, **options):
+    return compare(model, [FB], variants=("ddcm",), ddcm=DDCMOptions(**options))["ddcm", FB]
+
+
+def _chain(noise: float, seed: int, *, elements: int = 2, n_data: int = 30):
+    """An N-element bar pushed 1 % into contact, on noisy data (few elements: enumerable)."""
+    data = noisy_dataset(noise, seed, n_data=n_data)
+    return bar_chain(length=1.0, elements=elements, youngs_modulus=200e9,
+                     tip_positions=np.linspace(1.002, 0.99, 5), dataset=data, name="noisy chain")
+
+
+# ------------------------------------------------------------------------------- bad option values
+@pytest.mark.parametrize("bad, key", [
+    (dict(start="elastc"), "start"), (dict(improve="best"), "improve"), (dict(restarts=-1), "restarts"),
+    (dict(restarts=1.5), "restarts"), (dict(seed=True), "seed"), (dict(warm="yes"), "warm"),
+    (dict(initial=[0, -1]), "initial"), (dict(initial="0"), "initial"), (dict(variant="maxent2"), "variant"),
+    (dict(lcdd_neighbours=1), "lcdd_neighbours"), (dict(greedy_budget=0), "greedy_budget"),
+])
+def test_bad_options_are_one_line_errors(bad, key):
+    with pytest.raises(InputError) as exc:
+        DDCMOptions(**bad)
+    assert key in str(exc.value) and "\n" not in str(exc.value)
+    with pytest.raises(InputError):  # and through compare, as a mapping, before any work
+        compare(paper_bar(n_data=20), [FB], variants=("ddcm",), ddcm=bad)
+
+
+def test_unknown_option_and_bad_initial_assignment():
+    with pytest.raises(InputError, match="unknown ddcm option 'restart'"):
+        compare(paper_bar(n_data=20), [FB], variants=("ddcm",), ddcm={"restart": 2})
+    with pytest.raises(InputError, match="initial has 2 indices"):
+        _run(paper_bar(n_data=20), initial=(1, 2))
+    with pytest.raises(InputError, match="outside"):
+        _run(paper_bar(n_data=20), initial=(20,))
+
+
+CASE = """[bar]
+length = 1.0
+youngs_modulus = 200e9
+
+[obstacle]
+positions = [1.01, 1.0, 0.995, 0.99]
+
+[data]
+hookean = { strain_min = -0.05, strain_max = 0.01, points = 200 }
+
+[ddcm]
+c = 300e9
+"""
+
+
+@pytest.mark.parametrize("extra, key", [('start = "warm"', "start"), ("restarts = -2", "restarts"),
+                                        ('improve = "greedy "', "improve"), ("seed = 1.0", "seed"),
+                                        ("initial = [1.5]", "initial")])
+def test_bad_case_file_values(tmp_path, capsys, extra, key):
+    cfg = tmp_path / "case.toml"
+    cfg.write_text(CASE + extra + "\n", encoding="utf-8")
+    with pytest.raises(InputError, match=rf"^\[ddcm\] {key}"):
+        load_case(cfg)
+    out = tmp_path / "out"
+    assert main(["--config", str(cfg), "--out", str(out), "-q", "--no-plots", "--formulations", FB]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"[ddcm] {key}" in err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_options_recorded_in_results_json(tmp_path, capsys):
+    cfg = tmp_path / "case.toml"
+    cfg.write_text(CASE + 'start = "elastic"\nrestarts = 1\nseed = 3\nimprove = "greedy"\n', encoding="utf-8")
+    case = load_case(cfg)
+    assert case.ddcm_options == DDCMOptions(start="elastic", restarts=1, seed=3, improve="greedy")
+    out = tmp_path / "out"
+    assert main(["--config", str(cfg), "--out", str(out), "-q", "--no-plots", "--formulations", FB]) == 0
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["parameters"]["ddcm"] == case.ddcm_options.describe()
+    ddcm = next(s for s in doc["summary"] if s["variant"] == "ddcm")
+    assert ddcm["projections"] >= 4  # every step ran at least its own run and one restart
+
+
+# ------------------------------------------------------------------------------------------ starts
+def test_elastic_state_is_the_classical_solution_when_the_metric_is_the_modulus():
+    """With c = E the linear problem of the elastic start is the classical one (closed form)."""
+    model = paper_bar(c=200e9)
+    for k in range(model.n_steps):
+        u, strain, stress = elastic_state(model, k)
+        u_ex, p_ex = model.closed_form(k)
+        assert u[0] == pytest.approx(u_ex[0], rel=1e-9, abs=1e-12 * model.length)
+        assert stress[0] == pytest.approx(-p_ex[0], rel=1e-9, abs=1e-9 * model.scales["stress"])
+
+
+def test_starts_and_explicit_initial_assignment():
+    model = paper_bar()
+    data = model.dataset
+    _, strain, stress = elastic_state(model, 0)
+    j_el = int(data.nearest(strain, stress)[0])
+    built = formulations.get(FB).build(build_problems(model).projection)
+    problems = build_problems(model)
+    r = DDCMSolver(problems, built, options=DDCMOptions(start="elastic")).solve()
+    # h = 1.01: the bar is free, the elastic state is the origin's and both start there.
+    assert int(r.steps[0].data_index[0]) == j_el == int(data.nearest([0.0], [0.0])[0])
+    default = DDCMSolver(problems, built).solve()
+    same = DDCMSolver(problems, built, options=DDCMOptions(initial=(j_el,))).solve()
+    assert np.array_equal(same.array("data_index"), default.array("data_index"))
+    j = 123
+    r = DDCMSolver(problems, built, options=DDCMOptions(initial=(j,))).solve()
+    # A free bar keeps eps* and drops its stress: the walk leaves datum j (strain -0.035) and
+    # ends at a fixed point between it and the origin.
+    s0 = r.steps[0]
+    assert s0.outer_iterations > 1 and data.strain[j] < s0.strain_star[0] <= 0.0
+    assert int(data.nearest(s0.strain, s0.stress)[0]) == int(s0.data_index[0])
+
+
+# ------------------------------------------------------------------------- reproducibility, descent
+def test_seeded_runs_are_reproducible():
+    model = noisy_paper_bar(0.02, 4, n_data=200)
+    opts = dict(start="random", restarts=2, seed=11, improve="greedy", greedy_screen=False)
+    a, b = _run(model, **opts), _run(model, **opts)
+    assert np.array_equal(a.array("data_index"), b.array("data_index"))
+    assert np.array_equal(a.array("distance"), b.array("distance"))
+    assert np.array_equal(a.array("projections"), b.array("projections"))
+    c = _run(model, **{**opts, "seed": 12})
+    assert not np.array_equal(a.array("projections"), c.array("projections"))  # the seed matters
+
+
+@pytest.mark.parametrize("screen", [True, False])
+@pytest.mark.parametrize("model", [noisy_paper_bar(0.05, 1, n_data=300), _chain(0.05, 2, elements=3, n_data=60)],
+                         ids=["bar", "chain"])
+def test_greedy_is_a_descent_method(model, screen):
+    """Every step starts from the same assignment (warm=False), so the greedy search starts from
+    plain alternating's fixed point and may only lower its objective."""
+    plain = _run(model, warm=False)
+    greedy = _run(model, warm=False, improve="greedy", greedy_screen=screen)
+    assert greedy.converged and plain.converged
+    d0, d1 = plain.array("distance"), greedy.array("distance")
+    scale = model.scales_for("ddcm")["energy"]
+    assert np.all(d1 <= d0 + ROUNDOFF * scale)
+    improved = greedy.array("improvements") > 0
+    assert np.all(d1[improved] < d0[improved])
+    assert np.array_equal(d1[~improved], d0[~improved])
+    assert improved.any()  # noisy data: some step had a better fixed point
+
+
+def test_restarts_keep_the_lowest_objective():
+    model = noisy_paper_bar(0.05, 3, n_data=300)
+    plain = _run(model, warm=False)
+    more = _run(model, warm=False, restarts=3, seed=5)
+    assert np.all(more.array("distance") <= plain.array("distance"))
+    assert np.all(more.array("runs") == 4)
+
+
+# ----------------------------------------------------------------------------------- certificates
+def _brute_force(problems, step, m, n):
+    """Every data assignment's exact projection, one parameter column each: the global minimum."""
+    data = problems.model.dataset
+    combos = np.array(list(itertools.product(range(n), repeat=m))).T  # (m, n^m)
+    P = problems.projection_params(step, data.strain[combos], data.stress[combos])
+    ex = ExactEnumerator(problems.projection).solve(P)
+    return float(np.min(ex.objective)) * problems.scales("mpcc")["energy"]
+
+
+@pytest.mark.parametrize("elements, n_data", [(1, 200), (2, 30), (3, 10)])
+def test_certificate_against_brute_force(elements, n_data):
+    model = _chain(0.02, 7, elements=elements, n_data=n_data)
+    r = _run(model, exact_max=n_data ** elements)
+    problems = build_problems(model)
+    tol = ROUNDOFF * problems.scales("mpcc")["energy"]
+    for s in r.steps:
+        best = _brute_force(problems, s.step, elements, n_data)
+        assert s.global_distance == pytest.approx(best, rel=1e-9, abs=tol)
+        assert s.global_gap == pytest.approx(s.distance - best, abs=2 * tol)
+        assert s.global_optimum == bool(s.distance <= best + tol)
+
+
+def test_no_certificate_beyond_exact_max():
+    r = _run(_chain(0.02, 7, elements=2, n_data=30), exact_max=899)
+    assert all(s.global_optimum is None for s in r.steps)
+
+
+def test_greedy_reaches_the_enumerated_optimum_on_one_element():
+    """On one element the screened moves cover the whole data set: every step is certified."""
+    for seed in range(3):
+        r = _run(noisy_paper_bar(0.05, seed, n_data=300), improve="greedy")
+        assert all(s.global_optimum for s in r.steps)
+
+
+# ------------------------------------------------------------------------------------------- LCDD
+@pytest.mark.parametrize("noise", [0.02, 0.05])
+def test_lcdd_is_closer_to_the_law_than_plain_ddcm_on_noisy_data(noise):
+    """Mean over seeded data sets of the max relative error of p against the noise-free classical
+    closed form: LCDD averages its neighbours' noise, plain DDCM takes one noisy datum."""
+    errs = {"plain": [], "lcdd": []}
+    for seed in range(4):
+        model = noisy_paper_bar(noise, seed)
+        for name, opts in (("plain", {}), ("lcdd", dict(variant="lcdd"))):
+            cmp = compare(model, [FB], variants=("ddcm",), ddcm=DDCMOptions(**opts))
+            # LCDD may leave a step unsettled (reported as not converged; see noise_robust).
+            assert name == "lcdd" or cmp["ddcm", FB].converged
+            errs[name].append(float(np.max(cmp.errors("ddcm", FB)["p"])))
+    mean = {k: np.mean(v) for k, v in errs.items()}
+    assert mean["lcdd"] < mean["plain"], mean
+
+
+def test_lcdd_refuses_what_it_cannot_do():
+    with pytest.raises(InputError, match="does not combine"):
+        _run(paper_bar(n_data=20), variant="lcdd", restarts=1)
