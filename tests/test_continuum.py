@@ -182,6 +182,22 @@ def test_hertz_formulas():
     delta = a ** 2 / 0.01
     assert math.isclose(4 / 3 * 2e11 * math.sqrt(0.01) * delta ** 1.5, 1e3, rel_tol=1e-12)
     assert math.isclose(p0, 3e3 / (2 * math.pi * a ** 2), rel_tol=1e-14)
+    assert hertz_2d(0.0, 0.05, 2e11) == (0.0, 0.0)
+    with pytest.raises(InputError, match="compressive load"):
+        hertz_3d(-1.0, 0.01, 2e11)
+
+
+def test_hertz_measure_of_a_step_without_contact():
+    """Roundoff pressures of either sign (a penalty's -1e-20 Pa) are no load, not a crash (it
+    once ended a 22-minute run while writing its results)."""
+    from ddcm_casadi.continuum.hertz import HertzReference
+
+    model = _indented(2)
+    ref = HertzReference(E, NU, obstacle=0)
+    p = np.full(model.n_contacts, -1e-20)
+    m = ref.measure(model, p)
+    assert m["force"] == 0.0 and m["a_hertz"] == 0.0 and m["p0_hertz"] == 0.0
+    assert ref.step_summary(model, p)["hertz_force"] == 0.0
 
 
 # ------------------------------------------------------------------------------- bad input

@@ -44,14 +44,21 @@ def effective_modulus(youngs_modulus: float, poisson_ratio: float) -> float:
     return float(youngs_modulus) / (1.0 - float(poisson_ratio) ** 2)
 
 
+def _compressive(load: float) -> None:
+    if not (math.isfinite(load) and load >= 0):
+        raise InputError(f"the Hertz solution needs a finite compressive load >= 0, got {load!r}")
+
+
 def hertz_2d(load: float, radius: float, e_star: float) -> tuple[float, float]:
-    """Half-width ``a`` and peak pressure ``p0`` for a load ``P`` per unit thickness."""
+    """Half-width ``a`` and peak pressure ``p0`` for a load ``P >= 0`` per unit thickness."""
+    _compressive(load)
     a = 2.0 * math.sqrt(radius * load / (math.pi * e_star))
     return a, 2.0 * load / (math.pi * a) if a > 0 else 0.0
 
 
 def hertz_3d(force: float, radius: float, e_star: float) -> tuple[float, float]:
-    """Contact radius ``a`` and peak pressure ``p0`` for a force ``F``."""
+    """Contact radius ``a`` and peak pressure ``p0`` for a force ``F >= 0``."""
+    _compressive(force)
     a = (3.0 * force * radius / (4.0 * e_star)) ** (1.0 / 3.0)
     return a, 3.0 * force / (2.0 * math.pi * a ** 2) if a > 0 else 0.0
 
@@ -135,7 +142,8 @@ class HertzReference:
         d = np.asarray(ob.direction, float) / np.linalg.norm(ob.direction)
         # the body pushes back on the indenter along -n; resolved against its travel d: n . d
         along = model.contact_normals[pairs] @ d
-        force = self.force_factor * float(np.sum(area * p * along))
+        # A step without contact sums roundoff of either sign (penalty: -1e-20 Pa): no load.
+        force = max(0.0, self.force_factor * float(np.sum(area * p * along)))
         w = area * p
         moment = float(np.sum(w * x ** 2) / np.sum(w)) if np.sum(w) > 0 else 0.0
         if model.dimension == 2:
