@@ -15,16 +15,8 @@ import argparse
 import time
 
 from ddcm_casadi import formulations as registry
-from ddcm_casadi.casefile import read_document
-from ddcm_casadi.config import case_from_dict
-from ddcm_casadi.continuum.validation import EXAMPLE
+from ddcm_casadi.continuum.validation import hertz_block
 from ddcm_casadi.harness import compare
-
-
-def hertz_case(levels: int):
-    doc = read_document(EXAMPLE)
-    doc["mesh"]["refine_near"]["levels"] = levels
-    return case_from_dict(doc, base_dir=EXAMPLE.parent, source=f"hertz2d L{levels}").model
 
 
 def main(argv=None) -> list[dict]:
@@ -37,7 +29,7 @@ def main(argv=None) -> list[dict]:
     print(f"{'mesh':>4} {'unknowns':>8} {'stress':>7} {'variant':9} {'formulation':22} {'conv':>5} "
           f"{'build s':>8} {'solve s':>8} {'its/step':>8} {'p0 err':>7}")
     for lev in args.levels:
-        model = hertz_case(lev)
+        model = hertz_block(lev, degree=2, data=True)
         for variant in args.variants:
             for name in args.formulations:
                 t0 = time.perf_counter()

@@ -30,7 +30,7 @@ import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -41,6 +41,7 @@ else:  # pragma: no cover
 
 from .data import MAX_DATA_POINTS, MaterialDataset, check_positive
 from .errors import InputError
+from .overrides import apply_overrides
 from .model import ContactModel
 from .solvers.ddcm_options import KEYS as DDCM_OPTION_KEYS
 from .solvers.ddcm_options import DDCMOptions
@@ -272,13 +273,16 @@ def read_document(path: Path) -> dict:
     return doc
 
 
-def load_case(path: str | Path) -> Case:
+def load_case(path: str | Path, *, overrides: Iterable[tuple[str, Any]] = ()) -> Case:
     """Read and validate a case file (``.toml`` or ``.json``, same schema).
 
     Parameters
     ----------
     path : str or Path
         The case file; relative data paths are resolved against its folder.
+    overrides : iterable of (str, value)
+        Dotted keys and values applied to the document before it is validated
+        (:func:`ddcm_casadi.overrides.apply_overrides`, ``ddcm-compare --set``).
 
     Returns
     -------
@@ -290,7 +294,8 @@ def load_case(path: str | Path) -> Case:
         Missing, unreadable or malformed file, unknown suffix, or any invalid value (one line).
     """
     path = Path(path)
-    return case_from_dict(read_document(path), base_dir=path.parent, source=str(path))
+    doc = apply_overrides(read_document(path), overrides)
+    return case_from_dict(doc, base_dir=path.parent, source=str(path))
 
 
 def _check_sections(doc: dict, source: str) -> None:

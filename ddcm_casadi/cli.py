@@ -173,6 +173,14 @@ def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
     return {f"{variant}/{name}": model.results_fields(cmp.fields(variant, name)) for (variant, name) in cmp.results}
 
 
+def compare_case(case: Case, names: list[str], variants: list[str], *, progress=None) -> Comparison:
+    """Run a case as ``ddcm-compare`` does: the formulations ``names`` with the case's options, the
+    case's DDCM settings (also what ``ddcm-sweep`` runs per case)."""
+    selection = {n: case.formulation_options.get(n, {}) for n in names}
+    return compare(case.model, selection, variants=variants, ddcm_max_outer=case.ddcm_max_outer,
+                   ddcm=case.ddcm_options, progress=progress)
+
+
 def versions() -> dict:
     return {"ddcm_casadi": __version__, "casadi": casadi.__version__, "numpy": np.__version__,
             "scipy": scipy.__version__, "python": platform.python_version()}
@@ -198,14 +206,12 @@ def run(argv: list[str] | None = None) -> int:
         # matplotlib only when a plot is drawn, but imported before any result is written: a
         # missing matplotlib must not leave results without their figures.
         from . import plots  # noqa: F401
-    selection = {n: case.formulation_options.get(n, {}) for n in names}
 
     progress = _Progress(case.model.n_steps, not args.quiet)
     if not args.quiet:
         print(f"ddcm-compare: {case.source}: {case.model.n_steps} steps, "
               f"{len(names)} formulations x {len(variants)} variants", file=sys.stderr)
-    cmp = compare(case.model, selection, variants=variants, ddcm_max_outer=case.ddcm_max_outer,
-                  ddcm=case.ddcm_options, progress=progress)
+    cmp = compare_case(case, names, variants, progress=progress)
     print(cmp.table())
 
     if out is not None:

@@ -230,9 +230,16 @@ class MaterialDataset:
         ``(strain_max - strain_min) / (points_per_axis - 1)`` in every component."""
         D = np.atleast_2d(np.asarray(stiffness, dtype=float))
         k = D.shape[0]
-        n = int(points_per_axis)
         if D.shape != (k, k) or not np.all(np.isfinite(D)):
             raise InputError(f"a Hookean data set needs a finite square stiffness, got shape {D.shape}")
+        return cls.from_law(lambda strain: strain @ D.T, k, strain_min, strain_max, points_per_axis, c=c)
+
+    @classmethod
+    def from_law(cls, law, components: int, strain_min: float, strain_max: float, points_per_axis: int, *,
+                 c) -> "MaterialDataset":
+        """Any law ``stress = law(strain)`` (``(n, k) -> (n, k)``, Mandel components) sampled on a
+        regular grid of ``points_per_axis^k`` strain states in ``[strain_min, strain_max]^k``."""
+        k, n = int(components), int(points_per_axis)
         if n < 1 or float(n) ** k > MAX_DATA_POINTS:
             raise InputError(f"points per axis must be between 1 and {int(MAX_DATA_POINTS ** (1 / k))} "
                              f"for {k} components (at most {MAX_DATA_POINTS} points), got {points_per_axis!r}")
@@ -240,7 +247,7 @@ class MaterialDataset:
             raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
         axis = np.linspace(strain_min, strain_max, n)
         strain = np.stack(np.meshgrid(*([axis] * k), indexing="ij"), axis=-1).reshape(-1, k)
-        return cls(strain, strain @ D.T, c)
+        return cls(strain, law(strain), c)
 
     @classmethod
     def from_csv(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":

@@ -20,7 +20,7 @@ from ddcm_casadi.formulations.base import Formulation
 from .errors import InputError
 from .model import ContactModel
 from .problem import ProblemPair, build_problems
-from .solvers.ddcm_options import DDCMOptions
+from .solvers.ddcm_options import KEYS, DDCMOptions
 from .solvers.path import DDCMSolver, PathResult, StepResult, solve_classical
 
 VARIANTS = ("classical", "ddcm")
@@ -250,7 +250,7 @@ def as_ddcm_options(ddcm: DDCMOptions | Mapping | None) -> DDCMOptions:
         return ddcm or DDCMOptions()
     if not isinstance(ddcm, Mapping):
         raise InputError(f"ddcm options must be DDCMOptions or a mapping, got {type(ddcm).__name__}")
-    unknown = sorted(set(ddcm) - {f.name for f in dataclasses.fields(DDCMOptions)})
+    unknown = sorted(set(ddcm) - KEYS)
     if unknown:
         raise InputError(f"unknown ddcm option {unknown[0]!r}")
     return DDCMOptions(**dict(ddcm))

@@ -40,13 +40,16 @@ def parse_value(text: str, *, what: str = "--set") -> Any:
         The text is not a TOML value (one line).
     """
     try:
-        return tomllib.loads(f"value = {text}")["value"]
+        parsed = tomllib.loads(f"value = {text}")
     except tomllib.TOMLDecodeError:
         if _BARE_WORD.fullmatch(text.strip()):
             return text.strip()
         raise InputError(f"{what}: {text!r} is not a TOML value (strings need quotes, e.g. '\"name\"')") from None
     except RecursionError:
         raise InputError(f"{what}: value nested too deeply") from None
+    if len(parsed) != 1:  # a newline in the text started another key
+        raise InputError(f"{what}: {text!r} is more than one TOML value")
+    return parsed["value"]
 
 
 def parse_item(item: str) -> tuple[str, Any]:
@@ -131,11 +134,7 @@ def load_case_with_overrides(path: str | Path, items: Iterable[str]):
         The case and the overrides as ``{key: parsed value}`` (for ``results.json``).
     """
     # Imported here: config imports every model kind (the package's heavier modules).
-    from .config import case_from_dict
-    from .casefile import read_document
+    from .config import load_case
 
-    path = Path(path)
     pairs = [parse_item(item) for item in items]
-    doc = apply_overrides(read_document(path), pairs)
-    case = case_from_dict(doc, base_dir=path.parent, source=str(path))
-    return case, dict(pairs)
+    return load_case(path, overrides=pairs), dict(pairs)

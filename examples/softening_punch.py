@@ -68,10 +68,9 @@ def dataset(points_per_axis: int, *, law: str = "softening") -> MaterialDataset:
     stresses from the softening law (or the linear one, ``law="linear"``), metric: the isotropic
     stiffness of ``E, nu``."""
     C = isotropic_elasticity(E, NU, 2)[0]
-    axis = np.linspace(-STRAIN_RANGE, STRAIN_RANGE, int(points_per_axis))
-    strain = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
-    stress = softening_stress(strain) if law == "softening" else strain @ C.T
-    return MaterialDataset(strain, stress, Metric(C))
+    if law == "linear":
+        return MaterialDataset.hookean_grid(C, -STRAIN_RANGE, STRAIN_RANGE, points_per_axis, c=Metric(C))
+    return MaterialDataset.from_law(softening_stress, 3, -STRAIN_RANGE, STRAIN_RANGE, points_per_axis, c=Metric(C))
 
 
 def travel(quick: bool) -> np.ndarray:
@@ -95,9 +94,11 @@ def build_model(*, quick: bool = False, points_per_axis: int | None = None, law:
 
 
 def punch_force(model, cmp: Comparison, variant: str, formulation: str) -> np.ndarray:
-    """Total punch force per step (N per metre of thickness, both halves)."""
-    p = cmp.fields(variant, formulation)["contact_pressure"]
-    return 2.0 * np.asarray(p) @ model.contact_area
+    """Total punch force per step (N per metre of thickness, both halves), resolved along the
+    punch's travel: the contact forces ``a p n`` of the pairs against ``d``."""
+    forces = model.contact_force_vectors(cmp.fields(variant, formulation)["contact_pressure"])
+    d = np.asarray(model.obstacles[0].direction, dtype=float)
+    return 2.0 * np.sum(forces @ (d / np.linalg.norm(d)), axis=-1)
 
 
 class PunchResult:

@@ -23,6 +23,17 @@ def fischer_burmeister(a, b, mu=0.0):
     return ca.sqrt(s + origin) - origin - a - b
 
 
+def _saddle_rows(problem: ComplementarityProblem, eta, theta, nu, sel, first, b, target=0):
+    """The projection's saddle-point rows with the pair equations ``first = target`` (multiplier
+    ``theta``) and, on the corner pairs ``sel``, ``b = 0`` (multiplier ``nu``; ``nu = 0`` elsewhere):
+    the stationarity of ``f + eta.h + theta.first + nu.(sel b)`` in ``(x, p)``, ``h``,
+    ``first - target`` and ``sel b + (1 - sel) nu``. The FB system and its piece systems differ
+    only in ``first``."""
+    lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, first) + ca.dot(nu, sel * b)
+    return ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, first - target,
+                      sel * b + (1 - sel) * nu)
+
+
 class FBSystem:
     """Newton system of the Fischer-Burmeister reformulation of a problem's pairs (built once).
 
@@ -99,11 +110,8 @@ class FBSystem:
             eta, theta, nu = ca.SX.sym("eta", ne), ca.SX.sym("theta", nc), ca.SX.sym("nu", nc)
             sel = P["corner"]
             z = ca.vertcat(problem.x, problem.p, eta, theta, nu)
-            first = sel * a + (1 - sel) * phi
-            lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, first) + ca.dot(nu, sel * b)
-            grad = ca.gradient(lag, ca.vertcat(problem.x, problem.p))
             target = (1 - sel) * (theta - P["lam"]) / P["rho"] if proximal else 0
-            r = ca.vertcat(grad, problem.residual, first - target, sel * b + (1 - sel) * nu)
+            r = _saddle_rows(problem, eta, theta, nu, sel, sel * a + (1 - sel) * phi, b, target)
             self.corner = True
             self._ne = ne
         self.parameters = P
@@ -176,10 +184,7 @@ class FBSystem:
             if problem.kind == "mcp":
                 r = ca.vertcat(problem.residual, piece)
             else:
-                first = sel * a + (1 - sel) * piece
-                lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, first) + ca.dot(nu, sel * b)
-                r = ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, first,
-                               sel * b + (1 - sel) * nu)
+                r = _saddle_rows(problem, eta, theta, nu, sel, sel * a + (1 - sel) * piece, b)
             J = ca.jacobian(r, z)
             linear = not ca.depends_on(J, ca.vertcat(z, problem.params))
             rj = NumericFunction(ca.Function("fb_branch_rj", [z, P.vector], [r, J]))

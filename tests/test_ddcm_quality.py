@@ -103,7 +103,8 @@ def test_options_recorded_in_results_json(tmp_path, capsys):
     doc = json.loads((out / "results.json").read_text())
     assert doc["parameters"]["ddcm"] == case.ddcm_options.describe()
     ddcm = next(s for s in doc["summary"] if s["variant"] == "ddcm")
-    assert ddcm["projections"] >= 4  # every step ran at least its own run and one restart
+    # every step ran its own run and one restart, at least one projection each
+    assert ddcm["projections"] >= 2 * case.model.n_steps
 
 
 # ------------------------------------------------------------------------------------------ starts
@@ -187,6 +188,28 @@ def _brute_force(problems, step, m, n):
     return float(np.min(ex.objective)) * problems.scales("mpcc")["energy"]
 
 
+def test_single_moves_are_the_exact_projections_of_the_moved_assignments():
+    """The screen's closed forms (only the moving points' directions) against the exact projection
+    of each moved assignment solved directly; both are the same branch QPs, so they agree to roundoff."""
+    from ddcm_casadi.solvers.ddcm_search import single_moves
+
+    model = _chain(0.02, 3, elements=3, n_data=12)
+    problems = build_problems(model)
+    exact = ExactEnumerator(problems.projection)
+    data, step = model.dataset, 4
+    index = np.array([2, 5, 7])
+    points, cand = np.array([0, 2]), np.array([[0, 4, 11], [1, 6, 9]])
+    obj, mine = single_moves(problems, exact, step, index, points, cand)
+    moved = np.repeat(index[:, None], cand.size, axis=1)
+    for a, i in enumerate(points):
+        moved[i, a * cand.shape[1]:(a + 1) * cand.shape[1]] = cand[a]
+    direct = exact.solve(problems.projection_params(step, data.strain[moved], data.stress[moved])).objective
+    scale = max(1.0, float(np.max(np.abs(direct))))
+    assert np.max(np.abs(obj.ravel() - direct)) <= ROUNDOFF * scale
+    own = exact.solve(problems.projection_params(step, data.strain[index], data.stress[index])).objective[0]
+    assert abs(mine - own) <= ROUNDOFF * max(1.0, abs(own))
+
+
 @pytest.mark.parametrize("elements, n_data", [(1, 200), (2, 30), (3, 10)])
 def test_certificate_against_brute_force(elements, n_data):
     model = _chain(0.02, 7, elements=elements, n_data=n_data)
@@ -222,9 +245,14 @@ def test_lcdd_is_closer_to_the_law_than_plain_ddcm_on_noisy_data(noise):
         model = noisy_paper_bar(noise, seed)
         for name, opts in (("plain", {}), ("lcdd", dict(variant="lcdd"))):
             cmp = compare(model, [FB], variants=("ddcm",), ddcm=DDCMOptions(**opts))
-            # LCDD may leave a step unsettled (reported as not converged; see noise_robust).
-            assert name == "lcdd" or cmp["ddcm", FB].converged
-            errs[name].append(float(np.max(cmp.errors("ddcm", FB)["p"])))
+            r = cmp["ddcm", FB]
+            # Plain DDCM and LCDD at 2 % settle at every step; at 5 % LCDD may leave a step unsettled
+            # (reported as not converged, measured: one step in three of four seeds). Errors are
+            # compared on the steps that converged.
+            assert r.converged or (name == "lcdd" and noise > 0.02)
+            ok = np.array([s.converged for s in r.steps])
+            assert ok.sum() >= len(ok) - 1
+            errs[name].append(float(np.max(cmp.errors("ddcm", FB)["p"][ok])))
     mean = {k: np.mean(v) for k, v in errs.items()}
     assert mean["lcdd"] < mean["plain"], mean
 

@@ -10,6 +10,7 @@ reproducible and their noise has the stated statistics.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import logging
 from pathlib import Path
@@ -22,7 +23,7 @@ from ddcm_casadi.errors import InputError
 from ddcm_casadi.sweep import generator_from_dict, load_spec, run_case, run_sweep
 from ddcm_casadi.sweep.cli import main as sweep_main
 from ddcm_casadi.sweep.runner import CASES, read_record
-from ddcm_casadi.sweep.table import TIMINGS
+from ddcm_casadi.sweep.table import TIMINGS, fit_loglog
 
 from .test_bad_input import case_toml
 
@@ -117,13 +118,28 @@ def test_local_cluster_of_two_workers_runs_a_small_sweep(tmp_path):
     assert sorted(p.name for p in folder.iterdir()) == ["case.json", "results.csv", "results.json"]
     record = read_record(out, case.id)
     assert record["params"] == {"generate.points": 60, "seed": 1} and record["generate"]["seed"] == 1
-    direct = run_case(dict(case=dict(id=case.id, index=case.index, params=case.params, doc=case.doc,
-                                     generate=case.generate), base=str(spec.base), variants=["classical", "ddcm"],
+    direct = run_case(dict(case=dataclasses.asdict(case), base=str(spec.base), variants=["classical", "ddcm"],
                            formulations=["fischer_burmeister"]))
+    assert direct["status"] == "ok" and len(direct["rows"]) == len(record["rows"]) == 2
     for mine, theirs in zip(direct["rows"], record["rows"]):
         assert {k: v for k, v in mine.items() if k not in TIMINGS} == {k: v for k, v in theirs.items()
                                                                       if k not in TIMINGS}
     assert len(read_csv(folder / "results.csv")) == 2 * 4  # per step
+
+
+def test_noiseless_error_is_at_most_half_a_data_spacing(tmp_path):
+    """Without noise the DDCM pressure error is the stress error of the nearest datum: at most half
+    a data spacing, ``0.5 E 0.012 / (n - 1)`` over ``max p = E 0.004`` (the base case's strain
+    range and largest compression), so it falls as ``1/n`` (slope -1)."""
+    spec = load_spec(write_spec(tmp_path, 'base = "base.toml"\nvariants = ["ddcm"]\nformulations = ["fischer_burmeister"]\n'
+                                          '[generate]\n[grid]\n"generate.points" = [50, 200, 800]\n'))
+    n = np.array([c.params["generate.points"] for c in spec.cases], dtype=float)
+    runs = [run_case(dict(case=dataclasses.asdict(c), base=str(spec.base), variants=["ddcm"],
+                          formulations=["fischer_burmeister"])) for c in spec.cases]
+    assert all(r["status"] == "ok" for r in runs)
+    err = np.array([float(r["rows"][0]["max_error_p"]) for r in runs])
+    assert np.all(err <= 0.5 * 0.012 / (n - 1) / 0.004 * (1 + 1e-9))  # roundoff of the ratio
+    assert fit_loglog(n, err)[0] == pytest.approx(-1.0, abs=0.05)
 
 
 def test_interrupted_sweep_resumes_with_the_missing_cases_only(tmp_path, scheduler):
@@ -308,10 +324,14 @@ def test_nonlinear_laws_and_strain_noise():
     (dict(points=2.5), "points must be an integer"),
     (dict(strain_min=0.1), "strain_min must be <= strain_max"),
     (dict(noise_kind="gaussian"), "noise_kind must be one of"),
-    (dict(youngs_modulus=-1.0), "youngs_modulus must be positive"),
+    (dict(youngs_modulus=-1.0), "youngs_modulus must be finite and positive"),
+    (dict(noise=10 ** 400), "noise must be"),  # too large for a float: one line, no OverflowError
 ])
 def test_bad_generator_values(table, message):
     with pytest.raises(InputError, match=message):
         _gen(**table)
+
+
+def test_generator_without_points():
     with pytest.raises(InputError, match="missing key 'points'"):
         generator_from_dict(dict(youngs_modulus=1.0, strain_min=0.0, strain_max=1.0), {})

@@ -140,10 +140,10 @@ class HertzReference:
         p = np.asarray(pressure, float)[pairs]
         area = model.contact_area[pairs]
         d = np.asarray(ob.direction, float) / np.linalg.norm(ob.direction)
-        # the body pushes back on the indenter along -n; resolved against its travel d: n . d
-        along = model.contact_normals[pairs] @ d
-        # A step without contact sums roundoff of either sign (penalty: -1e-20 Pa): no load.
-        force = max(0.0, self.force_factor * float(np.sum(area * p * along)))
+        # The contact forces a p n resolved against the travel d. A step without contact sums
+        # roundoff of either sign (penalty: -1e-20 Pa): no load.
+        along = model.contact_force_vectors(pressure)[pairs] @ d
+        force = max(0.0, self.force_factor * float(np.sum(along)))
         w = area * p
         moment = float(np.sum(w * x ** 2) / np.sum(w)) if np.sum(w) > 0 else 0.0
         if model.dimension == 2:

@@ -25,14 +25,16 @@ EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "cases" / "hertz2d.
 E, NU, R = 200e9, 0.3, 0.05
 
 
-def hertz_block(levels: int, *, degree: int = 1):
+def hertz_block(levels: int, *, degree: int = 1, data: bool = False):
     """The Hertz example (``examples/cases/hertz2d.toml``) with ``degree`` elements and ``levels``
-    gradings of the contact zone (element size ``2 mm / 2^levels`` there), classical only."""
+    gradings of the contact zone (element size ``2 mm / 2^levels`` there), classical only unless
+    ``data`` (then with the example's Hookean data)."""
     from ..casefile import read_document
     from ..config import case_from_dict  # the public entry: registers the case kinds
 
     doc = read_document(EXAMPLE)
-    doc.pop("data", None)
+    if not data:
+        doc.pop("data", None)
     doc["mesh"]["degree"] = degree
     doc["mesh"]["refine_near"]["levels"] = levels
     return case_from_dict(doc, base_dir=EXAMPLE.parent, source=f"hertz P{degree} L{levels}.toml").model

@@ -236,22 +236,6 @@ class ActiveSetSolver:
                 seen, flips[:] = set(), 0
         return None, total
 
-    def _corner_after(self, z, base, selection, kw, iterations):
-        """Biactive pairs ``selection``: the corner polish from ``z``, accepted only if B-stationary.
-
-        Returns ``(result, spent, wrong)``: ``result`` is ``None`` unless B-stationary; ``wrong``
-        is ``(z, wrong_theta, wrong_nu)`` of a converged but not B-stationary corner, else ``None``.
-        """
-        out = self._corner_solve(z, base, selection, dict(kw, jacobian=self.system.jacobian))
-        if out is None:
-            return None, iterations, None
-        res, wrong_theta, wrong_nu = out
-        res.iterations += iterations
-        if wrong_theta.any() or wrong_nu.any():
-            return None, res.iterations, (res.z, wrong_theta, wrong_nu)
-        res.message = "converged (biactive corner)"
-        return res, res.iterations, None
-
     def polish_corner(self, z, base, opts, *, corner_tol: float = 1e-3):
         """The biactive-branch solution near ``z`` if it is B-stationary, else ``None``."""
         kw = dict(jacobian=self.system.jacobian, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
@@ -264,24 +248,20 @@ class ActiveSetSolver:
 
     def _corner(self, z, base, corner_tol, kw):
         """Newton on the biactive branch of the pairs within ``corner_tol`` of a corner; ``None``
-        unless B-stationary."""
+        unless it converges and is B-stationary (no ``theta_i > 0``: ``a_i`` wants to open, nor
+        ``nu_i > 0``: ``b_i`` does; :func:`ddcm_casadi.complementarity.b_stationarity`)."""
         if not np.all(np.isfinite(z)):
             return None
-        a, b = self.system.ab(z, self.system.problem_values(base))
-        return self._corner_after(z, base, np.maximum(np.abs(a), np.abs(b)) <= corner_tol, kw, 0)[0]
-
-    def _corner_solve(self, z, base, selection, kw):
-        """Newton on the biactive branch of ``selection``: ``(result, wrong_theta, wrong_nu)``,
-        the pairs whose multiplier breaks B-stationarity (``theta_i > 0``: ``a_i`` wants to
-        open, ``nu_i > 0``: ``b_i`` does; the larger decides,
-        :func:`ddcm_casadi.complementarity.b_stationarity`); ``None`` if Newton fails."""
-        sel = np.asarray(selection, dtype=float)
-        if not sel.any() or not np.all(np.isfinite(z)):
-            return None
         system = self.system
+        a, b = system.ab(z, system.problem_values(base))
+        sel = (np.maximum(np.abs(a), np.abs(b)) <= corner_tol).astype(float)
+        if not sel.any():
+            return None
         res = newton_solve(system.rj, system.r, z, system.pack(base, mu=0.0, corner=sel), **kw)
         if not res.converged:
             return None
-        theta, nu = system.corner_multipliers(res.z)
-        wrong_theta, wrong_nu = b_stationarity(theta, nu, sel > 0)
-        return res, wrong_theta, wrong_nu
+        wrong_theta, wrong_nu = b_stationarity(*system.corner_multipliers(res.z), sel > 0)
+        if wrong_theta.any() or wrong_nu.any():
+            return None
+        res.message = "converged (biactive corner)"
+        return res

@@ -60,7 +60,7 @@ def _checked(name: str, value: Any, where: str) -> Any:
                              f"got {value!r:.60}")
         out = []
         for v in value:
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or int(v) < 0:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not 0 <= int(v) < 2**63:
                 raise InputError(f"{where} initial must hold non-negative integer data indices, got {v!r:.60}")
             out.append(int(v))
         return tuple(out)
@@ -145,18 +145,16 @@ class DDCMOptions:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             object.__setattr__(self, f.name, _checked(f.name, getattr(self, f.name), "ddcm option"))
+        if self.variant == "lcdd" and (self.restarts or self.improve != "none"):
+            # checked here, before any work: LCDD has no data assignment to restart or improve
+            raise InputError("ddcm variant 'lcdd' does not combine with restarts or improve (it has no data assignment)")
 
     @classmethod
     def from_mapping(cls, table: Mapping[str, Any], *, where: str = "[ddcm]") -> "DDCMOptions":
         """Options from a case file's ``[ddcm]`` table (other keys, such as ``c``, are ignored
         here); every value is checked and a bad one is a one-line error naming ``where key``."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        values = {k: _checked(k, v, where) for k, v in table.items() if k in names}
+        values = {k: _checked(k, v, where) for k, v in table.items() if k in KEYS}
         return cls(**values)
-
-    def replace(self, **changes) -> "DDCMOptions":
-        """A copy with ``changes`` (validated)."""
-        return dataclasses.replace(self, **changes)
 
     def describe(self) -> dict:
         """The options as plain values, for ``results.json``."""

@@ -55,32 +55,43 @@ def _metric_blocks(model) -> np.ndarray:
     return np.stack([mt.matrix for mt in metrics])[material]
 
 
+def _elastic_operator(model):
+    """``(C, lu, KG, S)`` of the metric's linear problem: the point metrics, the factorised
+    ``K_C = B^T W C B``, ``K_C^-1 G^T`` and the contact compliance ``G K_C^-1 G^T``; the same at
+    every load step, so computed once per model."""
+    cached = model._cache.get("elastic_start")
+    if cached is None:
+        C = _metric_blocks(model)
+        B, G = model.strain_operator, model.gap_operator
+        K = (B.T @ block_diagonal(C * model.volumes[:, None, None]) @ B).tocsc()
+        try:
+            lu = factorize(K)
+        except SingularMatrix:
+            lu = factorize(K + 1e-9 * float(K.diagonal().max()) * sp.identity(K.shape[0], format="csc"))
+        KG = S = None
+        if model.n_contacts:
+            KG = lu.solve(G.T.toarray())  # K^-1 G^T, one column per pair
+            S = np.asarray(G @ KG)
+            S = 0.5 * (S + S.T)
+        cached = model._cache["elastic_start"] = (C, lu, KG, S)
+    return cached
+
+
 def elastic_state(model, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(u, strain, stress)`` of the linear contact problem with the metric as material law
     (see the module's docstring), at load step ``step``."""
-    C = _metric_blocks(model)
+    C, lu, KG, S = _elastic_operator(model)
     k = model.strain_components
-    B, G = model.strain_operator, model.gap_operator
-    WC = block_diagonal(C * model.volumes[:, None, None])
-    K = (B.T @ WC @ B).tocsc()
-    try:
-        lu = factorize(K)
-    except SingularMatrix:
-        lu = factorize(K + 1e-9 * float(K.diagonal().max()) * sp.identity(K.shape[0], format="csc"))
-    f = model.loads[step]
-    u = lu.solve(f)
+    u = lu.solve(model.loads[step])
     if model.n_contacts:
-        KG = lu.solve(G.T.toarray())  # K^-1 G^T, one column per pair
-        S = np.asarray(G @ KG)
-        S = 0.5 * (S + S.T)
-        q = G @ u + model.gap_offsets[step]
+        q = model.gap_operator @ u + model.gap_offsets[step]
         if np.any(q < 0):  # some pair would penetrate: solve the dual
             scale = float(np.max(np.diag(S))) or 1.0
             Sn = S / scale + 1e-12 * np.eye(S.shape[0])
             L = np.linalg.cholesky(Sn)
             lam, _ = nnls(L.T, -np.linalg.solve(L, q / scale), maxiter=50 * S.shape[0] + 100)
             u = u + KG @ lam
-    strain = B @ u
+    strain = model.strain_operator @ u
     stress = np.einsum("ijk,ik->ij", C, strain.reshape(-1, k)).reshape(-1)
     return u, strain, stress
 
@@ -95,15 +106,18 @@ def start_assignment(model, start: str, step: int, rng: np.random.Generator) -> 
     return random_assignment(model, rng)
 
 
-def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.ndarray):
+def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
+                      points: np.ndarray | None = None):
     r"""The exact projections of every assignment near ``index``, as closed forms.
 
     The projection's parameters are affine in the assigned data, ``P = P(index) + D c`` with
-    ``c`` the data's strain and stress minus those of ``index`` (``2 m k`` numbers, point-major
-    strains then stresses), so every branch of ``Z_E`` is solved once for ``2 m k + 1``
-    right-hand sides (:meth:`~ddcm_casadi.exact.ExactEnumerator.affine_family`) and the objective
-    of any assignment is a closed-form quadratic in ``c``. Centring ``c`` on ``index`` keeps the
-    terms small near the assignment found, where comparisons matter.
+    ``c`` the data's strain and stress minus those of ``index`` at the material points ``points``
+    (default: all; ``2 n k`` numbers for ``n`` points, point-major strains then stresses), so
+    every branch of ``Z_E`` is solved once for ``2 n k + 1`` right-hand sides
+    (:meth:`~ddcm_casadi.exact.ExactEnumerator.affine_family`) and the objective of any
+    assignment that differs from ``index`` only at ``points`` is a closed-form quadratic in
+    ``c``. Centring ``c`` on ``index`` keeps the terms small near the assignment found, where
+    comparisons matter.
 
     Returns ``(family, strain, stress)``: the :class:`~ddcm_casadi.exact.AffineFamily` and the
     assigned data of ``index`` as ``(m, k)`` arrays.
@@ -114,13 +128,15 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     cur_e = data.strain[index].reshape(m, k)
     cur_s = data.stress[index].reshape(m, k)
     base = problems.projection_params(step, cur_e.ravel(), cur_s.ravel())
-    r = 2 * m * k
+    pts = np.arange(m) if points is None else np.asarray(points)
+    comps = (pts[:, None] * k + np.arange(k)).ravel()
+    cols = np.concatenate([comps, m * k + comps])  # their strains, then their stresses
     zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
-    D = np.empty((base.size, r))
-    for i in range(r):
-        unit = np.zeros(r)
+    D = np.empty((base.size, cols.size))
+    for a, i in enumerate(cols):
+        unit = np.zeros(2 * m * k)
         unit[i] = 1.0
-        D[:, i] = problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero
+        D[:, a] = problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero
     return exact.affine_family(base, D), cur_e, cur_s
 
 
@@ -128,20 +144,20 @@ def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
                  candidates: np.ndarray) -> tuple[np.ndarray, float]:
     """The exact projection's objective (scaled) of every assignment that differs from ``index``
     at one point: ``points[a]`` moved to datum ``candidates[a, b]``; returns ``(objectives,
-    objective of index)`` with ``objectives`` shaped like ``candidates``."""
-    family, cur_e, cur_s = assignment_family(problems, exact, step, index)
-    model, data = problems.model, problems.model.dataset
-    m, k = model.n_points, model.strain_components
+    objective of index)`` with ``objectives`` shaped like ``candidates``. Only the moving points
+    enter the closed forms (``2 n k`` directions for ``n`` points, not ``2 m k``)."""
+    family, cur_e, cur_s = assignment_family(problems, exact, step, index, points)
+    data, k = problems.model.dataset, problems.model.strain_components
     strain = data.strain.reshape(len(data), k)
     stress = data.stress.reshape(len(data), k)
-    n_c = candidates.shape[1]
-    c = np.zeros((2 * m * k, len(points) * n_c))
+    n, n_c = len(points), candidates.shape[1]
+    c = np.zeros((2 * n * k, n * n_c))
     for a, i in enumerate(points):
         cols = slice(a * n_c, (a + 1) * n_c)
-        c[i * k:(i + 1) * k, cols] = (strain[candidates[a]] - cur_e[i]).T
-        c[m * k + i * k:m * k + (i + 1) * k, cols] = (stress[candidates[a]] - cur_s[i]).T
-    mine = float(family.best(np.zeros((2 * m * k, 1)))[0])
-    return family.best(c).reshape(len(points), n_c), mine
+        c[a * k:(a + 1) * k, cols] = (strain[candidates[a]] - cur_e[i]).T
+        c[n * k + a * k:n * k + (a + 1) * k, cols] = (stress[candidates[a]] - cur_s[i]).T
+    mine = float(family.best(np.zeros((2 * n * k, 1)))[0])
+    return family.best(c).reshape(n, n_c), mine
 
 
 def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,

@@ -28,8 +28,6 @@ import time
 
 import numpy as np
 
-from ..errors import InputError
-from .ddcm_search import start_assignment
 
 #: Relative change of the reconstructed states below which LCDD has converged.
 LCDD_TOL = 1e-7
@@ -79,28 +77,21 @@ def solve_noise_robust(solver, *, formulation_name: str = "", raise_on_failure: 
     from .path import PathResult, StepResult, _check_convergence
 
     problems, model, opts = solver.problems, solver.problems.model, solver.options
-    if model.strain_components != 1:
-        raise InputError("ddcm variant 'lcdd' is implemented for one-component points (bars, trusses)")
-    if opts.restarts or opts.improve != "none":
-        raise InputError("ddcm variant 'lcdd' does not combine with restarts or improve (it has no data assignment)")
     data = model.dataset
     out = PathResult("ddcm", formulation_name)
     x, p, state = np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None
     spread = max(float(np.ptp(np.sqrt(model.metric).max() * data.strain)),
                  float(np.ptp(data.stress / np.sqrt(model.metric).min())))
+    rc = np.sqrt(model.metric)
     star_e = star_s = None
     t_all = time.perf_counter()
     for k in range(model.n_steps):
         t0 = time.perf_counter()
         if star_e is None or not opts.warm:
-            if k == 0 and opts.initial is not None:
-                index = np.asarray(opts.initial, dtype=np.intp)
-            else:
-                index = start_assignment(model, opts.start, k, np.random.default_rng((opts.seed, k, 0)))
+            index = solver.initial_assignment(k)
             star_e, star_s = data.strain[index].copy(), data.stress[index].copy()
         cost = dict(inner=0, t_project=0.0)
         converged, message = False, "maximum outer iterations reached"
-        rc = np.sqrt(model.metric)
         for outer in range(1, solver.max_outer + 1):
             sol, is_global, err, failed = solver.project_data(k, star_e, star_s, (x, p, state), cost)
             if failed:

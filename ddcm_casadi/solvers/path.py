@@ -193,6 +193,8 @@ class DDCMSolver:
         self.built = built
         self.max_outer = int(max_outer)
         model = problems.model
+        if self.options.variant == "lcdd" and model.strain_components != 1:
+            raise InputError("ddcm variant 'lcdd' is implemented for one-component points (bars, trusses)")
         if self.options.initial is not None:
             initial = np.asarray(self.options.initial, dtype=np.intp)
             offset, size = point_ranges(model)
@@ -206,6 +208,14 @@ class DDCMSolver:
         n_assign = float(np.prod(point_ranges(model)[1].astype(float)))
         self.global_search = (global_search and self.exact is not None
                               and (model.n_points == 1 or n_assign <= self.options.exact_max))
+
+    def initial_assignment(self, k: int) -> np.ndarray:
+        """The data assignment load step ``k`` starts from when it does not continue the previous
+        step's: ``initial`` at the first step if given, else ``start`` (seeded per step)."""
+        o = self.options
+        if k == 0 and o.initial is not None:
+            return np.asarray(o.initial, dtype=np.intp)
+        return start_assignment(self.problems.model, o.start, k, np.random.default_rng((o.seed, k, 0)))
 
     def _project(self, params, x0, p0, state):
         """Projection onto Z_E, restarted on the exact global branch if it may have stopped elsewhere.
@@ -380,10 +390,8 @@ class DDCMSolver:
         t_all = time.perf_counter()
         for k in range(model.n_steps):
             t0 = time.perf_counter()
-            if k == 0 and opts.initial is not None:
-                index = np.asarray(opts.initial, dtype=np.intp)
-            elif k == 0 or not opts.warm:
-                index = start_assignment(model, opts.start, k, np.random.default_rng((opts.seed, k, 0)))
+            if k == 0 or not opts.warm:
+                index = self.initial_assignment(k)
             tally = dict(projections=0, inner=0, runs=0, improvements=0, t_project=0.0, t_search=0.0)
             best, best_warm = self._alternate(k, index, *warm)
             _count(tally, best)

@@ -25,13 +25,13 @@ validated exactly as any data file.
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..casefile import _HOOKEAN, integer, number, positive
 from ..data import MAX_DATA_POINTS
 from ..errors import InputError
 
@@ -42,7 +42,7 @@ NOISE_ON = ("stress", "both")
 #: Keys of ``[generate]``.
 KEYS = ("law", "youngs_modulus", "strain_min", "strain_max", "points", "sampling", "noise", "noise_kind",
         "noise_on", "seed", "stress_scale", "beta", "table")
-_FROM_HOOKEAN = ("strain_min", "strain_max", "points", "youngs_modulus")
+_FROM_HOOKEAN = tuple(sorted(_HOOKEAN))
 
 
 @dataclass(frozen=True)
@@ -107,22 +107,9 @@ class DataGenerator:
         return asdict(self)
 
 
-def _number(key: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise InputError(f"[generate] {key} must be a finite number, got {value!r}")
-    return float(value)
-
-
 def _choice(key: str, value: Any, choices: tuple[str, ...]) -> str:
     if value not in choices:
         raise InputError(f"[generate] {key} must be one of {', '.join(choices)}, got {value!r}")
-    return value
-
-
-def _integer(key: str, value: Any, low: int, high: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low or (high is not None and value > high):
-        span = f"in {low}..{high}" if high is not None else f">= {low}"
-        raise InputError(f"[generate] {key} must be an integer {span}, got {value!r}")
     return value
 
 
@@ -154,7 +141,7 @@ def generator_from_dict(table: Any, case_doc: dict) -> DataGenerator:
     if unknown:
         raise InputError(f"unknown key {unknown[0]!r} in [generate]; known: {', '.join(sorted(KEYS))}")
     g = dict(table)
-    index = _integer("table", g.get("table", 0), 0)
+    index = integer("generate", "table", g.get("table", 0), low=0)
     target = data_table(case_doc, index)
     if target is None and index > 0:
         raise InputError(f"[generate] table = {index}, but the case has no data table {index}")
@@ -166,30 +153,26 @@ def generator_from_dict(table: Any, case_doc: dict) -> DataGenerator:
     if missing:
         raise InputError(f"missing key {missing[0]!r} in [generate] (and in the case's data hookean table)")
     law = _choice("law", g.get("law", "hookean"), LAWS)
-    E = _number("youngs_modulus", g["youngs_modulus"])
-    if E <= 0:
-        raise InputError(f"[generate] youngs_modulus must be positive, got {g['youngs_modulus']!r}")
-    lo, hi = _number("strain_min", g["strain_min"]), _number("strain_max", g["strain_max"])
+    E = positive("generate", "youngs_modulus", g["youngs_modulus"])
+    lo, hi = number("generate", "strain_min", g["strain_min"]), number("generate", "strain_max", g["strain_max"])
     if lo > hi:
         raise InputError(f"[generate] strain_min must be <= strain_max, got [{lo}, {hi}]")
     points = g["points"]
     if isinstance(points, float) and points.is_integer():
         points = int(points)  # 1e5 in a grid of sizes
-    points = _integer("points", points, 1, MAX_DATA_POINTS)
-    noise = _number("noise", g.get("noise", 0.0))
+    points = integer("generate", "points", points, low=1, high=MAX_DATA_POINTS)
+    noise = number("generate", "noise", g.get("noise", 0.0))
     if noise < 0:
         raise InputError(f"[generate] noise must be >= 0, got {g['noise']!r}")
     stress_scale = beta = None
     if law == "tanh":
         if "stress_scale" not in g:
             raise InputError("[generate] law = \"tanh\" needs stress_scale (Pa)")
-        stress_scale = _number("stress_scale", g["stress_scale"])
-        if stress_scale <= 0:
-            raise InputError(f"[generate] stress_scale must be positive, got {g['stress_scale']!r}")
+        stress_scale = positive("generate", "stress_scale", g["stress_scale"])
     if law == "cubic":
         if "beta" not in g:
             raise InputError("[generate] law = \"cubic\" needs beta")
-        beta = _number("beta", g["beta"])
+        beta = number("generate", "beta", g["beta"])
     for key, needed_by in (("stress_scale", "tanh"), ("beta", "cubic")):
         if key in g and law != needed_by:
             raise InputError(f"[generate] {key} applies to law = \"{needed_by}\" only, the law is {law!r}")
@@ -197,7 +180,7 @@ def generator_from_dict(table: Any, case_doc: dict) -> DataGenerator:
                          sampling=_choice("sampling", g.get("sampling", "grid"), SAMPLINGS), noise=noise,
                          noise_kind=_choice("noise_kind", g.get("noise_kind", "multiplicative"), NOISE_KINDS),
                          noise_on=_choice("noise_on", g.get("noise_on", "stress"), NOISE_ON),
-                         seed=_integer("seed", g.get("seed", 0), 0), stress_scale=stress_scale, beta=beta,
+                         seed=integer("generate", "seed", g.get("seed", 0), low=0), stress_scale=stress_scale, beta=beta,
                          table=index)
 
 

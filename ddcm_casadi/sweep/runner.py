@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from ..errors import DDCMError, InputError
-from ..io import prepare_output_dir, write_csv_atomic, write_json_atomic
+from ..io import prepare_output_dir, umask, write_csv_atomic, write_json_atomic
 from .spec import SweepCase, SweepSpec, build_case
 from .table import case_rows, fits, summary_rows
 
@@ -39,7 +39,9 @@ RECORD = "case.json"
 
 
 def _message(exc: BaseException) -> str:
-    text = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+    from ..cli import _one_line
+
+    text = _one_line(exc)
     return text if isinstance(exc, DDCMError) and text else f"{type(exc).__name__}: {text}"
 
 
@@ -62,20 +64,16 @@ def run_case(task: dict) -> dict:
         ``worker``.
     """
     from .. import formulations as registry
-    from ..cli import _variants, parameters, versions
-    from ..harness import compare
+    from ..cli import _variants, compare_case, parameters, versions
 
     t0 = time.perf_counter()
     try:
         case = build_case(SweepCase(**task["case"]), Path(task["base"]))
         variants = _variants(",".join(task["variants"]) if task["variants"] else None, case)
-        names = task["formulations"] or registry.available()
-        selection = {n: case.formulation_options.get(n, {}) for n in names}
-        # as ddcm-compare runs a case (ddcm_casadi.cli.run)
-        cmp = compare(case.model, selection, variants=variants, ddcm_max_outer=case.ddcm_max_outer,
-                      ddcm=case.ddcm_options)
-        out = dict(status="ok", error=None, rows=summary_rows(cmp), results_rows=cmp.rows(),
-                   results=dict(parameters=parameters(case, cmp), versions=versions(), summary=cmp.summary()))
+        cmp = compare_case(case, task["formulations"] or registry.available(), variants)
+        summary = cmp.summary()
+        out = dict(status="ok", error=None, rows=summary_rows(cmp, summary), results_rows=cmp.rows(),
+                   results=dict(parameters=parameters(case, cmp), versions=versions(), summary=summary))
     except Exception as exc:  # noqa: BLE001 - any failure of a case is recorded and the sweep goes on
         out = dict(status="failed", error=_message(exc), rows=[], results_rows=None, results=None)
     out["seconds"] = time.perf_counter() - t0
@@ -104,8 +102,9 @@ def read_record(out: Path, case_id: str) -> dict | None:
         return None
 
 
-def write_case(out: Path, case: SweepCase, spec: SweepSpec, result: dict) -> Path:
-    """Write a finished case to ``out/cases/<id>/`` atomically (a temporary folder, renamed)."""
+def write_case(out: Path, case: SweepCase, spec: SweepSpec, result: dict) -> dict:
+    """Write a finished case to ``out/cases/<id>/`` atomically (a temporary folder, renamed);
+    returns its record (what ``case.json`` holds)."""
     cases = out / CASES
     cases.mkdir(exist_ok=True)
     record = dict(id=case.id, index=case.index, params=case.params, status=result["status"], error=result["error"],
@@ -119,7 +118,7 @@ def write_case(out: Path, case: SweepCase, spec: SweepSpec, result: dict) -> Pat
             write_csv_atomic(tmp / "results.csv", result["results_rows"])
             write_json_atomic(tmp / "results.json", result["results"])
         write_json_atomic(tmp / RECORD, record)
-        os.chmod(tmp, 0o777 & ~_umask())
+        os.chmod(tmp, 0o777 & ~umask())
         final = cases / case.id
         if final.exists():  # --force: move the old folder away first, so the new one lands whole
             old = Path(tempfile.mkdtemp(dir=cases, prefix=f".{case.id}.old."))
@@ -131,13 +130,7 @@ def write_case(out: Path, case: SweepCase, spec: SweepSpec, result: dict) -> Pat
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return final
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+    return record
 
 
 def _clean_partial(out: Path) -> None:
@@ -290,8 +283,7 @@ def _run(client, spec: SweepSpec, todo: list[SweepCase], out: Path, report: Swee
                 error = _message(exc)
                 report.lost.append(case.id)
             else:
-                write_case(out, case, spec, result)
-                record = read_record(out, case.id)
+                record = write_case(out, case, spec, result)
                 report.ran += 1
                 if result["status"] != "ok":
                     report.failed.append(case.id)

@@ -41,11 +41,12 @@ def _finite_stat(values: np.ndarray, stat) -> float | None:
     return float(stat(values)) if values.size else None
 
 
-def summary_rows(cmp) -> list[dict]:
-    """The metrics of every variant x formulation of a :class:`~ddcm_casadi.harness.Comparison`."""
+def summary_rows(cmp, summary: list[dict]) -> list[dict]:
+    """The metrics of every variant x formulation of a :class:`~ddcm_casadi.harness.Comparison`
+    (``summary``: its :meth:`~ddcm_casadi.harness.Comparison.summary`, computed once)."""
     dataset = cmp.model.dataset
     rows = []
-    for rec in cmp.summary():
+    for rec in summary:
         variant, name = rec["variant"], rec["formulation"]
         row = dict(variant=variant, formulation=name)
         row.update({k: rec.get(k) for k in _FROM_SUMMARY})
