@@ -12,7 +12,7 @@ Three layers:
 from importlib.metadata import PackageNotFoundError, version as _version
 
 from .data import MaterialDataset
-from .errors import ConvergenceError, DDCMError, InputError
+from .errors import ConvergenceError, DDCMError, InputError, PhysicsWarning
 from .bar import BarModel, bar_model, paper_bar
 from .model import ContactModel
 from .problem import build_problems
@@ -33,5 +33,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'ddcm_casadi' has no attribute {name!r}")
 
 
-__all__ = ["BarModel", "Comparison", "ConvergenceError", "ContactModel", "DDCMError", "InputError",
+__all__ = ["BarModel", "Comparison", "ConvergenceError", "ContactModel", "DDCMError", "InputError", "PhysicsWarning",
            "MaterialDataset", "bar_model", "build_problems", "compare", "paper_bar", "__version__"]

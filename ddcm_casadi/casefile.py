@@ -41,10 +41,11 @@ else:  # pragma: no cover
 
 from .data import MAX_DATA_POINTS, MaterialDataset, check_positive
 from .errors import InputError
+from .inputs import input_file
 from .overrides import apply_overrides
 from .model import ContactModel
 from .solvers.ddcm_options import KEYS as DDCM_OPTION_KEYS
-from .solvers.ddcm_options import DDCMOptions
+from .solvers.ddcm_options import MAX_OUTER_RANGE, DDCMOptions
 
 #: Keys of the sections every kind shares (``None``: checked elsewhere, here against the registry).
 COMMON_SECTIONS: dict[str, set[str] | None] = {
@@ -189,11 +190,15 @@ def positive(section: str, key: str, value: Any) -> float:
 def integer(section: str, key: str, value: Any, *, low: int | None = None, high: int | None = None,
             what: str = "an integer") -> int:
     """``value`` as an int in ``low..high`` (inclusive); booleans and floats are refused."""
+    span = "" if low is None and high is None else f" in {low}..{high}" if high is not None else f" (>= {low})"
+    if isinstance(value, float) and value.is_integer():
+        # TOML and JSON read 1e7 and 100.0 as floats: say how to write the integer.
+        raise InputError(f"[{section}] {key} must be {what}{span}, got the float {show(value)} "
+                         f"(write it without a decimal point or exponent: {int(value)})")
     if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(f"[{section}] {key} must be {what}, got {show(value)}")
+        raise InputError(f"[{section}] {key} must be {what}{span}, got {show(value)}")
     if (low is not None and value < low) or (high is not None and value > high):
-        span = f"in {low}..{high}" if high is not None else f"(>= {low})"
-        raise InputError(f"[{section}] {key} must be {what} {span}, got {show(value)}")
+        raise InputError(f"[{section}] {key} must be {what}{span}, got {show(value)}")
     return value
 
 
@@ -240,8 +245,7 @@ def read_document(path: Path) -> dict:
     InputError
         Missing, unreadable or malformed file, or an unknown suffix (one line).
     """
-    if not path.is_file():
-        raise InputError(f"config file not found: {path}")
+    path = input_file(path, "config file")
     suffix = path.suffix.lower()
     if suffix not in _SUFFIXES:
         raise InputError(f"config file must be .toml or .json, got {path.suffix or 'no suffix'!r}: {path}")
@@ -479,8 +483,9 @@ def run_options(doc: dict) -> tuple[int, dict[str, dict]]:
     # formulations import the package's core modules (keep the import graph acyclic).
     from ddcm_casadi import formulations as registry
 
-    max_outer = integer("ddcm", "max_outer", doc.get("ddcm", {}).get("max_outer", 100), low=1,
-                        what="a positive integer")
+    # One alternating projection cannot confirm a fixed point (that takes an unchanged assignment).
+    max_outer = integer("ddcm", "max_outer", doc.get("ddcm", {}).get("max_outer", 100), low=MAX_OUTER_RANGE[0],
+                        high=MAX_OUTER_RANGE[1])
     options: dict[str, dict] = {}
     for fname, opts in doc.get("formulations", {}).items():
         if not isinstance(opts, dict):

@@ -5,7 +5,9 @@ With no arguments it runs the paper's example (Section 4) and prints a summary t
 stops, or a 1-D/2-D/3-D truss; the format is described in ddcm_casadi/config.py, each model
 kind's sections next to its parser in ddcm_casadi/bar.py and ddcm_casadi/truss.py). --out DIR
 writes results.csv, results.json (for models other than the one-unknown bar with the per-step
-fields of every run: nodal displacements, contact forces, ...) and the figures that suit the model.
+fields of every run: nodal displacements, contact forces, ...) and the figures that suit the model:
+all of them or none (a temporary folder moved into place), replacing the previous run's files, in
+a folder locked against a second run (ddcm_casadi/io.py, OutputFolder).
 --set KEY=VALUE overrides one value of the case file (a dotted key and a TOML value, applied to
 the document before it is validated; see ddcm_casadi/overrides.py) and is recorded in results.json.
 """
@@ -16,6 +18,7 @@ import argparse
 import platform
 import sys
 import time
+import warnings
 from typing import NoReturn
 
 import casadi
@@ -26,9 +29,9 @@ from ddcm_casadi import formulations as registry
 
 from . import __version__
 from .config import Case, default_case
-from .errors import DDCMError, InputError
+from .errors import DDCMError, InputError, PhysicsWarning
 from .harness import VARIANTS, Comparison, compare
-from .io import prepare_output_dir, write_csv_atomic, write_json_atomic
+from .io import OutputFolder, write_csv_atomic, write_json_atomic
 from .overrides import load_case_with_overrides
 
 EXIT_INPUT = 2
@@ -106,24 +109,38 @@ def _variants(arg: str | None, case: Case) -> list[str]:
 
 
 class _Progress:
-    """One line per run, updated in place on a terminal."""
+    """Progress on stderr: ``variant/formulation step k/n elapsed``.
+
+    On a terminal one line per run, updated in place after every step. Otherwise (a log) a line
+    after a run's first step, then at most one every :attr:`interval` seconds while it goes on,
+    and one at its last step and at every step that did not converge: a long run shows its pace.
+    """
+
+    #: Seconds between two lines of one run when stderr is not a terminal.
+    interval: float = 10.0
 
     def __init__(self, n_steps: int, enabled: bool) -> None:
         self.n, self.enabled = n_steps, enabled
         self.tty = sys.stderr.isatty()
         self.t0 = time.perf_counter()
+        self._last: tuple[tuple[str, str], float] | None = None  # the run and time of the last line
 
     def __call__(self, variant: str, name: str, step) -> None:
         if not self.enabled:
             return
         done = step.step + 1
         flag = "" if step.converged else "  NOT CONVERGED"
-        msg = f"{variant:>9}/{name:<21} step {done:>3}/{self.n}  {time.perf_counter() - self.t0:7.2f} s{flag}"
+        now = time.perf_counter()
+        msg = f"{variant:>9}/{name:<21} step {done:>3}/{self.n}  {now - self.t0:7.2f} s{flag}"
         if self.tty:
             end = "\n" if done == self.n or flag else ""
             print("\r" + msg, end=end, file=sys.stderr, flush=True)
-        elif done == self.n or flag:
+            return
+        run = (variant, name)
+        if (done == self.n or flag or self._last is None or self._last[0] != run
+                or now - self._last[1] >= self.interval):
             print(msg, file=sys.stderr, flush=True)
+            self._last = (run, now)
 
 
 def describe_dataset(dataset) -> dict | None:
@@ -200,8 +217,21 @@ def run(argv: list[str] | None = None) -> int:
         if n not in registry.available():
             raise InputError(f"unknown formulation {n!r}; available: {', '.join(registry.available())}")
     variants = _variants(args.variants, case)
-    out = prepare_output_dir(args.out) if args.out else None
-    draw = out is not None and not args.no_plots
+    for message in case.model.path_warnings():  # refuses a meaningless path before anything is written
+        print(f"ddcm-compare: warning: {message}", file=sys.stderr)
+    # The folder is created, checked and locked before any work, and stays locked until the end.
+    folder = OutputFolder(args.out, tool="ddcm-compare", manifest="results.json") if args.out is not None else None
+    try:
+        return _run_case(args, case, names, variants, overrides, folder)
+    finally:
+        if folder is not None:
+            folder.close()
+
+
+def _run_case(args, case: Case, names: list[str], variants: list[str], overrides: dict,
+              folder: OutputFolder | None) -> int:
+    """Run the checked case, print the table and write the outputs into ``folder`` (if any)."""
+    draw = folder is not None and not args.no_plots
     if draw:
         # matplotlib only when a plot is drawn, but imported before any result is written: a
         # missing matplotlib must not leave results without their figures.
@@ -211,23 +241,36 @@ def run(argv: list[str] | None = None) -> int:
     if not args.quiet:
         print(f"ddcm-compare: {case.source}: {case.model.n_steps} steps, "
               f"{len(names)} formulations x {len(variants)} variants", file=sys.stderr)
-    cmp = compare_case(case, names, variants, progress=progress)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicsWarning)  # printed above, in one line each
+        cmp = compare_case(case, names, variants, progress=progress)
     print(cmp.table())
 
-    if out is not None:
-        # Build both records before writing either, so a failure here leaves no partial results.
+    if folder is not None:
+        # Every output goes to a temporary folder, moved into place once all are written: a
+        # failure (a full disk) or Ctrl-C leaves the previous results of the folder as they were.
         rows = cmp.rows()
-        doc = dict(parameters=parameters(case, cmp), versions=versions(), summary=cmp.summary())
+        doc = dict(parameters=parameters(case, cmp), versions=versions(), summary=cmp.summary(),
+                   warnings=list(cmp.warnings))
         if overrides:
             doc["parameters"]["overrides"] = overrides
         per_step = fields(cmp)
         if per_step is not None:
             doc["fields"] = per_step
-        write_csv_atomic(out / "results.csv", rows)
-        write_json_atomic(out / "results.json", doc)
-        written = ["results.csv", "results.json"]
-        written += [str(p.relative_to(out)) for p in case.model.save_outputs(cmp, out, figures=draw)]
-        print(f"wrote {', '.join(written)} to {out}", file=sys.stderr)
+        with folder.staging() as stage:
+            write_csv_atomic(stage / "results.csv", rows)
+            written = ["results.csv"]
+            written += [p.relative_to(stage).as_posix() for p in case.model.save_outputs(cmp, stage, figures=draw)]
+            written.append("results.json")
+            # the manifest: the next run into this folder removes these files if it does not write them
+            doc["files"] = written
+            write_json_atomic(stage / "results.json", doc)
+        print(f"wrote {', '.join(written)} to {folder.path}", file=sys.stderr)
+    beyond = [r for r in cmp.results.values() if any(s.extrapolated for s in r.steps)]
+    if beyond:  # a flag, not a failure: the fixed points are fixed points, of data that end too soon
+        print("WARNING: states beyond the material data (DDCM stresses stop at the data's edge) in "
+              + ", ".join(f"{r.variant}/{r.formulation} at {sum(s.extrapolated > 0 for s in r.steps)} steps"
+                          for r in beyond), file=sys.stderr)
     failed = [r for r in cmp.results.values() if not r.converged]
     if failed:
         print("WARNING: non-converged steps in " + ", ".join(f"{r.variant}/{r.formulation}" for r in failed),

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import os
 import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import InputError
+from .inputs import input_file
 from .metric import Metric
 
 #: Data files larger than this are rejected before reading (bytes).
@@ -30,6 +31,51 @@ def check_positive(name: str, value: float) -> float:
     if not math.isfinite(v) or v <= 0.0:
         raise InputError(f"{name} must be finite and positive, got {value!r}")
     return v
+
+
+#: Largest scaled coordinate the search accepts: squared distances (sums of squares) stay below
+#: the largest double, 1.8e308, with room for a sum over 12 components.
+MAX_COORDINATE = 1e150
+#: The metric must balance strain and stress: ``d^2 = c de^2 + ds^2 / c`` keeps both terms only while
+#: their ratio ``(E / c)^2`` (``E`` the data's own modulus) is within ``[eps, 1 / eps]``, i.e. ``c / E``
+#: within ``[sqrt(eps), 1 / sqrt(eps)]`` = ``[1.5e-8, 6.7e7]``; beyond, one term is below the other's
+#: roundoff and the search ignores stress (or strain) altogether.
+METRIC_RATIO_LIMIT = 1.0 / math.sqrt(np.finfo(float).eps)
+
+
+def _searchable_coordinates(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> np.ndarray:
+    """The data's scaled coordinates (:meth:`Metric.coordinates`), refused where the search would
+    overflow or where the metric drowns stress in strain (or the reverse).
+
+    Raises
+    ------
+    InputError
+        A coordinate beyond :data:`MAX_COORDINATE` (e.g. a stress of 1e300 Pa in a CSV file, or a
+        metric ``c`` of 1e300), or a metric out of balance with the data (:data:`METRIC_RATIO_LIMIT`).
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        X = metric.coordinates(strain, stress)
+    k = metric.k
+    label = f"c = {metric.c:.3g} Pa" if k == 1 else f"C (norm {np.linalg.norm(metric.matrix, 2):.3g} Pa)"
+    big = ~(np.abs(X) <= MAX_COORDINATE)
+    if big.any():
+        row = int(np.argmax(big.any(axis=1)))
+        which, value = ("strain", strain) if big[row, :k].any() else ("stress", stress)
+        raise InputError(f"material data set: {which} {np.ravel(value[row])[0]:.3g} of data point {row} is out of "
+                         f"range for the metric {label} (the scaled coordinates must stay below "
+                         f"{MAX_COORDINATE:.0e} so that squared distances do not overflow)")
+    # Ranges, not variances: squares of tiny spreads would underflow to zero.
+    spread_e = float(np.max(np.ptp(X[:, :k], axis=0)))
+    spread_s = float(np.max(np.ptp(X[:, k:], axis=0)))
+    if spread_e > 0 and spread_s > 0:
+        ratio = spread_s / spread_e  # E / c for one component
+        if not 1.0 / METRIC_RATIO_LIMIT <= ratio <= METRIC_RATIO_LIMIT:
+            times = f"about 1e{math.log10(spread_e) - math.log10(spread_s):+.0f}"  # may overflow as a ratio
+            raise InputError(f"material data set: the metric {label} is {times} times the data's "
+                             f"own modulus; it must be within {1 / METRIC_RATIO_LIMIT:.1e} to "
+                             f"{METRIC_RATIO_LIMIT:.1e} times it, else one term of the distance is below "
+                             f"the other's roundoff")
+    return X
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,7 +131,7 @@ class MaterialDataset:
         # unchanged). Data along a line (a Hookean set) then fill thin slabs instead of fat
         # diagonal boxes, and a state far from the data no longer visits every box its search
         # ball crosses: measured at 1e6 points, 1.9 s -> 6 ms for 9 000 states 1e4 spacings away.
-        X = metric.coordinates(strain, stress)
+        X = _searchable_coordinates(metric, strain, stress)
         mean = X.mean(axis=0)
         _, axes = np.linalg.eigh((X - mean).T @ (X - mean))
         object.__setattr__(self, "_frame", (mean, axes))
@@ -262,9 +308,7 @@ class MaterialDataset:
         InputError
             Missing, unreadable, empty, huge, non-UTF-8, one-column or non-numeric file.
         """
-        path = Path(path)
-        if not path.is_file():
-            raise InputError(f"data file not found: {path}")
+        path = input_file(path, "data file")
         size = path.stat().st_size
         if size == 0:
             raise InputError(f"data file is empty: {path}")
@@ -298,7 +342,7 @@ class MaterialDataset:
         except UnicodeDecodeError:
             raise InputError(f"data file is not UTF-8 text: {path}") from None
         except ValueError as exc:
-            raise InputError(f"data file {path} is not numeric: {str(exc).splitlines()[0]}") from None
+            raise InputError(f"data file {path} is not numeric: {_csv_position(str(exc), header)}") from None
         except OSError as exc:
             raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
         if table.size == 0:
@@ -306,6 +350,18 @@ class MaterialDataset:
         if k == 1:
             return cls(table[:, 0], table[:, 1], c)
         return cls(table[:, :k], table[:, k:], c)
+
+
+def _csv_position(message: str, header: list[str]) -> str:
+    """numpy's parse error with its position in the file's own terms: numpy counts data rows from
+    0 after the header and columns from 1; a user's editor counts lines from 1, header included."""
+    first = message.splitlines()[0] if message else "parse error"
+    m = re.search(r"(.*?) at row (\d+), column (\d+)\.?$", first)
+    if not m:
+        return first
+    line, col = int(m.group(2)) + 2, int(m.group(3))
+    name = f" ({header[col - 1].strip()!r})" if 0 < col <= len(header) else ""
+    return f"{m.group(1)} on line {line}, column {col}{name}"
 
 
 class PointData:

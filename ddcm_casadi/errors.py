@@ -26,3 +26,8 @@ class ConvergenceError(DDCMError):
     def __init__(self, message: str, diagnostics: dict[str, Any] | None = None) -> None:
         super().__init__(message)
         self.diagnostics = dict(diagnostics or {})
+
+
+class PhysicsWarning(UserWarning):
+    """Input that runs but is physically odd: an obstacle that starts inside the body, strains far
+    beyond the small-strain model (:meth:`~ddcm_casadi.model.ContactModel.path_warnings`)."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Callable, Iterable, Mapping
 
@@ -17,7 +18,7 @@ import numpy as np
 from ddcm_casadi import formulations as registry
 from ddcm_casadi.formulations.base import Formulation
 
-from .errors import InputError
+from .errors import InputError, PhysicsWarning
 from .model import ContactModel
 from .problem import ProblemPair, build_problems
 from .solvers.ddcm_options import KEYS, DDCMOptions
@@ -27,7 +28,8 @@ VARIANTS = ("classical", "ddcm")
 _COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "max_abs_u", "total_contact_force",
             "active_contacts", "converged", "iterations", "outer_iterations",
             "residual", "complementarity", "penetration", "strain_star", "stress_star", "data_index",
-            "distance", "global_optimum", "global_distance", "projection_global", "projection_error",
+            "distance", "extrapolated", "data_spacings", "global_optimum", "global_distance",
+            "projection_global", "projection_error",
             "error_u", "error_p", "seconds", "message")
 
 
@@ -51,6 +53,37 @@ def _nanmax(a: np.ndarray) -> float:
     return float(np.nanmax(a)) if np.any(np.isfinite(a)) else float("nan")
 
 
+#: A note of the table lists at most this many values, then summarises (a count and the first ones).
+NOTE_VALUES = 3
+
+
+def _distinct(values: list) -> list[str]:
+    """``values`` as text with the fewest significant digits, at least 4, that keep distinct values
+    distinct (``0.99`` and ``0.98999`` must not both print ``0.99``)."""
+    distinct = len(set(values))
+    for digits in range(4, 18):
+        text = [f"{v:.{digits}g}" for v in values]
+        if len(set(text)) == distinct:
+            return text
+    return [repr(v) for v in values]
+
+
+def _listing(values: list, name: str | None = None) -> str:
+    """The first :data:`NOTE_VALUES` of ``values`` (``name=`` first if given), ``...`` if there are more."""
+    text = _distinct(values)
+    shown = ", ".join(text[:NOTE_VALUES]) + (", ..." if len(text) > NOTE_VALUES else "")
+    return f"{name}={shown}" if name else shown
+
+
+def _note(what: str, values: list, name: str | None = None) -> str:
+    """A note of the table about some steps: every value when there are few (``what at h=0.992``;
+    steps without ``name``), else their count and the first few (``what at 1000 steps (h=0.99,
+    0.989, 0.988, ...)``), so that a note stays one short line however long the path."""
+    if len(values) <= NOTE_VALUES:
+        return f"{what} at " + (_listing(values, name) if name else f"steps {_listing(values)}")
+    return f"{what} at {len(values)} steps ({_listing(values, name)})"
+
+
 def _relative_error(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """Per-step error relative to the largest reference magnitude along the path."""
     scale = float(np.max(np.abs(reference))) or 1.0
@@ -65,6 +98,8 @@ class Comparison:
     problems: ProblemPair
     formulations: list[Formulation]
     results: dict[tuple[str, str], PathResult] = field(default_factory=dict)
+    #: What is physically odd about the load path (:meth:`ContactModel.path_warnings`).
+    warnings: list[str] = field(default_factory=list)
 
     def __getitem__(self, key: tuple[str, str]) -> PathResult:
         return self.results[key]
@@ -170,7 +205,7 @@ class Comparison:
                     if m.scalar:
                         row.update(strain_star=float(s.strain_star[0]), stress_star=float(s.stress_star[0]),
                                    data_index=int(s.data_index[0]))
-                    row.update(distance=s.distance,
+                    row.update(distance=s.distance, extrapolated=s.extrapolated, data_spacings=s.data_spacings,
                                projection_error=s.projection_error, projection_global=s.projection_global,
                                global_optimum=s.global_optimum, global_distance=s.global_distance,
                                global_gap=s.global_gap, projections=s.projections)
@@ -211,7 +246,12 @@ class Comparison:
                            projection_not_global_steps=[s.step for s in r.steps if s.projection_global is False],
                            max_projection_error=_nanmax(r.array("projection_error")),
                            projections=int(sum(s.projections for s in r.steps)),
-                           max_global_gap=_nanmax(r.array("global_gap")))
+                           max_global_gap=_nanmax(r.array("global_gap")),
+                           # states beyond the data (a flag, not a failure: ddcm_casadi.extrapolation)
+                           extrapolated_steps=int(sum(s.extrapolated > 0 for s in r.steps)),
+                           extrapolated_h=[s.load_parameter for s in r.steps if s.extrapolated > 0],
+                           max_extrapolated_states=int(max(s.extrapolated for s in r.steps)),
+                           max_data_spacings=_nanmax(r.array("data_spacings")))
             out.append(rec)
         return out
 
@@ -226,12 +266,17 @@ class Comparison:
             if "max_error_u_vs_exact" in rec:
                 notes.append(f"errors vs own closed form; vs exact: u {rec['max_error_u_vs_exact']:.1e}, "
                              f"p {rec['max_error_p_vs_exact']:.1e}")
+            name = self.model.load_parameter_name
             if rec["non_converged_steps"]:
-                notes.append(f"NOT CONVERGED at steps {rec['non_converged_steps']}")
+                notes.append(_note("NOT CONVERGED", rec["non_converged_steps"]))
+            if rec.get("extrapolated_steps"):
+                notes.append(f"DATA RANGE EXCEEDED at {rec['extrapolated_steps']} step"
+                             f"{'s' if rec['extrapolated_steps'] > 1 else ''} (max {rec['max_extrapolated_states']} "
+                             f"of {self.model.n_points} states; {_listing(rec['extrapolated_h'], name)})")
             if rec.get("local_minimum_h"):
-                notes.append(f"local minimum at {self.model.load_parameter_name}=" + ", ".join(f"{h:.4g}" for h in rec["local_minimum_h"]))
+                notes.append(_note("local minimum", rec["local_minimum_h"], name))
             if rec.get("projection_not_global_steps"):
-                notes.append(f"projection not global at {rec['projection_not_global_steps']}")
+                notes.append(_note("projection not global", rec["projection_not_global_steps"]))
             lines.append(f"{rec['variant']:<10} {rec['formulation']:<22} {rec['converged_steps']:>3}/{rec['steps']:<3} "
                          f"{e(rec['max_error_u'])} {e(rec['max_error_p'])} {rec['iterations_mean']:8.1f} "
                          f"{rec['outer_iterations_mean']:6.1f} {rec['max_residual']:8.1e} {rec['max_complementarity']:8.1e} "
@@ -295,8 +340,11 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         raise InputError(f"unknown data search {ddcm_search!r}; known: {', '.join(DDCMSolver.SEARCHES)}")
     ddcm = as_ddcm_options(ddcm)
     forms = resolve_formulations(formulations)
+    odd = model.path_warnings()  # refuses a meaningless path before any work
+    for message in odd:
+        warnings.warn(message, PhysicsWarning, stacklevel=2)
     problems = build_problems(model)
-    out = Comparison(model=model, problems=problems, formulations=forms)
+    out = Comparison(model=model, problems=problems, formulations=forms, warnings=odd)
     for variant in variants:
         if variant == "classical" and problems.classical is None:
             continue

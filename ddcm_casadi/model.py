@@ -25,6 +25,11 @@ from .errors import InputError
 from .linalg import SingularMatrix, factorize
 
 
+#: Imposed strain beyond which :meth:`ContactModel.path_warnings` warns: small-strain kinematics
+#: then differ from finite-strain ones by more than ~5 % (Green-Lagrange ``e + e^2/2`` vs ``e``).
+LARGE_STRAIN = 0.1
+
+
 def _finite(name: str, a: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=float)
     if not np.all(np.isfinite(a)):
@@ -222,7 +227,9 @@ class ContactModel:
                 u_g = spring().solve(kappa * (GA @ penetration[worst]))
                 normal = float(np.max(np.abs(G @ u_g), initial=0.0))
                 if normal > 0:
-                    strain = max(strain, float(np.max(np.abs(B @ u_g), initial=0.0)) * pen / normal)
+                    imposed = float(np.max(np.abs(B @ u_g), initial=0.0)) * pen / normal
+                    self._cache[("imposed_strain", kind)] = imposed
+                    strain = max(strain, imposed)
         U = max(float(np.max(np.abs(u_f), initial=0.0)), pen)
         if not (U > 0 and strain > 0):
             U, strain = 1e-3 * self.length_scale, 1e-3  # nothing moves: any unit will do
@@ -239,9 +246,49 @@ class ContactModel:
             energy = float(np.sum(w)) * 0.5 * (metric * strain ** 2 + stress ** 2 / metric)
         scales = dict(length=self.length_scale, displacement=U, strain=strain, stress=stress,
                       force=stress * section, energy=energy, modulus=modulus, metric=metric)
-        if not all(np.isfinite(v) and v > 0 for v in scales.values()):
-            raise InputError("obstacle positions, loads or moduli are out of range (scales overflow)")
+        # Squares and products of scales (energies, d^2) must stay representable: each within 1e+-150.
+        bad = {k: v for k, v in scales.items() if not (np.isfinite(v) and 1e-150 <= v <= 1e150)}
+        if bad:
+            name, value = next(iter(bad.items()))
+            raise InputError(f"obstacle positions, loads or moduli are out of range: the {kind} problem's {name} "
+                             f"scale is {value:.3g}, outside 1e-150 to 1e150")
         return scales
+
+    def path_warnings(self) -> list[str]:
+        """What is physically odd about the load path, one line each; refuses what is meaningless.
+
+        - The obstacles already penetrate the body at the first step: the body starts with
+          contact forces and no load (often an obstacle placed on the wrong side).
+        - The largest strain the obstacles impose (the penetration spread over the body as the
+          scales estimate it, :meth:`scales_for`) beyond :data:`LARGE_STRAIN`: far outside the
+          small-strain model.
+
+        Raises
+        ------
+        InputError
+            An imposed strain of 1 or more (an obstacle pushed past a fixed end, through the
+            body): a small-strain model is meaningless there.
+        """
+        out = []
+        first = -np.min(self.gap_offsets[0], initial=0.0)
+        if first > 1e-12 * self.length_scale:
+            n = int(np.sum(self.gap_offsets[0] < 0))
+            out.append(f"the obstacles start inside the body: {n} contact pair(s) penetrate by up to {first:.3g} m "
+                       f"at the first step ({self.load_parameter_name}={self.load_parameter[0]:.6g}), so there are "
+                       f"contact forces before any load")
+        self.scales_for("classical" if self.youngs_modulus is not None else "ddcm")
+        imposed = max((v for k, v in self._cache.items() if isinstance(k, tuple) and k[0] == "imposed_strain"),
+                      default=0.0)
+        worst = int(np.argmin(np.min(self.gap_offsets, axis=1))) if self.n_contacts else 0
+        where = f"{self.load_parameter_name}={self.load_parameter[worst]:.6g}"
+        if imposed >= 1.0:
+            raise InputError(f"the obstacles impose a strain of about {imposed:.3g} at {where} (penetration "
+                             f"{-np.min(self.gap_offsets):.3g} m): pushed past a fixed end or through the body; "
+                             f"a small-strain model is meaningless there")
+        if imposed > LARGE_STRAIN:
+            out.append(f"the obstacles impose a strain of about {imposed:.3g} at {where}: far beyond the "
+                       f"small-strain model (> {LARGE_STRAIN:g})")
+        return out
 
     @property
     def scales(self) -> dict:

@@ -7,8 +7,9 @@
   the contact forces along the load path (:func:`figure_contact_history`, any model).
 
 Classical results are lines, DDCM results markers, the closed form a dashed black line; a step that
-did not converge is circled in red and named in the legend, never drawn as if it were fine, and a
-DDCM step that stopped at a local (not the global) minimum is framed by a grey diamond.
+did not converge is circled in red and named in the legend, never drawn as if it were fine, a
+DDCM step that stopped at a local (not the global) minimum is framed by a grey diamond, and a DDCM
+step with states beyond the material data (:mod:`ddcm_casadi.extrapolation`) by a violet hexagon.
 """
 
 from __future__ import annotations
@@ -24,6 +25,14 @@ from .io import write_bytes_atomic
 
 _MARKERS = {"penalty": "s", "augmented_lagrangian": "^", "fischer_burmeister": "o", "mpcc": "x"}
 _STYLES = {"penalty": "-", "augmented_lagrangian": "--", "fischer_burmeister": "-.", "mpcc": ":"}
+#: The frame of a DDCM step with states beyond the data, and its legend entry.
+_BEYOND = dict(ls="none", marker="h", ms=16, mfc="none", mec="darkviolet", mew=1.5, zorder=4)
+_BEYOND_LABEL = "DATA RANGE EXCEEDED"
+
+
+def _beyond(r) -> np.ndarray:
+    """Which steps of a run have states beyond the data (all false for classical runs)."""
+    return np.array([st.extrapolated > 0 for st in r.steps], dtype=bool)
 
 
 def _panel(cmp: Comparison, quantity: str, ylabel: str, scale: float, title: str) -> Figure:
@@ -36,7 +45,7 @@ def _panel(cmp: Comparison, quantity: str, ylabel: str, scale: float, title: str
         idx = 0 if quantity == "u" else 1
         ax.plot(h, [r[idx][-1 if quantity == "u" else 0] * scale for r in ref], "k--", lw=1.0,
                 label="closed form", zorder=1)
-    failed = local = False
+    failed = local = extrapolated = False
     for (variant, name), r in cmp.results.items():
         y = r.array(quantity)
         y = (y[:, -1] if quantity == "u" else y[:, 0]) * scale
@@ -51,11 +60,17 @@ def _panel(cmp: Comparison, quantity: str, ylabel: str, scale: float, title: str
             if loc.any():
                 local = True
                 ax.plot(h[loc], y[loc], "D", ms=11, mfc="none", mec="0.3", mew=1, zorder=4)
+        beyond = _beyond(r)
+        if beyond.any():
+            extrapolated = True
+            ax.plot(h[beyond], y[beyond], **_BEYOND)
         if not conv.all():
             failed = True
             ax.plot(h[~conv], y[~conv], "o", ms=14, mfc="none", mec="red", mew=2, zorder=4)
     if local:
         ax.plot([], [], "D", ms=9, mfc="none", mec="0.3", label="DDCM local minimum (not global)")
+    if extrapolated:
+        ax.plot([], [], **{**_BEYOND, "ms": 10}, label=_BEYOND_LABEL)
     if failed:
         ax.plot([], [], "o", ms=10, mfc="none", mec="red", mew=2, label="NOT CONVERGED")
     ax.set_xlabel(_param_label(cmp))
@@ -228,8 +243,10 @@ def figure_structure(cmp: Comparison, variant: str, formulation: str, step: int 
                  f"({model.load_parameter_name} = {value:.4g})\n"
                  f"{int(np.sum(active))}/{F.size} contacts active,{total} displacements x{mag:g}",
                  fontsize=9)
-    if not converged:
-        fig.suptitle("NOT CONVERGED", color="red", fontweight="bold")
+    beyond = int(cmp[variant, formulation].steps[k].extrapolated)
+    flags = (["NOT CONVERGED"] if not converged else []) + ([f"{_BEYOND_LABEL} ({beyond} states)"] if beyond else [])
+    if flags:
+        fig.suptitle("; ".join(flags), color="red" if not converged else _BEYOND["mec"], fontweight="bold")
     return fig
 
 
@@ -386,7 +403,7 @@ def figure_contact_history(cmp: Comparison, *, pair_labels: list[str] | None = N
         y = curves(np.array([r[1] for r in ref]) * m.contact_area[None, :])
         for j in range(y.shape[1]):
             ax.plot(h, y[:, j], "k--", lw=1.0, zorder=5)
-    failed = local = False
+    failed = local = extrapolated = False
     handles = []
     for (variant, name), r in cmp.results.items():
         f = cmp.fields(variant, name)
@@ -406,6 +423,10 @@ def figure_contact_history(cmp: Comparison, *, pair_labels: list[str] | None = N
                 if loc.any():
                     local = True
                     ax.plot(h[loc], y[loc, j], "D", ms=11, mfc="none", mec="0.3", mew=1, zorder=4)
+            beyond = _beyond(r)
+            if beyond.any():
+                extrapolated = True
+                ax.plot(h[beyond], y[beyond, j], **_BEYOND)
         if ax2 is not None:
             n_active = np.sum(m.active_contacts(f["contact_pressure"]), axis=1)
             if variant == "classical":
@@ -430,6 +451,8 @@ def figure_contact_history(cmp: Comparison, *, pair_labels: list[str] | None = N
     if local:
         handles.append(Line2D([], [], ls="none", marker="D", ms=9, mfc="none", mec="0.3",
                               label="DDCM local minimum (not global)"))
+    if extrapolated:
+        handles.append(Line2D([], [], **{**_BEYOND, "ms": 10}, label=_BEYOND_LABEL))
     if failed:
         handles.append(Line2D([], [], ls="none", marker="o", ms=10, mfc="none", mec="red", mew=2,
                               label="NOT CONVERGED"))

@@ -26,7 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     args = p.parse_args(argv)
     try:
-        out = prepare_output_dir(args.out) if args.out else None
+        out = prepare_output_dir(args.out) if args.out is not None else None  # --out "" is an error
         from .ladder import as_records, markdown, run_ladder
 
         t0 = time.perf_counter()

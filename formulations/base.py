@@ -81,6 +81,14 @@ class Metrics:
         return residual, comp, pen, float(obj[0]) if obj.size else 0.0
 
 
+#: Range of iteration limits (options named ``max_*``): 0 iterations cannot converge, and a limit
+#: beyond a million only hides a solve that does not converge.
+ITERATION_LIMIT = (1, 10**6)
+#: Range of tolerances (options named ``*tol``): relative residuals and complementarity errors are
+#: measured in double precision, whose floor is a few ``eps`` = 2.2e-16.
+TOLERANCE = (1e-15, 1.0)
+
+
 class Formulation(ABC):
     """Base class of the registered contact formulations.
 
@@ -117,9 +125,14 @@ class Formulation(ABC):
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
                     raise InputError(f"{where} must be a finite number, got {v!r}")
                 if kind.startswith("int"):
-                    if v != int(v) or v < 0:
-                        raise InputError(f"{where} must be a non-negative integer, got {v!r}")
+                    lo, hi = ITERATION_LIMIT if f.name.startswith("max_") else (0, None)
+                    if v != int(v) or v < lo or (hi is not None and v > hi):
+                        span = f"in {lo}..{hi}" if hi is not None else "(>= 0)"
+                        raise InputError(f"{where} must be an integer {span}, got {v!r}")
                     object.__setattr__(self.options, f.name, int(v))
+                elif f.name.endswith("tol") and not TOLERANCE[0] <= v < TOLERANCE[1]:
+                    raise InputError(f"{where} must be in [{TOLERANCE[0]:g}, {TOLERANCE[1]:g}) (a relative "
+                                     f"tolerance below a few machine epsilons cannot be met), got {v!r}")
             elif kind.startswith("tuple"):
                 if not isinstance(v, (tuple, list)) or not all(
                         isinstance(e, (int, float)) and not isinstance(e, bool) and np.isfinite(e) and e >= 0
@@ -150,7 +163,14 @@ class Formulation(ABC):
 
 
 class BuiltFormulation(ABC):
-    """A formulation built for one problem: ``solve`` may be called many times."""
+    """A formulation built for one problem: ``solve`` may be called many times.
+
+    ``penalty_stiffness`` is the physical ``gamma`` (Pa/m) of a formulation that regularises contact
+    (:meth:`Formulation.penalty_stiffness`), ``None`` for an exact one: the drivers' physical check
+    then allows its penetration ``p / gamma``.
+    """
+
+    penalty_stiffness: float | None = None
 
     def __init__(self, problem: ComplementarityProblem) -> None:
         self.problem = problem

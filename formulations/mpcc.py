@@ -35,11 +35,26 @@ from ddcm_casadi.complementarity import BIACTIVE, b_stationarity, identify, impo
 from ddcm_casadi.problem import ComplementarityProblem
 from ddcm_casadi.solvers.evaluate import NumericFunction
 from ddcm_casadi.solvers.homotopy import scholtes_homotopy
+from ddcm_casadi.solvers.ipopt_options import check_ipopt_options, iteration_count
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .registry import register
 
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
+# How IPOPT ends when Ctrl-C arrives during a solve: CasADi catches the KeyboardInterrupt that
+# Python's SIGINT handler raises inside IPOPT's callbacks and hands IPOPT an exception (from an
+# evaluation: NonIpopt_Exception_Thrown) or a stop request (User_Requested_Stop; this module sets
+# no iteration callback that could ask for one).
+_INTERRUPTED = frozenset({"User_Requested_Stop", "NonIpopt_Exception_Thrown"})
+
+
+def _stats(solver: ca.Function) -> dict:
+    """``solver.stats()`` after a solve; raises ``KeyboardInterrupt`` if IPOPT stopped on Ctrl-C
+    (read as one failed solve, the interrupt would be lost and the run would go on)."""
+    stats = solver.stats()
+    if stats.get("return_status") in _INTERRUPTED:
+        raise KeyboardInterrupt
+    return stats
 
 
 @register
@@ -91,6 +106,8 @@ class MPCC(Formulation):
         if not 0 < self.options.tau_factor < 1:
             from ddcm_casadi.errors import InputError
             raise InputError(f"option 'tau_factor' of 'mpcc' must be in (0, 1), got {self.options.tau_factor!r}")
+        if self.options.ipopt:
+            check_ipopt_options(f"formulation {self.name!r}", self.options.ipopt)
 
     def build(self, problem: ComplementarityProblem) -> "_BuiltMPCC":
         return _BuiltMPCC(problem, self.options)
@@ -143,8 +160,8 @@ class _BuiltMPCC(BuiltFormulation):
             if warm is not None:
                 args.update(lam_x0=warm[0], lam_g0=warm[1])
             sol = self._solver(**args)
-            stats = self._solver.stats()
-            its = int(stats.get("iter_count", 0))
+            stats = _stats(self._solver)
+            its = iteration_count(stats)
             if stats["return_status"] not in _OK:
                 return f"IPOPT: {stats['return_status']}", w, None, its
             return ("", np.asarray(sol["x"], float).ravel(),
@@ -201,8 +218,8 @@ class _BuiltMPCC(BuiltFormulation):
             lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
             ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
             sol = self._bnlp(x0=w, p=params, lbg=lbg, ubg=ubg)
-            stats = self._bnlp.stats()
-            iters += int(stats.get("iter_count", 0))
+            stats = _stats(self._bnlp)
+            iters += iteration_count(stats)
             if stats["return_status"] not in _OK:
                 continue
             w_new = np.asarray(sol["x"], float).ravel()

@@ -92,9 +92,9 @@ class Penalty(Formulation):
 
     def build(self, problem: ComplementarityProblem) -> BuiltFormulation:
         gamma = problem.scaled_penalty(self.gamma(problem))
-        if problem.kind == "mcp":
-            return _BuiltPenalty(problem, self.options, gamma)
-        return _BuiltCompliantProjection(problem, self.options, gamma)
+        built = (_BuiltPenalty if problem.kind == "mcp" else _BuiltCompliantProjection)(problem, self.options, gamma)
+        built.penalty_stiffness = self.penalty_stiffness(problem)  # its expected penetration is p / gamma
+        return built
 
 
 class _BuiltPenalty(BuiltFormulation):

@@ -45,6 +45,14 @@ def _chain(noise: float, seed: int, *, elements: int = 2, n_data: int = 30):
     (dict(restarts=1.5), "restarts"), (dict(seed=True), "seed"), (dict(warm="yes"), "warm"),
     (dict(initial=[0, -1]), "initial"), (dict(initial="0"), "initial"), (dict(variant="maxent2"), "variant"),
     (dict(lcdd_neighbours=1), "lcdd_neighbours"), (dict(greedy_budget=0), "greedy_budget"),
+    # max-ent (tests/test_maxent.py)
+    (dict(maxent_neighbours=1), "maxent_neighbours"), (dict(maxent_neighbours=5000), "maxent_neighbours"),
+    (dict(maxent_neighbours=2.5), "maxent_neighbours"), (dict(maxent_steps=0), "maxent_steps"),
+    (dict(maxent_steps=201), "maxent_steps"), (dict(maxent_steps=True), "maxent_steps"),
+    (dict(maxent_beta_growth=1), "maxent_beta_growth"), (dict(maxent_beta_growth=0.5), "maxent_beta_growth"),
+    (dict(maxent_beta_growth="2"), "maxent_beta_growth"), (dict(maxent_beta_growth=float("nan")), "maxent_beta_growth"),
+    (dict(maxent_beta_growth=float("inf")), "maxent_beta_growth"), (dict(maxent_beta_growth=True), "maxent_beta_growth"),
+    (dict(variant="maxent", restarts=1), "does not combine"), (dict(variant="maxent", improve="greedy"), "does not combine"),
 ])
 def test_bad_options_are_one_line_errors(bad, key):
     with pytest.raises(InputError) as exc:

@@ -30,6 +30,7 @@ from skfem import MeshTet1, MeshTri1
 
 from ..data import check_positive
 from ..errors import InputError
+from ..inputs import input_file
 
 Mesh = Union[MeshTri1, MeshTet1]
 
@@ -257,8 +258,7 @@ def read_mesh(path: str | Path) -> Mesh:
     kind, reader = READERS.get(path.suffix.lower(), (None, None))
     if reader is None:
         raise InputError(f"unknown mesh file suffix {path.suffix!r} of {path}; use .msh, .vtu or .xdmf")
-    if not path.is_file():
-        raise InputError(f"mesh file not found: {path}")
+    path = input_file(path, "mesh file")
     try:
         raw = reader(str(path))
     except ImportError as err:  # meshio's XDMF reader needs h5py, even for inline XML data

@@ -1,24 +1,73 @@
-r"""Noise-robust data-driven schemes: local convexity data-driven (LCDD).
+r"""Noise-robust data-driven schemes: local convexity (LCDD) and maximum entropy (max-ent).
 
-LCDD (Q. He and J.-S. Chen, "A physics-constrained data-driven approach based on locally convex
-reconstruction for noisy database", CMAME 363 (2020) 112791) replaces the projection onto the
-data by the projection onto the convex hull of the ``k`` data nearest to the state:
+Both keep the projection onto ``Z_E`` of the DDCM driver (:meth:`DDCMSolver.project_data`, the
+same CasADi problem with the material states passed as parameters) and replace the projection
+onto the data, "the nearest datum", by another *material update* ``z* = M(z)``:
+
+.. math::  z \leftarrow P_{Z_E}(z^*) , \qquad z^* \leftarrow M(z) ,
+
+alternated until ``z*`` moves less than :data:`TOL` of the data's spread (in the metric; such
+alternations converge only in the limit, so a load step that does not settle within
+``max_outer`` projections is reported as not converged). The reported ``distance`` is
+``1/2 sum_i w_i d^2(z_i, z*_i)``, ``data_index`` the datum nearest ``z*``.
+
+**LCDD** (Q. He and J.-S. Chen, "A physics-constrained data-driven approach based on locally
+convex reconstruction for noisy database", CMAME 363 (2020) 112791): the projection onto the
+convex hull of the ``k`` data nearest to the state,
 
 .. math::  z^*_i = \arg\min_{y \in \operatorname{conv} N_k(z_i)} d(z_i, y)^2 ,
-           \qquad z \leftarrow P_{Z_E}(z^*) ,
 
-``N_k(z_i)`` the ``k`` nearest data of point ``i`` under the metric. The reconstructed material
-state averages the noise of its neighbours instead of jumping between noisy data, so on noisy
-data the solution is closer to the underlying law (He & Chen report about an order of magnitude).
-In the metric's scaled coordinates (:meth:`~ddcm_casadi.metric.Metric.coordinates`, where the
-metric distance is Euclidean) the projection onto the hull of ``k`` points in the
-``(strain, stress)`` plane is exact and vectorised over points: the state itself if it lies in
-one of the triangles of three neighbours, else the nearest point of the segments between two
-neighbours (every edge of the hull is one of them). One-component points only (bars, trusses).
+``N_k(z_i)`` the ``k`` nearest data of point ``i`` under the metric. The reconstructed state
+averages the noise of its neighbours instead of jumping between noisy data (He & Chen report
+about an order of magnitude on noisy data). In the metric's scaled coordinates
+(:meth:`~ddcm_casadi.metric.Metric.coordinates`, where the metric distance is Euclidean) the
+projection onto the hull of ``k`` points in the ``(strain, stress)`` plane is exact and
+vectorised over points: the state itself if it lies in one of the triangles of three neighbours,
+else the nearest point of the segments between two neighbours (every edge of the hull is one of
+them). One-component points only (bars, trusses).
 
-The iteration stops when the reconstructed states move less than ``1e-7`` of the data's spread
-(alternating projections between convex sets converge, but only in the limit: a step that does
-not settle within ``max_outer`` iterations is reported as not converged).
+**Max-ent** (T. Kirchdoerfer and M. Ortiz, "Data-driven computing with noisy material data
+sets", CMAME 326 (2017) 622-641): point ``i`` is not assigned one datum but the distribution of
+maximum entropy over its data ``y_j`` at a given mean squared distance, the Boltzmann weights
+
+.. math::  p_{ij} = \frac{\exp(-\tfrac{\beta}{2} d^2(z_i, y_j))}{Z_i} , \qquad
+           Z_i = \sum_j \exp(-\tfrac{\beta}{2} d^2(z_i, y_j)) ,
+
+``beta`` the inverse temperature (1/Pa: ``d^2 = de C de + ds C^-1 ds`` is an energy density),
+and the material state is their mean ``z*_i = sum_j p_ij y_j``. The scheme minimises the free
+energy ``sum_i w_i F_i(z_i)`` over ``Z_E``,
+
+.. math::  F_i(z_i) = -\frac{1}{\beta} \log Z_i
+           = \min_{p \ge 0,\ \sum p = 1} \sum_j p_j \tfrac12 d^2(z_i, y_j)
+             + \frac{1}{\beta} \sum_j p_j \log p_j ,
+
+by alternating minimisation: the minimising ``p`` is the Boltzmann distribution (Gibbs), and
+since ``d^2`` is a quadratic form, ``sum_j p_j d^2(z, y_j) = d^2(z, z*) + sum_j p_j d^2(z*, y_j)``,
+so the minimising ``z`` is ``P_{Z_E}(z*)``. With ``G(z, p)`` the bracket above summed with the
+weights ``w_i``, ``F(z') <= G(z', p) <= G(z, p) = F(z)``: at fixed ``beta`` the free energy never
+increases (as far as the ``Z_E`` projection is a global minimum). As ``beta -> infinity``,
+``F_i`` tends to ``min_j d^2 / 2`` and ``z*`` to the nearest datum: plain distance-minimising DDCM.
+
+*Neighbourhoods.* The sums run over the ``K = maxent_neighbours`` data nearest the state (the
+KD-tree, each point in its own data set), not over all data: the neighbourhood of ``z_i``. The
+``K`` nearest give the largest ``Z_i`` over all sets of ``K`` data, so the truncated ``F_i`` is
+also a minimum over ``(set, p)`` and the descent argument holds for it; beyond ``d_K`` the
+weights are below ``exp(-beta (d_K^2 - d_1^2) / 2)`` relative to the nearest datum, under
+``1e-16`` once ``beta`` has grown (then the truncation is exact to roundoff).
+
+*Annealing.* Per load step, from the first projected state: ``beta_0 = 1 / <d^2>``, the mean of
+``d^2`` over all points and their ``K`` nearest data (the neighbourhood's spread: at ``beta_0``
+the weights cover the neighbourhood), then ``beta_s = beta_0 g^s``, ``s = 0 .. S - 1``
+(``g = maxent_beta_growth``, ``S = maxent_steps``). At each stage the scheme alternates until
+``z*`` settles (an intermediate stage to :data:`STAGE_TOL` of the kernel's width, the last to
+:data:`TOL`), then ``beta`` grows, from the same state. It stops after stage ``S - 1``, or as soon
+as the weights have *concentrated* (every point's second-nearest datum weighs less than
+:data:`CONCENTRATED` relative to its nearest: ``z*`` is then the nearest datum to roundoff and the
+settled state is a fixed point of plain DDCM). A finite final ``beta`` keeps a weighted mean of
+the neighbourhood (the noise of many data averaged: the measured best on noisy data, at one
+stage); many stages anneal to plain DDCM, starting from the smooth high-temperature problem
+(deterministic annealing: a search for a better plain fixed point, whose error is still that of
+single noisy data).
 """
 
 from __future__ import annotations
@@ -29,8 +78,15 @@ import time
 import numpy as np
 
 
-#: Relative change of the reconstructed states below which LCDD has converged.
-LCDD_TOL = 1e-7
+#: Change of the material states (metric distance over the data's spread) below which an
+#: alternation has settled.
+TOL = 1e-7
+#: Max-ent: an intermediate annealing stage has settled when the material states move less than
+#: this fraction of the kernel's width ``beta^-1/2``.
+STAGE_TOL = 1e-3
+#: Relative weight of a point's second-nearest datum below which max-ent's weights have
+#: concentrated on the nearest one (the mean is then that datum to roundoff).
+CONCENTRATED = 1e-16
 
 
 def hull_projection(q: np.ndarray, Y: np.ndarray) -> np.ndarray:
@@ -71,25 +127,148 @@ def _lcdd_star(model, strain, stress, k: int) -> tuple[np.ndarray, np.ndarray]:
     return y[:, 0] / rc, y[:, 1] * rc
 
 
+def _point_distance2(model, d_strain: np.ndarray, d_stress: np.ndarray) -> np.ndarray:
+    """Squared metric distances of strain and stress differences ``(m, K, k)``, each point under
+    its own material's metric: ``(m, K)``."""
+    metrics, material = model.dataset.point_materials(model.n_points)
+    m, K, kc = d_strain.shape
+    out = np.empty((m, K))
+    for j, mt in enumerate(metrics):
+        pts = material == j
+        out[pts] = mt.distance2(d_strain[pts].reshape(-1, kc), d_stress[pts].reshape(-1, kc)).reshape(-1, K)
+    return out
+
+
+def _per_point(model, a) -> np.ndarray:
+    """A flat point-major field as ``(m, 1, k)``."""
+    return np.reshape(np.asarray(a, dtype=float), (model.n_points, 1, model.strain_components))
+
+
+def _largest_distance(model, d_strain, d_stress) -> float:
+    """The largest metric length of per-point strain and stress differences (flat, point-major)."""
+    return float(np.sqrt(np.max(_point_distance2(model, _per_point(model, d_strain), _per_point(model, d_stress)))))
+
+
+def data_spread(model) -> float:
+    """The largest extent of the data along one scaled coordinate (metric units, sqrt(Pa))."""
+    return max(float(np.max(np.ptp(d.metric.coordinates(d.strain, d.stress), axis=0)))
+               for d in model.dataset.datasets)
+
+
+def neighbourhoods(model, strain, stress, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` data nearest each point's state (global indices, nearest first, ``(m, k)``) and
+    their squared metric distances ``d^2`` (``(m, k)``); ``strain``, ``stress`` flat, point-major."""
+    data = model.dataset
+    near = data.k_nearest(strain, stress, k)
+    m, K = near.shape
+    shape = (m, K, model.strain_components)
+    de = _per_point(model, strain) - data.strain[near].reshape(shape)
+    ds = _per_point(model, stress) - data.stress[near].reshape(shape)
+    return near, _point_distance2(model, de, ds)
+
+
+def boltzmann_weights(d2: np.ndarray, beta: float) -> tuple[np.ndarray, bool]:
+    """Max-ent weights ``p_ij ~ exp(-beta d_ij^2 / 2)`` over each row of ``d2`` (``(m, K)``),
+    normalised per row, and whether they have concentrated: in every row, each datum farther
+    than the nearest weighs less than :data:`CONCENTRATED` times the nearest (data exactly as near,
+    such as duplicates, share its weight). Shifted by the row minimum, so no overflow; a ``beta``
+    grown to infinity leaves the nearest data only."""
+    shifted = d2 - d2.min(axis=1, keepdims=True)
+    farther = shifted > 0
+    with np.errstate(over="ignore", invalid="ignore"):  # inf x 0 where not farther: not used
+        w = np.exp(-0.5 * np.where(farther, beta * shifted, 0.0))
+    w /= w.sum(axis=1, keepdims=True)
+    far = np.where(farther, w, 0.0).max(axis=1)
+    return w, bool(np.all(far < CONCENTRATED * w.max(axis=1)))
+
+
+class _LCDD:
+    """LCDD's material update (no stages)."""
+
+    def __init__(self, model, opts) -> None:
+        self.model, self.k = model, opts.lcdd_neighbours
+
+    def start(self, strain, stress) -> None:
+        pass
+
+    def star(self, strain, stress) -> tuple[np.ndarray, np.ndarray]:
+        return _lcdd_star(self.model, strain, stress, self.k)
+
+    def tolerance(self, tol: float) -> float:
+        return tol
+
+    def advance(self) -> bool:
+        return False
+
+    def settled(self) -> str:
+        return "fixed point (LCDD)"
+
+
+class _MaxEnt:
+    """Max-ent's material update and its annealing schedule (see the module's docstring)."""
+
+    def __init__(self, model, opts) -> None:
+        self.model, self.k = model, opts.maxent_neighbours
+        self.steps, self.growth = opts.maxent_steps, opts.maxent_beta_growth
+        self.beta = self.beta0 = float("nan")
+        self.stage, self.concentrated, self.last = 0, False, False
+
+    def start(self, strain, stress) -> None:
+        _, d2 = neighbourhoods(self.model, strain, stress, self.k)
+        # all neighbours on the state (duplicated data): any beta gives the same mean
+        self.beta0 = self.beta = 1.0 / max(float(np.mean(d2)), np.finfo(float).tiny)
+        self.stage, self.concentrated, self.last = 0, False, False
+
+    def star(self, strain, stress) -> tuple[np.ndarray, np.ndarray]:
+        data, model = self.model.dataset, self.model
+        near, d2 = neighbourhoods(model, strain, stress, self.k)
+        w, self.concentrated = boltzmann_weights(d2, self.beta)
+        shape = near.shape + (model.strain_components,)
+        e = np.einsum("ij,ijk->ik", w, data.strain[near].reshape(shape))
+        s = np.einsum("ij,ijk->ik", w, data.stress[near].reshape(shape))
+        return e.reshape(np.shape(strain)), s.reshape(np.shape(stress))
+
+    def tolerance(self, tol: float) -> float:
+        """An intermediate stage only has to follow the minimiser within a small fraction of the
+        kernel's width ``beta^-1/2`` (the next stage moves it anyway); the last one settles to ``tol``."""
+        return tol if self.last else max(tol, STAGE_TOL / np.sqrt(self.beta))
+
+    def advance(self) -> bool:
+        if self.last or self.concentrated or self.stage + 1 >= self.steps:
+            self.last = True
+            return False
+        self.stage += 1
+        self.beta *= self.growth
+        return True
+
+    def settled(self) -> str:
+        how = "weights concentrated" if self.concentrated else "final temperature"
+        return f"fixed point (max-ent, {how} at stage {self.stage + 1}/{self.steps}, beta = {self.beta:.3g}/Pa)"
+
+
+#: The material update of each noise-robust variant.
+SCHEMES = {"lcdd": _LCDD, "maxent": _MaxEnt}
+
+
 def solve_noise_robust(solver, *, formulation_name: str = "", raise_on_failure: bool = False, progress=None):
-    """The LCDD scheme along the load path with the driver's projection onto ``Z_E``
-    (:meth:`DDCMSolver.project_data`) and starts (:class:`DDCMOptions` ``start``, ``initial``, ``warm``)."""
+    """A noise-robust variant (:data:`SCHEMES`, chosen by :class:`DDCMOptions` ``variant``) along the
+    load path with the driver's projection onto ``Z_E`` (:meth:`DDCMSolver.project_data`) and
+    starts (:class:`DDCMOptions` ``start``, ``initial``, ``warm``)."""
     from .path import PathResult, StepResult, _check_convergence
 
     problems, model, opts = solver.problems, solver.problems.model, solver.options
     data = model.dataset
+    scheme = SCHEMES[opts.variant](model, opts)
     out = PathResult("ddcm", formulation_name)
     x, p, state = np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None
-    spread = max(float(np.ptp(np.sqrt(model.metric).max() * data.strain)),
-                 float(np.ptp(data.stress / np.sqrt(model.metric).min())))
-    rc = np.sqrt(model.metric)
+    tol = TOL * data_spread(model)
     star_e = star_s = None
     t_all = time.perf_counter()
     for k in range(model.n_steps):
         t0 = time.perf_counter()
         if star_e is None or not opts.warm:
             index = solver.initial_assignment(k)
-            star_e, star_s = data.strain[index].copy(), data.stress[index].copy()
+            star_e, star_s = data.strain[index].ravel(), data.stress[index].ravel()
         cost = dict(inner=0, t_project=0.0)
         converged, message = False, "maximum outer iterations reached"
         for outer in range(1, solver.max_outer + 1):
@@ -99,24 +278,31 @@ def solve_noise_robust(solver, *, formulation_name: str = "", raise_on_failure: 
                 break
             x, p, state = sol.x, sol.p, sol.state
             f = problems.fields("mpcc", sol.x, sol.p)
-            new_e, new_s = _lcdd_star(model, f["strain"], f["stress"], opts.lcdd_neighbours)
-            change = float(np.max(np.hypot(rc * (new_e - star_e), (new_s - star_s) / rc)))
+            if outer == 1:
+                scheme.start(f["strain"], f["stress"])
+            while True:
+                # the change is measured from the material states this state was projected from
+                new_e, new_s = scheme.star(f["strain"], f["stress"])
+                change = _largest_distance(model, new_e - star_e, new_s - star_s)
+                if change > scheme.tolerance(tol):
+                    break  # not settled at this stage: project again
+                if scheme.advance():
+                    continue  # settled: the next stage starts from the same state, without a projection
+                converged = change <= tol  # the last stage, settled to the final tolerance
+                break
             star_e, star_s = new_e, new_s
-            if change <= LCDD_TOL * spread:
-                converged, message = True, "fixed point (LCDD)"
+            if converged:
+                message = scheme.settled()
                 break
         f = problems.fields("mpcc", sol.x, sol.p)
         index = data.nearest(star_e, star_s)
-        metrics, material = data.point_materials(model.n_points)
-        d2 = np.empty(model.n_points)
-        for j, mt in enumerate(metrics):
-            pts = material == j
-            d2[pts] = mt.distance2(f["strain"][pts] - star_e[pts], f["stress"][pts] - star_s[pts])
+        d2 = _point_distance2(model, _per_point(model, f["strain"] - star_e), _per_point(model, f["stress"] - star_s))
         step = StepResult(step=k, load_parameter=float(model.load_parameter[k]), u=f["u"], p=f["p"],
                           converged=converged, iterations=cost["inner"], outer_iterations=outer, residual=sol.residual,
                           complementarity=sol.complementarity, penetration=sol.penetration, seconds=0.0,
                           message=message, strain=f["strain"], stress=f["stress"], strain_star=star_e.copy(),
-                          stress_star=star_s.copy(), data_index=index, distance=float(0.5 * np.dot(model.volumes, d2)),
+                          stress_star=star_s.copy(), data_index=index,
+                          distance=float(0.5 * np.dot(model.volumes, d2[:, 0])),
                           projection_error=err, projection_global=is_global, projection_seconds=cost["t_project"],
                           projections=outer, runs=1)
         step.seconds = time.perf_counter() - t0

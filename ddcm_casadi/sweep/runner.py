@@ -14,7 +14,10 @@ Ctrl-C or a lost worker); ``force`` reruns every case, ``retry_failed`` the fail
 that raises is recorded as failed with its message and does not stop the sweep; a task lost by
 the cluster (a worker killed more often than Dask retries it) is not recorded, so the next run
 runs it. ``DIR/sweep.csv`` and ``DIR/sweep.json`` are then written from the case folders, in
-the order of the spec, whatever the order in which the cases finished.
+the order of the spec, whatever the order in which the cases finished, with the figures, all
+together (:class:`~ddcm_casadi.io.OutputFolder`: a rerun removes the previous sweep's figures it
+does not draw). ``DIR`` is locked for the whole run: a second sweep (or ``ddcm-compare``) into it
+is refused.
 """
 
 from __future__ import annotations
@@ -24,13 +27,13 @@ import os
 import shutil
 import tempfile
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
 from ..errors import DDCMError, InputError
-from ..io import prepare_output_dir, umask, write_csv_atomic, write_json_atomic
+from ..io import OutputFolder, umask, write_csv_atomic, write_json_atomic
 from .spec import SweepCase, SweepSpec, build_case
 from .table import case_rows, fits, summary_rows
 
@@ -248,16 +251,21 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, workers: int | None = None, s
     report = SweepReport(out=out, total=len(spec.cases), skipped=len(spec.cases) - len(todo))
     if figures and spec.figures:
         from . import figures as _figures  # noqa: F401 - a missing matplotlib fails before any work
-    if todo:
-        with dask_client(workers=workers, scheduler=scheduler) as client:
-            out = prepare_output_dir(out)
-            _clean_partial(out)
-            report.workers = n_workers(client)
-            _run(client, spec, todo, out, report, progress)
-    else:
-        out = prepare_output_dir(out)
-    report.seconds = time.perf_counter() - t0
-    finish(spec, out, report, figures=figures, versions=versions)
+    folder = None  # locked from its creation to the end: one sweep (or ddcm-compare) per folder
+    try:
+        if todo:
+            with dask_client(workers=workers, scheduler=scheduler) as client:
+                folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json")
+                _clean_partial(folder.path)
+                report.workers = n_workers(client)
+                _run(client, spec, todo, folder.path, report, progress)
+        else:
+            folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json")
+        report.seconds = time.perf_counter() - t0
+        finish(spec, folder.path, report, figures=figures, versions=versions, folder=folder)
+    finally:
+        if folder is not None:
+            folder.close()
     return report
 
 
@@ -296,8 +304,16 @@ def _run(client, spec: SweepSpec, todo: list[SweepCase], out: Path, report: Swee
 
 
 def finish(spec: SweepSpec, out: Path, report: SweepReport, *, figures: bool = True,
-           versions: dict | None = None) -> None:
-    """Write ``sweep.csv``, ``sweep.json`` and the figures from the finished case folders."""
+           versions: dict | None = None, folder: OutputFolder | None = None) -> None:
+    """Write ``sweep.csv``, ``sweep.json`` and the figures from the finished case folders (with
+    ``folder``, through its staging folder: all of them or none, and the previous sweep's figures
+    that this one does not draw are removed)."""
+    with folder.staging() if folder is not None else nullcontext(out) as into:
+        _write_summary(spec, out, into, report, figures=figures, versions=versions)
+
+
+def _write_summary(spec: SweepSpec, out: Path, into: Path, report: SweepReport, *, figures: bool,
+                   versions: dict | None) -> None:
     from ..cli import versions as package_versions
 
     records = [(case, read_record(out, case.id)) for case in spec.cases]
@@ -306,7 +322,7 @@ def finish(spec: SweepSpec, out: Path, report: SweepReport, *, figures: bool = T
     if figures and spec.figures and rows:
         from .figures import save_figures
 
-        report.figures = [p.name for p in save_figures(spec, rows, out)]
+        report.figures = [p.name for p in save_figures(spec, rows, into)]
     status = {case.id: (rec or {}).get("status", "missing") for case, rec in records}
     doc = dict(spec=spec.document, spec_path=str(spec.path), base=str(spec.base), columns=spec.columns,
                cases=len(spec.cases), finished=sum(s != "missing" for s in status.values()),
@@ -314,9 +330,10 @@ def finish(spec: SweepSpec, out: Path, report: SweepReport, *, figures: bool = T
                ran=report.ran, skipped=report.skipped, lost=len(report.lost), workers=report.workers,
                seconds=report.seconds, fits=report.fits, figures=report.figures,
                versions={**package_versions(), **_dask_versions(), **(versions or {})},
-               case_index=[dict(id=case.id, params=case.params, status=status[case.id]) for case in spec.cases])
-    write_csv_atomic(out / "sweep.csv", rows)
-    write_json_atomic(out / "sweep.json", doc)
+               case_index=[dict(id=case.id, params=case.params, status=status[case.id]) for case in spec.cases],
+               files=["sweep.csv", *report.figures, "sweep.json"])  # the manifest (see OutputFolder)
+    write_csv_atomic(into / "sweep.csv", rows)
+    write_json_atomic(into / "sweep.json", doc)
 
 
 def _dask_versions() -> dict:

@@ -49,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from ..inputs import input_file
 from ..overrides import apply_overrides, split_key
 from .generators import DataGenerator, attach, generator_from_dict
 
@@ -228,9 +229,7 @@ def load_spec(path: str | Path, *, check: bool = True) -> SweepSpec:
     """
     from ..casefile import read_document
 
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"sweep spec not found: {path}")
+    path = input_file(path, "sweep spec")
     spec = read_document(path)
     unknown = sorted(set(spec) - set(SPEC_KEYS))
     if unknown:
@@ -239,9 +238,7 @@ def load_spec(path: str | Path, *, check: bool = True) -> SweepSpec:
         raise InputError(f"the sweep spec {path} needs base = \"CASE.toml\" (the base case, relative to the spec)")
     if not isinstance(spec["base"], str) or not spec["base"]:
         raise InputError(f"base must be the path of a case file, got {spec['base']!r}")
-    base = path.parent / spec["base"]
-    if not base.is_file():
-        raise InputError(f"base case not found: {base}")
+    base = input_file(path.parent / spec["base"], "base case")
     base_doc = read_document(base)
 
     from .. import formulations as registry
