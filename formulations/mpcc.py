@@ -86,6 +86,10 @@ class MPCC(Formulation):
             many times while it fails; 0: only when the homotopy converges near a corner or stalls.
             An accepted branch solution passes the same tests (signs, B-stationarity,
             ``comp_tol``, ``residual_tol``) as at the end of the homotopy.
+        warm_branch : bool
+            From a warm start that is a converged solution, first solve the branch NLP of the
+            branch identified there (``g_i = 0`` where ``g_i <= p_i``, else ``p_i = 0``), accepted
+            under the same tests as above; the homotopy runs only when that fails.
         ipopt : dict
             Extra IPOPT options passed through unchanged (copied).
         """
@@ -97,6 +101,7 @@ class MPCC(Formulation):
         residual_tol: float = 1e-10
         max_homotopy: int = 30
         early_branch: int = 2
+        warm_branch: bool = True
         ipopt: dict = field(default_factory=dict)
 
     def _validate(self) -> None:
@@ -153,7 +158,8 @@ class _BuiltMPCC(BuiltFormulation):
             polished, iters, ok = self._branch_nlp(w, params, 0.0)
             if ok:
                 return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
-                                    outer=1, message="converged (branch NLP from the start's branch)")
+                                    outer=1, message="converged (branch NLP from the start's branch)",
+                                    state=self._next_state(True))
 
         def relaxed(w, tau, warm):
             args = dict(x0=w, p=self.parameters.pack(params, tau=tau), lbx=self._lbx, lbg=self._lbg, ubg=self._ubg)
@@ -177,7 +183,15 @@ class _BuiltMPCC(BuiltFormulation):
                                 residual_tol=o.residual_tol, max_homotopy=o.max_homotopy,
                                 early_branch=o.early_branch)
         return self._finish(out.w[:nx], out.w[nx:], params, converged=out.converged, iterations=out.iterations,
-                            outer=out.steps, message=out.message)
+                            outer=out.steps, message=out.message, state=self._next_state(out.converged))
+
+    def _next_state(self, converged: bool) -> dict:
+        """The warm-start state a solution hands on: with ``warm_branch``, a converged solution
+        marks its point as on a branch, so that the next solve from it (the next load step, the
+        next projection of the DDCM iterations) first solves that branch's NLP (one IPOPT solve
+        where the homotopy takes several), falling back to the homotopy when the branch's signs or
+        B-stationarity fail (a pair that changes side)."""
+        return {"on_branch": True} if converged and self.opts.warm_branch else {}
 
     def _near_corner(self, w, params, tau) -> bool:
         """Is some pair within the branch NLP's biactive identification ``10 sqrt(tau)`` of a corner?"""
