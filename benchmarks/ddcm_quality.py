@@ -21,21 +21,34 @@ references, the best of ``R/4`` and of ``R`` kicked restarts + greedy from every
 (``R = --reference-restarts``; the two show how far the reference is from converged); the share of
 steps at the best known (within 1e-9), the max relative error of ``p`` and ``u`` against the
 noise-free classical solution (FB, ``E = 200 GPa``; mean over data sets), the cost as ``Z_E``
-projections relative to plain alternating, the steps converged and wall time. Measured cost
-(cProfile, one data set, ``R = 20``): about two thirds of the reference's time is the greedy
-screen's closed forms (:meth:`~ddcm_casadi.exact.AffineFamily.best`, 8 points x 2001 data x 8
-branches per sweep), a quarter the ``Z_E`` projections; the restarts cost linearly in ``R``.
+projections relative to plain alternating, the steps converged and the wall time (and relative to
+plain: the greedy screen costs time that no projection count shows). Where the time
+goes (cProfile, one data set at 2 %, ``R = 20``, one BLAS thread: 9 s): 70 % in the ``Z_E``
+projections, nearly all of it the exact branch enumeration that checks each one
+(:meth:`~ddcm_casadi.exact.ExactEnumerator.solve`, 27 partitions of 3 pairs; the FB Newton
+solves take 7 %), 28 % in the greedy screen's closed forms
+(:meth:`~ddcm_casadi.exact.AffineFamily.best`, 8 points x 2001 data per sweep); the restarts
+cost linearly in ``R``. A threaded BLAS made the screen 2-10x slower on a loaded 2-core machine,
+hence one thread by default (below).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+
+# One BLAS thread unless the caller sets one: the closed forms of the greedy screen and of the
+# enumeration are products of small matrices (16 x 16 by 16 x 16 000 on the truss), which a
+# threaded BLAS made 2-10x slower on a loaded 2-core machine (measured; before numpy is imported).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import numpy as np
 
 from ddcm_casadi import compare, truss
 from ddcm_casadi.harness import _relative_error  # the error measure of Comparison.errors
-from ddcm_casadi.quality_rungs import CONFIGURATIONS, NOISE_LEVELS, measure, noisy_dataset
+from ddcm_casadi.quality_rungs import (CONFIGURATIONS, MAXENT_CONFIGURATION, MAXENT_OPTIONS, NOISE_LEVELS, measure,
+                                       noisy_dataset)
 from ddcm_casadi.solvers.ddcm_options import DDCMOptions
 
 FB = "fischer_burmeister"
@@ -45,7 +58,7 @@ FB = "fischer_burmeister"
 #: x4 per stage until the weights concentrate (a plain DDCM fixed point, reached from the smooth
 #: problem).
 MAXENT = {
-    "max-ent (K=32, 1 stage)": DDCMOptions(variant="maxent"),
+    MAXENT_CONFIGURATION: MAXENT_OPTIONS,
     "max-ent (K=32, 2 stages x2)": DDCMOptions(variant="maxent", maxent_steps=2),
     "max-ent (K=32, x4 to concentration)": DDCMOptions(variant="maxent", maxent_steps=30, maxent_beta_growth=4.0),
 }
@@ -103,7 +116,7 @@ def table_truss(seeds, reference_restarts: int, only=None) -> None:
     print(f"best known: per step, the lowest objective of every row (references: warm=False, "
           f"{', '.join(str(o.restarts) for o in refs.values())} kicked restarts (K = 10) + greedy)\n")
     print("| noise | search | steps at the best known | objective / best: mean | max | error p | error u "
-          "| projections (x plain) | converged | seconds |")
+          "| projections (x plain) | converged | seconds (x plain) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     classical = compare(noisy_truss(0.0, 0), [FB], variants=("classical",))["classical", FB]
     u_ref, p_ref = classical.array("u"), classical.array("p")
@@ -126,13 +139,14 @@ def table_truss(seeds, reference_restarts: int, only=None) -> None:
             for name in configs:
                 rows[name]["objective"].append(objective[name])
                 rows[name]["best"].append(best)
-        base = rows["plain"]["projections"]
+        base, base_seconds = rows["plain"]["projections"], rows["plain"]["seconds"]
         for name, row in rows.items():
             ratio = np.concatenate(row["objective"]) / np.concatenate(row["best"])
             at_best = int(np.sum(ratio <= 1 + 1e-9))
             print(f"| {noise:.0%} | {name} | {at_best}/{ratio.size} | {np.mean(ratio):.3g} | {np.max(ratio):.3g} | "
                   f"{np.mean(row['error_p']):.3f} | {np.mean(row['error_u']):.3f} | {row['projections'] / base:.2f} | "
-                  f"{row['converged']}/{ratio.size} | {row['seconds']:.1f} |", flush=True)
+                  f"{row['converged']}/{ratio.size} | {row['seconds']:.1f} ({row['seconds'] / base_seconds:.1f}) |",
+                  flush=True)
 
 
 def main(argv=None) -> None:

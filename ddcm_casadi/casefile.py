@@ -7,7 +7,7 @@ kind shares:
 - ``[data]`` or ``[[data]]``: material data sets (a CSV file, or generated Hookean data);
 - ``[ddcm]``: ``c`` (the default metric, Pa), ``max_outer`` (alternating projections per step) and
   the search options ``start``, ``initial``, ``warm``, ``seed``, ``restarts``, ``improve``,
-  ``restart_neighbours``, ``greedy_*``, ``exact_max``, ``variant``, ``lcdd_neighbours``
+  ``restart_neighbours``, ``greedy_*``, ``exact_max``, ``variant``, ``lcdd_neighbours``, ``maxent_*``
   (:class:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions`);
 - ``[formulations.NAME]``: options of one contact formulation (checked against the registry).
 
@@ -395,7 +395,7 @@ class DataSpec:
     def build(self) -> MaterialDataset:
         """Read the file or generate the Hookean data."""
         if self.path is not None:
-            return MaterialDataset.from_csv(self.path, c=self.c)
+            return MaterialDataset.from_file(self.path, c=self.c)
         return MaterialDataset.hookean(self.youngs_modulus, self.strain_min, self.strain_max, self.points, c=self.c)
 
 

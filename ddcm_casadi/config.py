@@ -18,7 +18,8 @@ imported here.
 Shared sections
 ---------------
 ``[data]`` (one data set) or ``[[data]]`` (one table per material): ``path`` (a CSV file with
-header ``strain,stress``, relative to the case file) or ``hookean = {strain_min, strain_max,
+header ``strain,stress``, or a ``.npy`` array with those columns, read memory-mapped; relative to
+the case file) or ``hookean = {strain_min, strain_max,
 points, youngs_modulus}`` (the modulus defaults to the model's), and ``c`` (Pa, default
 ``[ddcm] c``). ``[ddcm]``: ``c`` and ``max_outer`` (default 100). ``[formulations.NAME]``: the
 options of one formulation (see ``ddcm_casadi.formulations``).

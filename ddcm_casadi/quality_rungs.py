@@ -48,6 +48,17 @@ TARGET_COST = 5.0
 #: The configuration the rung checks against the target.
 TARGET_CONFIGURATION = "restarts 1 (kick) + greedy"
 
+#: The noise-robust variant the rung checks: max-ent (Kirchdoerfer & Ortiz 2017) at its defaults
+#: (K = 32 neighbours, one temperature).
+MAXENT_CONFIGURATION = "max-ent (K=32, 1 stage)"
+MAXENT_OPTIONS = DDCMOptions(variant="maxent")
+#: The rung's bound on max-ent's error of ``p`` over plain alternating's (both against the noise-free
+#: closed form). Measured ratios: 0.10-0.12 on the rung's four data sets at 1, 2 and 5 % noise, and
+#: 0.14-0.16 on eight others (seeds 4-11): the bound, "at least halves the error", keeps a factor
+#: of three over the largest. The error of ``u`` is not claimed: small for both (below 5 %), it was
+#: measured at 0.9-2.3 times plain alternating's.
+MAXENT_ERROR_RATIO = 0.5
+
 
 def noisy_dataset(noise: float, seed: int, *, n_data: int = 500, c: float = 300e9,
                   youngs_modulus: float = 200e9) -> MaterialDataset:
@@ -115,7 +126,9 @@ def measure(options: DDCMOptions, noise: float, seeds, *, name: str = "", formul
 def rung_search_quality(*, seeds=range(4)) -> list:
     """``ddcm-validate`` rung: on the noisy paper bar at 1, 2 and 5 % noise, the target
     configuration reaches the enumerated global optimum at >= 95 % of the steps, at no more than
-    5x the ``Z_E`` projections of plain alternating (an iteration-count ratio, not wall time)."""
+    5x the ``Z_E`` projections of plain alternating (an iteration-count ratio, not wall time);
+    max-ent's error of ``p`` against the noise-free closed form is at most
+    :data:`MAXENT_ERROR_RATIO` times plain alternating's."""
     from .ladder import Check
 
     out = []
@@ -130,4 +143,11 @@ def rung_search_quality(*, seeds=range(4)) -> list:
         ratio = best.projections / plain.projections
         out.append(Check.make(name, f"Z_E projections relative to plain alternating (<= {TARGET_COST:g})",
                               ratio, 0.0, TARGET_COST, note=f"{best.projections} vs {plain.projections} projections"))
+        maxent = measure(MAXENT_OPTIONS, noise, seeds, name=MAXENT_CONFIGURATION)
+        out.append(Check.make(f"noisy paper bar, {noise:.0%} noise / ddcm / {MAXENT_CONFIGURATION}",
+                              f"error of p relative to plain alternating's (<= {MAXENT_ERROR_RATIO:g})",
+                              maxent.error_p / plain.error_p, 0.0, MAXENT_ERROR_RATIO,
+                              note=f"max relative error of p against the noise-free closed form, mean over "
+                                   f"{len(list(seeds))} data sets: {maxent.error_p:.3g} vs plain {plain.error_p:.3g}; "
+                                   f"{maxent.converged}/{maxent.steps} steps settled"))
     return out

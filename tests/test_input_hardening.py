@@ -232,3 +232,17 @@ def test_validate_refuses_an_empty_out(capsys) -> None:
     assert validate(["--out", "", "-q"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("ddcm-validate: error:") and len(err.strip().splitlines()) == 1
+
+
+def test_case_file_reads_npy_data(tmp_path: Path, capsys) -> None:
+    """``[data] path = "data.npy"``: the memory-mapped reader, same results as the CSV."""
+    strain = np.linspace(-0.05, 0.01, 50)
+    np.save(tmp_path / "data.npy", np.column_stack([strain, 200e9 * strain]))
+    (tmp_path / "data.csv").write_text("strain,stress\n" + "".join(f"{float(e)!r},{float(200e9 * e)!r}\n" for e in strain))
+    rows = {}
+    for name in ("data.npy", "data.csv"):
+        case = tmp_path / f"{name}.toml"
+        case.write_text(case_toml(data=f'path = "{name}"'))
+        cmp = compare(load_case(case).model, ["fischer_burmeister"], variants=["ddcm"])
+        rows[name] = cmp["ddcm", "fischer_burmeister"].array("p")
+    np.testing.assert_array_equal(rows["data.npy"], rows["data.csv"])

@@ -231,7 +231,7 @@ def _datasets(doc: dict, base_dir: Path, k: int, materials: list) -> list[Materi
         if "path" in table:
             if not isinstance(table["path"], str):
                 raise InputError(f"[{label}] path must be a string")
-            ds = MaterialDataset.from_csv(base_dir / table["path"], c=probe)
+            ds = MaterialDataset.from_file(base_dir / table["path"], c=probe)
         else:
             hk = casefile.hookean_table(label, table["hookean"], _HOOKEAN)
             mat = users[0]
