@@ -10,12 +10,15 @@ run (the machines are shared and noisy). ``--quick`` keeps to about 5 minutes on
 
 The floor of one DDCM iteration is one sparse LU factorisation and solve (scipy) of the same
 saddle-point system the projection solves, plus one KD-tree query of all material points against
-the data set.
+the data set. The one-off build (``build, ...`` records and ``build_seconds``: both problems and
+the formulation's CasADi Functions) is measured against the same floor, for bars, trusses and a
+2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import subprocess
 import sys
@@ -83,10 +86,12 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
     state, plus one KD-tree query of every material point against the data set.
 
     ``seconds`` is the mean over every iteration of the path, the cold first step included;
-    ``first_step_seconds`` and ``later_steps_seconds`` split it.
+    ``first_step_seconds`` and ``later_steps_seconds`` split it. ``build_seconds`` is the one-off
+    build (problems and the formulation), ``build_ratio`` its ratio to the floor.
     """
-    problems = build_problems(model)
     t0 = time.perf_counter()
+    problems = build_problems(model)
+    problem_build = time.perf_counter() - t0
     built = registry.get(formulation).build(problems.projection)
     build = time.perf_counter() - t0
     system = _fb_system(built)
@@ -111,22 +116,115 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
                search_seconds_per_iteration=float(sum(s.search_seconds for s in steps)) / int(its.sum()),
                newton_per_projection=float(sum(s.iterations for s in steps) / its.sum()),
                predicted_share=stats["predicted"] / max(1, stats["predicted"] + stats["newton"]),
-               build_seconds=build, converged=bool(path.converged))
+               build_seconds=build, problem_build_seconds=problem_build, converged=bool(path.converged))
     if system is None:  # no saddle-point system to measure the floor on
         return rec
-    step = steps[-1]
-    x, p = problems.scaled_start("mpcc", step.u, step.p, step.stress)
-    z = system.start(x, p, None)
-    P = system.pack(problems.projection_params(step.step, step.strain_star, step.stress_star))
-    r, J = system.rj(z, P)
-    A = system.jacobian(J)
-    rec["unknowns"] = int(A.shape[0])
+    rec["unknowns"] = int(system.jacobian.shape[0])
     if floor:
-        rhs = np.asarray(r, float).ravel() + 1.0
-        t_lu = median_time(lambda: spla.splu(A).solve(rhs), max(3, repeats))
-        t_kd = median_time(lambda: model.dataset.nearest(step.strain, step.stress), max(3, repeats))
-        rec.update(floor_seconds=t_lu + t_kd, ratio=seconds / (t_lu + t_kd), lu_seconds=t_lu, kdtree_seconds=t_kd)
+        step = steps[-1]
+        x, p = problems.scaled_start("mpcc", step.u, step.p, step.stress)
+        low = iteration_floor(problems, system, step.step, x, p, (step.strain_star, step.stress_star),
+                              (step.strain, step.stress), repeats)
+        rec.update(low, ratio=seconds / low["floor_seconds"], build_ratio=build / low["floor_seconds"])
     return rec
+
+
+def iteration_floor(problems, system, step: int, x, p, data, states, repeats: int) -> dict:
+    """The floor of one DDCM iteration: one scipy LU factorisation and solve of the FB
+    saddle-point system at scaled ``(x, p)`` with the assigned ``data = (strain*, stress*)`` at
+    load step ``step``, plus one KD-tree query of the ``states = (strain, stress)`` of every
+    material point against the data set."""
+    z = system.start(x, p, None)
+    r, J = system.rj(z, system.pack(problems.projection_params(step, *data)))
+    A = system.jacobian(J)
+    rhs = np.asarray(r, float).ravel() + 1.0
+    t_lu = median_time(lambda: spla.splu(A).solve(rhs), max(3, repeats))
+    t_kd = median_time(lambda: problems.model.dataset.nearest(*states), max(3, repeats))
+    return dict(floor_seconds=t_lu + t_kd, lu_seconds=t_lu, kdtree_seconds=t_kd)
+
+
+def continuum_block(divisions: int):
+    """The body of the Hertz example (``examples/cases/hertz2d.toml``: plane strain, P2 triangles,
+    a 20 mm square indented by a cylinder, with its 21^3 Hookean data) on a uniform
+    ``divisions x divisions`` mesh without the contact grading, for sizes set by one number."""
+    from ddcm_casadi.casefile import read_document
+    from ddcm_casadi.config import case_from_dict
+    from ddcm_casadi.continuum.validation import EXAMPLE
+
+    doc = read_document(EXAMPLE)
+    doc["mesh"]["divisions"] = [divisions, divisions]
+    doc["mesh"].pop("refine_near", None)
+    return case_from_dict(doc, base_dir=EXAMPLE.parent, source=f"hertz block {divisions}x{divisions}").model
+
+
+#: Models of about ``u`` projection unknowns (``n + m k + 3 nc`` with ``n`` = ``m k`` for bars).
+BUILD_MODELS = {
+    "bar": lambda u: stopped_bar(max(10, round(u / 3)), 10_000),
+    "truss": lambda u: warren(max(8, round(u / 12.75)), 10_000),
+    "2-D continuum": lambda u: continuum_block(max(4, round((u / 34) ** 0.5))),
+}
+
+
+def build_record(family: str, unknowns: int, repeats: int) -> dict:
+    """The one-off build of a DDCM run (both problems, then the projection's Fischer-Burmeister
+    system and its piece system) of a ``family`` model of about ``unknowns`` unknowns, against
+    the floor of one DDCM iteration (:func:`iteration_floor`, at the zero start with a random
+    data assignment, whose states are queried). ``peak_memory_bytes``: the peak resident set
+    (Linux ``VmHWM``) of the process, imports and model included."""
+    from ddcm_casadi.solvers.ddcm_search import random_assignment
+
+    model = BUILD_MODELS[family](unknowns)
+    t0 = time.perf_counter()
+    problems = build_problems(model)
+    t1 = time.perf_counter()
+    system = _fb_system(registry.get("fischer_burmeister").build(problems.projection))
+    build = time.perf_counter() - t0
+    data = model.dataset
+    index = random_assignment(model, np.random.default_rng(0))
+    assigned = (data.strain[index], data.stress[index])
+    x, p = np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs)
+    low = iteration_floor(problems, system, model.n_steps - 1, x, p, assigned, assigned, repeats)
+    n = int(system.jacobian.shape[0])
+    with open("/proc/self/status") as fh:
+        peak = next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:")) * 1024
+    return dict(name=f"build, {family}: {model.name}", unknowns=n, data_points=len(data), seconds=build,
+                ratio=build / low["floor_seconds"], **low, build_seconds=build, problem_build_seconds=t1 - t0,
+                formulation_build_seconds=build - (t1 - t0), build_seconds_per_1e5_unknowns=build * 1e5 / n,
+                peak_memory_bytes=peak)
+
+
+BUILD_RECORD = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from run import build_record
+print(json.dumps(build_record(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
+"""
+
+
+def build_sizes(family: str, sizes, repeats: int) -> list[dict]:
+    """:func:`build_record` per size, each in a fresh process (its peak memory its own; a size the
+    machine cannot hold is reported, not fatal), then the growth: build seconds per 1e5 unknowns
+    at the largest size that ran against the smallest (``ratio`` 1 for linear growth)."""
+    from pathlib import Path
+
+    out = []
+    for u in sizes:
+        cmd = [sys.executable, "-c", BUILD_RECORD, str(Path(__file__).resolve().parent), family, str(u), str(repeats)]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode == 0:
+            out.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+        else:  # e.g. killed for memory (exit status -9)
+            out.append(dict(name=f"build, {family}, about {u:.0e} unknowns", unknowns=u, data_points=0,
+                            seconds=float("nan"), floor_seconds=float("nan"), ratio=float("nan"),
+                            error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}"))
+    done = [r for r in out if np.isfinite(r["seconds"])]
+    if len(done) >= 2:
+        small, large = done[0], done[-1]
+        a, b = small["build_seconds_per_1e5_unknowns"], large["build_seconds_per_1e5_unknowns"]
+        out.append(dict(name=f"build seconds per 1e5 unknowns, {family}: {small['unknowns']} to {large['unknowns']} "
+                             "unknowns", unknowns=large["unknowns"], data_points=large["data_points"], seconds=b,
+                        floor_seconds=a, ratio=b / a, note="seconds: at the largest size; floor: at the smallest"))
+    return out
 
 
 PEAK_MEMORY = """
@@ -167,6 +265,81 @@ def data_set_memory(n_data: int) -> dict:
                 data_points=n_data, seconds=build + query, floor_seconds=float("nan"), ratio=float("nan"),
                 build_seconds=build, query_seconds=query, peak_memory_mb=tree_mb,
                 peak_memory_with_graph_mb=graph_mb)
+
+
+DATA_SIZE = """
+import json, sys, time
+import numpy as np
+from ddcm_casadi import MaterialDataset
+from ddcm_casadi.metric import Metric
+
+def status(key):
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith(key)) * 1024
+
+def reset_peak():
+    with open("/proc/self/clear_refs", "w") as fh:
+        fh.write("5")  # the peak (VmHWM) back to the current resident set
+
+n, k, states, warm = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4] == "warm"
+rng = np.random.default_rng(0)
+metric = Metric(200e9) if k == 1 else Metric.isotropic(200e9, 0.3, 3)
+
+def law(m):
+    # one component: equally spaced as in the paper; six: random strains; stress = C strain
+    e = np.linspace(-0.01, 0.01, m)[:, None] if k == 1 else rng.uniform(-0.01, 0.01, (m, k))
+    return e, e @ metric.matrix.T
+
+def seconds(fn):
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+q_e, q_s = law(states) if k > 1 else (rng.uniform(-0.01, 0.01, states), None)
+q_s = (q_e * 200e9 if k == 1 else q_s) * (1 + 0.01 * rng.standard_normal(q_e.shape))  # 1 % off the law
+small = MaterialDataset(*law(10**4), metric)
+out = dict(floor=seconds(lambda: small.nearest(q_e, q_s)))
+del small
+reset_peak()
+base = status("VmRSS:")
+strain, stress = law(n)
+t0 = time.perf_counter()
+data = MaterialDataset(strain, stress, metric)
+out["build"] = time.perf_counter() - t0
+out["cold"] = seconds(lambda: data.nearest(q_e, q_s))
+out["peak"] = status("VmHWM:") - base
+out["data_bytes"] = strain.nbytes + stress.nbytes
+if warm:
+    previous = data.nearest(q_e * (1 + 1e-4), q_s)
+    out["graph"] = seconds(data._graph)
+    out["peak_with_graph"] = status("VmHWM:") - base
+    stats = {}
+    out["warm"] = seconds(lambda: data.nearest_warm(q_e, q_s, previous, stats=stats))
+    out["certified"] = 1 - stats["fallbacks"] / stats["queries"]
+print(json.dumps(out))
+"""
+
+
+def data_size(n_data: int, components: int, *, states: int, warm: bool) -> dict:
+    """A data set of ``n_data`` points (one component: equally spaced on a Hookean line as in the
+    paper; six: random Mandel strains of 3-D isotropic elasticity) in a fresh process: build
+    seconds, cold KD-tree search of ``states`` states 1 % off the law (reported per 1e5 states)
+    against the floor, the same search in a set of 1e4 points, and the peak resident memory
+    above the imports (Linux ``VmHWM``), data arrays included. With ``warm``, also the warm
+    search's neighbour graph (seconds, peak memory) and the warm search from the assignment of
+    states moved by 1e-4 (relative), with the share of its answers certified without the tree."""
+    cmd = [sys.executable, "-c", DATA_SIZE, str(n_data), str(components), str(states), "warm" if warm else "cold"]
+    r = json.loads(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
+    per = 1e5 / states
+    rec = dict(name=f"data search, {n_data:.0e} points x {components} components: build, search of 1e5 states",
+               unknowns=states, data_points=n_data, seconds=r["cold"] * per, floor_seconds=r["floor"] * per,
+               ratio=r["cold"] / r["floor"], build_seconds=r["build"], search_seconds_per_1e5_states=r["cold"] * per,
+               peak_memory_bytes=r["peak"], data_bytes=r["data_bytes"],
+               peak_bytes_per_point=r["peak"] / n_data, note="floor: the same states against 1e4 points")
+    if warm:
+        rec.update(graph_seconds=r["graph"], peak_memory_with_graph_bytes=r["peak_with_graph"],
+                   warm_search_seconds_per_1e5_states=r["warm"] * per, warm_certified_share=r["certified"])
+    return rec
 
 
 def fb_vs_qp(model, repeats: int, *, max_dofs: dict) -> list[dict]:
@@ -276,6 +449,10 @@ def main(argv=None) -> int:
     for panels in ((100, 1000, 8000) if quick else (100, 1000, 8000)):
         model = warren(panels, 10_000)
         log(dict(name=f"DDCM iteration, {model.name}", **ddcm_iteration(model, rep)))
+    # The one-off build against one iteration's floor, 1e4 to 1e6 unknowns (issue 15).
+    for family in BUILD_MODELS:
+        for rec in build_sizes(family, (10**4, 10**5) if quick else (10**4, 10**5, 10**6), rep):
+            log(rec)
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):
         log(data_set_memory(n_data))
         model = stopped_bar(3000, n_data)
@@ -288,6 +465,11 @@ def main(argv=None) -> int:
                  floor_seconds=cold["search_seconds_per_iteration"],
                  ratio=warm["search_seconds_per_iteration"] / cold["search_seconds_per_iteration"],
                  overall_ratio=warm["seconds"] / cold["seconds"]))
+    # Data size: 1-D sets with the warm search's graph; 6-D (3-D continua) cold only, as the
+    # graph of all 6-D data takes minutes per 1e6 points (a KD-tree query of every datum).
+    for n_data, k in (((10**6, 1), (10**6, 6)) if quick else
+                      ((10**6, 1), (10**7, 1), (10**8, 1), (10**6, 6), (10**7, 6))):
+        log(data_size(n_data, k, states=10**5 if k == 1 else 2 * 10**4, warm=k == 1))
     for n in ((1000, 10_000) if quick else (1000, 10_000, 100_000)):
         # qpOASES (dense internals) and OSQP take minutes per path above these sizes.
         limits = dict(qpoases=3000, osqp=3000 if quick else 20_000)

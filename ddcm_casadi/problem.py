@@ -14,19 +14,30 @@ metric), so formulations and solvers see O(1) numbers for any units. A formulati
 :class:`ComplementarityProblem`; it never needs the mechanical model. Its parameters are named
 (:class:`Parameters`): a formulation extends them with its own (smoothing, multipliers, ...) and
 packs values by name, never by position.
+
+The models are linear (small strains, linearised gaps), so a problem is held as sparse matrices:
+the residual and the gaps are affine in the unknowns ``z = [x; p]`` and the parameters ``P``
+(:class:`Affine`), the objective is half a weighted squared distance of an affine map
+(:class:`Distance`). Formulations build their Newton systems from these matrices
+(:mod:`ddcm_casadi.formulations.pairs`): one symbolic expression per matrix nonzero, and its
+symbolic derivative, cost about 20 microseconds per nonzero (seconds at 1e5 unknowns) where a
+sparse product costs nanoseconds. The CasADi ``SX`` expressions (:attr:`ComplementarityProblem.residual`,
+``gap``, ``objective``, ...) are rendered from the same matrices on first use, for the consumers
+that differentiate them symbolically (IPOPT, the exact enumeration).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, Mapping
+from functools import cached_property
+from typing import Literal
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
 from .linalg import to_casadi
-from .metric import weighted_distance2
+from .metric import block_diagonal, weighted_distance2
 from .model import ContactModel
 
 
@@ -38,31 +49,52 @@ class Parameters:
     >>> Q.pack(P.pack(gap0=[0.1], f=[0, 1]), mu=0.0)
     array([0.1, 0. , 1. , 0. ])
 
+    The ``SX`` symbols (:attr:`symbols`, :attr:`vector`) are created on first use (a million of
+    them take about a second, and the sparse builds never need them); an extension shares the
+    symbols of the parameters it extends.
+
     Parameters
     ----------
     **sizes : int
         Name and length of each parameter, in order.
     """
 
-    def __init__(self, _symbols: Mapping[str, ca.SX] | None = None, **sizes: int) -> None:
-        symbols = dict(_symbols or {})
-        for name, n in sizes.items():
-            if name in symbols:
+    def __init__(self, _base: "Parameters | None" = None, **sizes: int) -> None:
+        inherited = dict(_base.sizes) if _base is not None else {}
+        for name in sizes:
+            if name in inherited:
                 raise ValueError(f"parameter {name!r} is defined twice")
-            symbols[name] = ca.SX.sym(name, int(n))
-        self.symbols = symbols
-        self.names = tuple(symbols)
-        offsets = np.cumsum([0] + [s.numel() for s in symbols.values()])
+        self._base = _base
+        self.sizes: dict[str, int] = {**inherited, **{name: int(n) for name, n in sizes.items()}}
+        self.names = tuple(self.sizes)
+        offsets = np.cumsum([0] + list(self.sizes.values()))
         self._slices = {n: slice(int(a), int(b)) for n, a, b in zip(self.names, offsets[:-1], offsets[1:])}
         self.size = int(offsets[-1])
-        self.vector = ca.vertcat(*symbols.values()) if symbols else ca.SX(0, 1)
+
+    @cached_property
+    def symbols(self) -> dict[str, ca.SX]:
+        """The ``SX`` symbol of each parameter (those of the extended parameters shared)."""
+        symbols = dict(self._base.symbols) if self._base is not None else {}
+        for name in self.names:
+            if name not in symbols:
+                symbols[name] = ca.SX.sym(name, self.sizes[name])
+        return symbols
+
+    @cached_property
+    def vector(self) -> ca.SX:
+        """All symbols as one vector, in order."""
+        return ca.vertcat(*self.symbols.values()) if self.names else ca.SX(0, 1)
 
     def __getitem__(self, name: str) -> ca.SX:
         return self.symbols[name]
 
+    def slice(self, name: str) -> slice:
+        """Where ``name`` sits in a packed vector."""
+        return self._slices[name]
+
     def extend(self, **sizes: int) -> "Parameters":
         """These parameters followed by new ones (the same symbols)."""
-        return Parameters(self.symbols, **sizes)
+        return Parameters(self, **sizes)
 
     def pack(self, _base: np.ndarray | None = None, **values) -> np.ndarray:
         """One vector (or, with 2-D values, one column per case) from values by name.
@@ -101,6 +133,71 @@ class Parameters:
         return np.asarray(packed)[:upto.size]
 
 
+def sparse_matrix(A) -> sp.csr_matrix:
+    """``A`` as CSR without stored zeros (a stored zero would become a structural nonzero of
+    every Jacobian built from it)."""
+    A = sp.csr_matrix(A, dtype=float)
+    A.eliminate_zeros()
+    return A
+
+
+@dataclass(frozen=True, eq=False)
+class Affine:
+    """A vector affine in the scaled unknowns ``z = [x; p]`` and the parameters ``P``:
+    ``v = Z z + Q P`` with sparse ``Z`` (rows x (n_x + n_pairs)) and ``Q`` (rows x n_params)."""
+
+    z: sp.csr_matrix
+    params: sp.csr_matrix
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "z", sparse_matrix(self.z))
+        object.__setattr__(self, "params", sparse_matrix(self.params))
+
+    @property
+    def rows(self) -> int:
+        return self.z.shape[0]
+
+    def __add__(self, other: "Affine") -> "Affine":
+        return Affine(self.z + other.z, self.params + other.params)
+
+    def __mul__(self, c: float) -> "Affine":
+        return Affine(float(c) * self.z, float(c) * self.params)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, c: float) -> "Affine":
+        return self * (1.0 / float(c))
+
+    def render(self, z, P):
+        """``Z z + Q P`` for symbols ``z``, ``P`` (``SX`` or ``MX``)."""
+        return ca.mtimes(to_casadi(self.z), z) + ca.mtimes(to_casadi(self.params), P)
+
+    def terms(self, z, P):
+        """``|Z| |z| + |Q| |P|``: the size of the terms that cancel in each row."""
+        return ca.mtimes(to_casadi(abs(self.z)), ca.fabs(z)) + ca.mtimes(to_casadi(abs(self.params)), ca.fabs(P))
+
+
+@dataclass(frozen=True, eq=False)
+class Distance:
+    """The objective ``f = d^T W d / 2`` of the projection, ``d`` an :class:`Affine` (the strain
+    and stress differences to the assigned data, point by point) and ``W`` sparse symmetric
+    positive semidefinite (the metric times the volumes, over the energy unit)."""
+
+    d: Affine
+    weight: sp.csr_matrix
+
+    @cached_property
+    def hessian(self) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """``(H, H_P)`` with ``grad_z f = H z + H_P P``: ``H = Z^T W Z``, ``H_P = Z^T W Q`` (once)."""
+        ZtW = (self.d.z.T @ self.weight).tocsr()
+        return sparse_matrix(ZtW @ self.d.z), sparse_matrix(ZtW @ self.d.params)
+
+    def render(self, z, P):
+        """``f`` for symbols ``z``, ``P``."""
+        d = self.d.render(z, P)
+        return 0.5 * ca.dot(d, ca.mtimes(to_casadi(self.weight), d))
+
+
 @dataclass(frozen=True, eq=False)
 class ComplementarityProblem:
     """A nondimensional complementarity problem, the contract between models and formulations.
@@ -108,22 +205,16 @@ class ComplementarityProblem:
     Attributes
     ----------
     kind : {"mcp", "mpcc"}
-    x : casadi.SX
-        Smooth unknowns (scaled).
-    p : casadi.SX
-        One multiplier per pair: the scaled contact pressures.
     parameters : Parameters
         Named parameters (load step; assigned data), in physical units.
-    residual : casadi.SX
+    unknowns : tuple of (str, int)
+        Names and sizes of the blocks of the smooth unknowns ``x`` (``u``; then ``stress``).
+    residual_map : Affine
         ``mcp``: ``F(x, p)``, as many rows as ``x``. ``mpcc``: equality constraints ``h(x, p)``.
-    residual_terms : casadi.SX
-        Per row of ``residual``, the size of the terms that cancel in it, before they cancel
-        (``|K| |u| + |G^T a| |p| + |f|`` and the like): residual tests are relative to it
-        (:meth:`relative_residual`).
-    objective : casadi.SX or None
-        ``mpcc`` only: the scaled squared distance.
-    gap : casadi.SX
+    gap_map : Affine
         Scaled gaps ``g(x)``.
+    distance : Distance or None
+        ``mpcc`` only: the scaled squared distance ``f`` (the objective).
     gap_ref, pressure_ref : float
         Physical size of one unit of scaled gap (m) and of scaled pressure (Pa).
     contact_stiffness : float
@@ -131,16 +222,20 @@ class ComplementarityProblem:
     fb_alpha, fb_beta : float
         Default Fischer-Burmeister scalings (1/m and 1/Pa), as in the paper (``beta = 1/c`` for the
         projection, ``1/E`` for the classical problem).
+
+    The symbolic (``SX``) quantities :attr:`x`, :attr:`p`, :attr:`params`, :attr:`residual`,
+    :attr:`residual_terms` (per row of the residual, the size of the terms that cancel in it,
+    ``|K| |u| + |G^T a| |p| + |f|`` and the like: residual tests are relative to it,
+    :meth:`relative_residual`), :attr:`gap` and :attr:`objective` are rendered from the matrices
+    on first use.
     """
 
     kind: Literal["mcp", "mpcc"]
-    x: ca.SX
-    p: ca.SX
     parameters: Parameters
-    residual: ca.SX
-    residual_terms: ca.SX
-    objective: ca.SX | None
-    gap: ca.SX
+    unknowns: tuple
+    residual_map: Affine
+    gap_map: Affine
+    distance: Distance | None
     gap_ref: float
     pressure_ref: float
     contact_stiffness: float
@@ -148,17 +243,86 @@ class ComplementarityProblem:
     fb_beta: float
 
     @property
+    def n_x(self) -> int:
+        return sum(n for _, n in self.unknowns)
+
+    @property
+    def n_pairs(self) -> int:
+        return self.gap_map.rows
+
+    @property
+    def n_residual(self) -> int:
+        """Rows of the residual (``F`` or ``h``)."""
+        return self.residual_map.rows
+
+    @cached_property
+    def pressure_map(self) -> Affine:
+        """The scaled pressures ``p`` as an :class:`Affine`."""
+        nx, nc = self.n_x, self.n_pairs
+        return Affine(sp.hstack([sp.csr_matrix((nc, nx)), sp.identity(nc)]), sp.csr_matrix((nc, self.parameters.size)))
+
+    # ------------------------------------------------------------------ symbolic (SX), on first use
+    @cached_property
+    def x(self) -> ca.SX:
+        """Smooth unknowns (scaled)."""
+        return ca.vertcat(*[ca.SX.sym(name, n) for name, n in self.unknowns])
+
+    @cached_property
+    def p(self) -> ca.SX:
+        """One multiplier per pair: the scaled contact pressures."""
+        return ca.SX.sym("p", self.n_pairs)
+
+    @property
     def params(self) -> ca.SX:
         """All parameters as one symbolic vector (in the order of :attr:`parameters`)."""
         return self.parameters.vector
 
-    @property
-    def n_x(self) -> int:
-        return self.x.numel()
+    @cached_property
+    def residual(self) -> ca.SX:
+        return self.residual_map.render(ca.vertcat(self.x, self.p), self.params)
 
-    @property
-    def n_pairs(self) -> int:
-        return self.p.numel()
+    @cached_property
+    def residual_terms(self) -> ca.SX:
+        return self.residual_map.terms(ca.vertcat(self.x, self.p), self.params)
+
+    @cached_property
+    def gap(self) -> ca.SX:
+        return self.gap_map.render(ca.vertcat(self.x, self.p), self.params)
+
+    @cached_property
+    def objective(self) -> ca.SX | None:
+        return None if self.distance is None else self.distance.render(ca.vertcat(self.x, self.p), self.params)
+
+    # ------------------------------------------------------------------ numeric, shared by formulations
+    @cached_property
+    def _shared(self) -> dict:
+        return {}
+
+    def shared(self, key, build):
+        """``build()``, once per problem and ``key``: what several formulations of one problem
+        build alike (a saddle point's matrices) is built once."""
+        if key not in self._shared:
+            self._shared[key] = build()
+        return self._shared[key]
+
+    @cached_property
+    def _stacked(self) -> tuple[sp.csr_matrix, sp.csr_matrix, tuple[int, int]]:
+        """``[residual; gap; d]`` and ``|residual|`` as matrices of ``[z; P]`` (three sparse products
+        per evaluation: scipy's overhead per product, not the arithmetic, is what small problems pay)."""
+        maps = [self.residual_map, self.gap_map] + ([self.distance.d] if self.distance is not None else [])
+        stacked = sp.vstack([sp.hstack([a.z, a.params]) for a in maps]).tocsr()
+        R = self.residual_map
+        return stacked, abs(sp.hstack([R.z, R.params]).tocsr()), (R.rows, R.rows + self.gap_map.rows)
+
+    def evaluate(self, x, p, params) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """``(residual, residual_terms, gap, objective)`` at scaled ``(x, p)`` and the parameter
+        values (objective 0 for ``mcp``): sparse products with the problem's matrices (those of
+        :attr:`residual`, :attr:`residual_terms`, :attr:`gap`, :attr:`objective`), nothing to build."""
+        w = np.concatenate([np.ravel(x), np.ravel(p), np.ravel(params)]).astype(float, copy=False)
+        stacked, size, (ne, ng) = self._stacked
+        v = stacked @ w
+        objective = 0.0 if self.distance is None else 0.5 * float(v[ng:] @ (self.distance.weight @ v[ng:]))
+        return v[:ne], size @ np.abs(w), v[ne:ng], objective
 
     def scaled_penalty(self, gamma: float) -> float:
         """A physical contact stiffness (Pa/m) in the problem's scaled units."""
@@ -227,49 +391,80 @@ class ProblemPair:
         return np.concatenate(x), np.asarray(p) / s["stress"]
 
 
-def _common(model: ContactModel, G: ca.DM, s: dict, u: ca.SX, gap0: ca.SX, fb_beta: float) -> dict:
-    gap = (ca.mtimes(G, u) + gap0) / s["displacement"]
-    return dict(gap=gap, gap_ref=s["displacement"], pressure_ref=s["stress"],
+def _common(model: ContactModel, s: dict, fb_beta: float, n_z: int, P: Parameters) -> dict:
+    """The gaps ``(G u + gap0) / s_d`` with ``u = s_d u_hat`` (``gap0`` the first parameter) and the scales."""
+    nc = model.n_contacts
+    gap = Affine(sp.hstack([model.gap_operator, sp.csr_matrix((nc, n_z - model.n_dofs))]),
+                 sp.hstack([sp.identity(nc) / s["displacement"], sp.csr_matrix((nc, P.size - nc))]))
+    return dict(parameters=P, gap_map=gap, gap_ref=s["displacement"], pressure_ref=s["stress"],
                 contact_stiffness=model.contact_stiffness, fb_alpha=1.0 / (0.01 * model.length_scale),
                 fb_beta=fb_beta)
 
 
+def _selection(rows: int, start: int, columns: int, scale: float = 1.0) -> sp.csr_matrix:
+    """``scale`` times the identity placed at column ``start`` of a ``rows x columns`` matrix."""
+    return sp.hstack([sp.csr_matrix((rows, start)), scale * sp.identity(rows),
+                      sp.csr_matrix((rows, columns - start - rows))]).tocsr()
+
+
+def distance_weight(model: ContactModel) -> sp.csr_matrix:
+    """``W`` with ``sum_i w_i d_i^2 = d^T W d`` for ``d`` point-major ``[e_i - e*_i; s_i - s*_i]``.
+
+    Per point, its volume times half the Hessian of :func:`~ddcm_casadi.metric.weighted_distance2`
+    (the one place the metric's formula is written) for one point of unit weight of its material.
+    """
+    m, k = model.n_points, model.strain_components
+    metrics, material = model.dataset.point_materials(m)
+    nm, half = len(metrics), len(metrics) * k
+    e, s = ca.SX.sym("e", half), ca.SX.sym("s", half)
+    d2 = weighted_distance2(e, s, metrics, np.arange(nm), np.ones(nm))
+    H = ca.evalf(ca.hessian(d2, ca.vertcat(e, s))[0])
+    colind, row = H.sparsity().get_ccs()
+    row = np.asarray(row)
+    col = np.repeat(np.arange(2 * half), np.diff(colind))
+    # (material, position in its [e; s] block) of every Hessian row and column
+    (mr, br), (mc, bc) = (((i % half) // k, (i >= half) * k + i % k) for i in (row, col))
+    if np.any(mr != mc):
+        raise ValueError("the distance couples two material points")
+    blocks = np.zeros((nm, 2 * k, 2 * k))
+    np.add.at(blocks, (mr, br, bc), 0.5 * np.asarray(H.nonzeros()))
+    return block_diagonal(blocks[material] * np.asarray(model.volumes, float)[:, None, None])
+
+
 def build_problems(model: ContactModel) -> ProblemPair:
-    """Build the classical MCP and the DDCM projection MPCC of ``model`` (each symbolically, once)."""
+    """Build the classical MCP and the DDCM projection MPCC of ``model`` (as sparse matrices, once)."""
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
-    B, G = to_casadi(model.strain_operator), to_casadi(model.gap_operator)
-    GtA = model.gap_operator.T @ sp.diags(model.contact_area)  # contact forces G^T (a p)
-    Ga, Gabs = to_casadi(GtA), to_casadi(abs(GtA))
+    GtA = (model.gap_operator.T @ sp.diags(model.contact_area)).tocsr()  # contact forces G^T (a p)
 
     classical = None
     if model.youngs_modulus is not None:
         s = model.scales_for("classical")
         P = Parameters(gap0=nc, f=n)
-        u_hat, p_hat = ca.SX.sym("u", n), ca.SX.sym("p", nc)
-        u, p = s["displacement"] * u_hat, s["stress"] * p_hat
-        K = model.stiffness()
-        F = (ca.mtimes(to_casadi(K), u) - ca.mtimes(Ga, p) - P["f"]) / s["force"]
-        # |K| |u| + |G^T a| |p| + |f|: the terms before they cancel (roundoff is relative to them).
-        size = (ca.mtimes(to_casadi(abs(K)), ca.fabs(u)) + ca.mtimes(Gabs, ca.fabs(p)) + ca.fabs(P["f"])) / s["force"]
-        classical = ComplementarityProblem(kind="mcp", x=u_hat, p=p_hat, parameters=P, residual=F,
-                                           residual_terms=size, objective=None,
-                                           **_common(model, G, s, u, P["gap0"], 1.0 / s["modulus"]))
+        # F = (K u - G^T a p - f) / s_f with u = s_d u_hat, p = s_s p_hat
+        # (scaled in the order the arithmetic of F does it: each term times its scale, over s_f)
+        F = Affine(sp.hstack([model.stiffness() * s["displacement"] / s["force"], GtA * -s["stress"] / s["force"]]),
+                   _selection(n, nc, P.size, -1.0 / s["force"]))
+        classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),), residual_map=F, distance=None,
+                                           **_common(model, s, 1.0 / s["modulus"], n + nc, P))
 
     projection = None
     if model.dataset is not None:
         s = model.scales_for("ddcm")
         P = Parameters(gap0=nc, f=n, strain_star=m * k, stress_star=m * k)
-        u_hat, p_hat, sig_hat = ca.SX.sym("u", n), ca.SX.sym("p", nc), ca.SX.sym("stress", m * k)
-        u, p, sig = s["displacement"] * u_hat, s["stress"] * p_hat, s["stress"] * sig_hat
-        metrics, material = model.dataset.point_materials(m)
-        d2 = weighted_distance2(ca.mtimes(B, u) - P["strain_star"], sig - P["stress_star"], metrics, material,
-                                model.volumes)
-        objective = 0.5 * d2 / s["energy"]
+        nz, mk = n + m * k + nc, m * k
         BtW = model.strain_operator.T @ sp.diags(np.repeat(model.volumes, k))
-        h = (ca.mtimes(to_casadi(BtW), sig) - ca.mtimes(Ga, p) - P["f"]) / s["force"]
-        size = (ca.mtimes(to_casadi(abs(BtW)), ca.fabs(sig)) + ca.mtimes(Gabs, ca.fabs(p)) + ca.fabs(P["f"])) / s["force"]
+        # h = (B^T W stress - G^T a p - f) / s_f with stress = s_s stress_hat
+        h = Affine(sp.hstack([sp.csr_matrix((n, n)), BtW * s["stress"] / s["force"], GtA * -s["stress"] / s["force"]]),
+                   _selection(n, nc, P.size, -1.0 / s["force"]))
+        # d = [B u - strain_star; stress - stress_star] point-major, f = d^T W d / (2 energy)
+        stacked = Affine(sp.vstack([sp.hstack([model.strain_operator * s["displacement"], sp.csr_matrix((mk, mk + nc))]),
+                                    _selection(mk, n, nz, s["stress"])]),
+                         sp.vstack([_selection(mk, nc + n, P.size, -1.0), _selection(mk, nc + n + mk, P.size, -1.0)]))
+        point, c = np.divmod(np.arange(2 * mk), 2 * k)
+        order = np.where(c < k, point * k + c, mk + point * k + c - k)
+        d = Affine(stacked.z[order], stacked.params[order])
         projection = ComplementarityProblem(
-            kind="mpcc", x=ca.vertcat(u_hat, sig_hat), p=p_hat, parameters=P, residual=h,
-            residual_terms=size, objective=objective,
-            **_common(model, G, s, u, P["gap0"], 1.0 / s["metric"]))
+            kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=h,
+            distance=Distance(d, distance_weight(model) / s["energy"]),
+            **_common(model, s, 1.0 / s["metric"], nz, P))
     return ProblemPair(model=model, classical=classical, projection=projection)

@@ -51,17 +51,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
-from ddcm_casadi.solvers.evaluate import NumericFunction
 from ddcm_casadi.solvers.active_set import ActiveSetSolver
-from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
+from ddcm_casadi.solvers.newton import SMOOTHING, plus, smoothed_newton_solve
 from ddcm_casadi.solvers.uzawa import method_of_multipliers, uzawa
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
+from .pairs import PairSystem
 from .registry import register
 
 
@@ -138,12 +137,11 @@ class _BuiltAL(BuiltFormulation):
         if problem.kind == "mcp":
             P = problem.parameters.extend(multiplier=problem.n_pairs, mu=1)
             self.parameters = P
-            p_of_x = plus(P["multiplier"] - gamma * problem.gap, P["mu"])
-            r = ca.substitute(problem.residual, problem.p, p_of_x)
-            self._update = NumericFunction(ca.Function("uzawa", [problem.x, P.vector], [p_of_x]))
-            self._rj = NumericFunction(ca.Function("al_rj", [problem.x, P.vector], [r, ca.jacobian(r, problem.x)]))
-            self._r = NumericFunction(ca.Function("al_r", [problem.x, P.vector], [r]))
-            self._jac = SparseJacobian(self._rj)
+            S = PairSystem(problem, problem.n_x, P)
+            p_of_x = plus(S.parameter("multiplier") - gamma * S.affine("gap", problem.gap_map), S.parameter("mu"))
+            built = S.eliminated("al", p_of_x)
+            self._rj, self._r, self._jac = built.rj, built.r, built.jacobian
+            self._update = S.values("uzawa", [p_of_x])
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)
             self.solver = ActiveSetSolver(self.system, predictor=False)

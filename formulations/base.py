@@ -12,12 +12,10 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-import casadi as ca
 import numpy as np
 
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.problem import ComplementarityProblem
-from ddcm_casadi.solvers.evaluate import NumericFunction
 
 
 @dataclass
@@ -59,26 +57,23 @@ class LocalSolution:
 
 
 class Metrics:
-    """Residual, gap and objective evaluation for one problem (one CasADi Function).
+    """Residual, gap and objective evaluation for one problem
+    (:meth:`~ddcm_casadi.problem.ComplementarityProblem.evaluate`: sparse products, nothing built).
 
     The residual is relative to the terms that cancel in it
     (:meth:`~ddcm_casadi.problem.ComplementarityProblem.relative_residual`).
     """
 
     def __init__(self, problem: ComplementarityProblem) -> None:
-        obj = problem.objective if problem.objective is not None else ca.SX(0)
         self._problem = problem
-        self._f = NumericFunction(ca.Function("metrics", [problem.x, problem.p, problem.params],
-                                              [problem.residual, problem.residual_terms, problem.gap, obj]))
 
     def __call__(self, x, p, params) -> tuple[float, float, float, float]:
-        res, terms, gap, obj = self._f(x, p, params)
-        gap = np.asarray(gap, dtype=float).ravel()
+        res, terms, gap, obj = self._problem.evaluate(x, p, params)
         p = np.asarray(p, dtype=float).ravel()
         residual = self._problem.relative_residual(res, terms)
         comp = float(np.max(np.abs(np.minimum(gap, p)))) if gap.size else 0.0
         pen = float(np.max(np.maximum(0.0, -gap))) if gap.size else 0.0
-        return residual, comp, pen, float(obj[0]) if obj.size else 0.0
+        return residual, comp, pen, obj
 
 
 #: Range of iteration limits (options named ``max_*``): 0 iterations cannot converge, and a limit

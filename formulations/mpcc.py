@@ -135,12 +135,11 @@ class _BuiltMPCC(BuiltFormulation):
         self._solver = ca.nlpsol("mpcc", "ipopt", {"x": w, "p": self.parameters.vector,
                                                    "f": objective, "g": g},
                                  {"ipopt": ipopt, "print_time": False, "error_on_fail": False})
-        ne = problem.residual.numel()
         # Branch NLP: [residual; g; p] with equality bounds chosen per solve.
         gb = ca.vertcat(problem.residual, problem.gap, problem.p)
         self._bnlp = ca.nlpsol("bnlp", "ipopt", {"x": w, "p": problem.params, "f": objective, "g": gb},
                                {"ipopt": ipopt, "print_time": False, "error_on_fail": False})
-        self._ne = ne = problem.residual.numel()
+        self._ne = ne = problem.n_residual
         self._lbg = np.concatenate([np.zeros(ne), np.zeros(nc), np.full(nc, -np.inf)])
         self._ubg = np.concatenate([np.zeros(ne), np.full(nc, np.inf), np.zeros(nc)])
         self._lbx = np.concatenate([np.full(nx, -np.inf), np.zeros(nc)])

@@ -1,19 +1,21 @@
 """Fischer-Burmeister NCP function and the Newton systems built on it (shared by formulations).
 
 ``Phi(a, b) = sqrt(a^2 + b^2) - a - b`` vanishes exactly when ``a >= 0, b >= 0, a b = 0``.
-This module only *builds* the systems (CasADi Functions with named parameters); the loops that
-solve them (predictor, semismooth Newton, corner polish, smoothing, branch finish) are in
-:mod:`ddcm_casadi.solvers.active_set`.
+This module only *builds* the systems (CasADi Functions with named parameters, from the problem's
+sparse matrices and one pair's expressions: :class:`~ddcm_casadi.formulations.pairs.PairSystem`);
+the loops that solve them (predictor, semismooth Newton, corner polish, smoothing, branch finish)
+are in :mod:`ddcm_casadi.solvers.active_set`.
 """
 
 from __future__ import annotations
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
-from ddcm_casadi.problem import ComplementarityProblem, Parameters
-from ddcm_casadi.solvers.evaluate import NumericFunction
-from ddcm_casadi.solvers.newton import SparseJacobian
+from ddcm_casadi.problem import Affine, ComplementarityProblem, Parameters
+
+from .pairs import PairSystem, scatter
 
 
 def fischer_burmeister(a, b, mu=0.0):
@@ -23,15 +25,23 @@ def fischer_burmeister(a, b, mu=0.0):
     return ca.sqrt(s + origin) - origin - a - b
 
 
-def _saddle_rows(problem: ComplementarityProblem, eta, theta, nu, sel, first, b, target=0):
-    """The projection's saddle-point rows with the pair equations ``first = target`` (multiplier
-    ``theta``) and, on the corner pairs ``sel``, ``b = 0`` (multiplier ``nu``; ``nu = 0`` elsewhere):
-    the stationarity of ``f + eta.h + theta.first + nu.(sel b)`` in ``(x, p)``, ``h``,
-    ``first - target`` and ``sel b + (1 - sel) nu``. The FB system and its piece systems differ
-    only in ``first``."""
-    lag = problem.objective + ca.dot(eta, problem.residual) + ca.dot(theta, first) + ca.dot(nu, sel * b)
-    return ca.vertcat(ca.gradient(lag, ca.vertcat(problem.x, problem.p)), problem.residual, first - target,
-                      sel * b + (1 - sel) * nu)
+def _saddle_terms(first, b, theta, nu, sel, target=0) -> dict:
+    """The projection's saddle-point system (:meth:`PairSystem.saddle`) with the pair equations
+    ``first = target`` (multiplier ``theta``) and, on the corner pairs ``sel``, ``b = 0``
+    (multiplier ``nu``; ``nu = 0`` elsewhere): the stationarity of
+    ``f + eta.h + theta.first + nu.(sel b)`` in ``(x, p)``, ``h``, ``first - target`` and
+    ``sel b + (1 - sel) nu``, all per pair. The FB system and its piece systems differ only in
+    ``first``."""
+    return dict(lagrangian=theta * first + nu * sel * b, rows=(first - target, sel * b + (1 - sel) * nu))
+
+
+def _mcp_rows(system: PairSystem, name: str, pair_equation):
+    """The classical system ``[F(x, p); pair_equation] = 0`` in ``z = [x; p]``."""
+    problem, nc = system.problem, system.nc
+    R = problem.residual_map
+    rows = problem.n_residual + nc
+    return system.build(name, linear=sp.vstack([R.z, sp.csr_matrix((nc, R.z.shape[1]))]),
+                        linear_params=sp.vstack([R.params, sp.csr_matrix((nc, R.params.shape[1]))]), outputs=[(pair_equation, scatter(rows, problem.n_residual, nc))])
 
 
 class FBSystem:
@@ -85,44 +95,44 @@ class FBSystem:
     """
 
     def __init__(self, problem: ComplementarityProblem, a_scale: float, b_scale: float, *,
-                 gap=None, proximal: bool = False) -> None:
+                 gap: Affine | None = None, proximal: bool = False) -> None:
         self.problem = problem
         self.proximal = bool(proximal)
-        gap = problem.gap if gap is None else gap
-        nc = problem.n_pairs
+        gap = problem.gap_map if gap is None else gap
+        nc, nx, ne = problem.n_pairs, problem.n_x, problem.n_residual
         self.nc = nc
         base = problem.parameters.extend(lam=nc, rho=1) if proximal else problem.parameters
         self.base_parameters = base
-        a, b = a_scale * gap, b_scale * problem.p
+        # The pair arguments a = a_scale gap, b = b_scale p, affine in [x; p].
+        self._a, self._b = a_scale * gap, b_scale * problem.pressure_map
         if problem.kind == "mcp":
             if proximal:
                 raise ValueError("the proximal FB system is for projections (mpcc) only")
             P = base.extend(mu=1)
-            phi = fischer_burmeister(a, b, P["mu"])
-            z = ca.vertcat(problem.x, problem.p)
-            r = ca.vertcat(problem.residual, phi)
+            self._nz = nx + nc
+            S = PairSystem(problem, self._nz, P)
+            a, b = S.affine("a", self._a), S.affine("b", self._b)
+            phi = fischer_burmeister(a, b, S.parameter("mu"))
+            built = _mcp_rows(S, "fb", phi)
             self.corner = False
-            eta = theta = nu = None
         else:
             P = base.extend(mu=1, corner=nc)
-            phi = fischer_burmeister(a, b, P["mu"])
-            ne = problem.residual.numel()
-            eta, theta, nu = ca.SX.sym("eta", ne), ca.SX.sym("theta", nc), ca.SX.sym("nu", nc)
-            sel = P["corner"]
-            z = ca.vertcat(problem.x, problem.p, eta, theta, nu)
-            target = (1 - sel) * (theta - P["lam"]) / P["rho"] if proximal else 0
-            r = _saddle_rows(problem, eta, theta, nu, sel, sel * a + (1 - sel) * phi, b, target)
+            self._nz = nx + 3 * nc + ne
+            S = PairSystem(problem, self._nz, P)
+            a, b = S.affine("a", self._a), S.affine("b", self._b)
+            theta, nu = S.unknowns("theta", nx + nc + ne), S.unknowns("nu", nx + 2 * nc + ne)
+            sel = S.parameter("corner")
+            phi = fischer_burmeister(a, b, S.parameter("mu"))
+            target = (1 - sel) * (theta - S.parameter("lam")) / S.parameter("rho") if proximal else 0
+            built = S.saddle("fb", **_saddle_terms(sel * a + (1 - sel) * phi, b, theta, nu, sel, target))
             self.corner = True
             self._ne = ne
         self.parameters = P
-        self._ab = NumericFunction(ca.Function("fb_ab", [z, problem.params], [a, b]))
+        self._ab = S.values("fb_ab", [a, b], problem.parameters)
         self._branch = None
         self.piece_parameters: Parameters | None = None
-        self._pieces = (problem, a, b, z, eta, theta, nu)
-        self.rj = NumericFunction(ca.Function("fb_rj", [z, P.vector], [r, ca.jacobian(r, z)]))
-        self.r = NumericFunction(ca.Function("fb_r", [z, P.vector], [r]))
-        self.phi = NumericFunction(ca.Function("fb_phi", [z, P.vector], [phi]))
-        self.jacobian = SparseJacobian(self.rj)
+        self.rj, self.r, self.jacobian = built.rj, built.r, built.jacobian
+        self.phi = S.values("fb_phi", [phi])
 
     # ------------------------------------------------------------------ parameters by name
     def pack(self, base: np.ndarray, *, mu: float = 0.0, corner: np.ndarray | None = None) -> np.ndarray:
@@ -146,7 +156,7 @@ class FBSystem:
         if self.problem.kind == "mcp":
             return np.concatenate([x0, p0])
         state = state or {}
-        eta = state.get("eta", np.zeros(self.problem.residual.numel()))
+        eta = state.get("eta", np.zeros(self.problem.n_residual))
         theta = state.get("theta", np.zeros(self.nc))
         return np.concatenate([x0, p0, eta, theta, np.zeros(self.nc)])
 
@@ -176,18 +186,17 @@ class FBSystem:
         predictor is on, else on first use (most solves never need it).
         """
         if self._branch is None:
-            problem, a, b, z, eta, theta, nu = self._pieces
-            P = problem.parameters.extend(branch=self.nc, corner=self.nc)
+            problem, nc, nx = self.problem, self.nc, self.problem.n_x
+            P = problem.parameters.extend(branch=nc, corner=nc)
             self.piece_parameters = P
-            branch, sel = P["branch"], P["corner"]
+            S = PairSystem(problem, self._nz, P)
+            a, b = S.affine("a", self._a), S.affine("b", self._b)
+            branch, sel = S.parameter("branch"), S.parameter("corner")
             piece = -(branch * a + (1 - branch) * b)
             if problem.kind == "mcp":
-                r = ca.vertcat(problem.residual, piece)
+                built = _mcp_rows(S, "fb_branch", piece)
             else:
-                r = _saddle_rows(problem, eta, theta, nu, sel, sel * a + (1 - sel) * piece, b)
-            J = ca.jacobian(r, z)
-            linear = not ca.depends_on(J, ca.vertcat(z, problem.params))
-            rj = NumericFunction(ca.Function("fb_branch_rj", [z, P.vector], [r, J]))
-            self._branch = (rj, NumericFunction(ca.Function("fb_branch_r", [z, P.vector], [r])), SparseJacobian(rj),
-                            linear)
+                theta, nu = S.unknowns("theta", nx + nc + self._ne), S.unknowns("nu", nx + 2 * nc + self._ne)
+                built = S.saddle("fb_branch", **_saddle_terms(sel * a + (1 - sel) * piece, b, theta, nu, sel))
+            self._branch = (built.rj, built.r, built.jacobian, built.linear)
         return self._branch

@@ -29,11 +29,11 @@ import numpy as np
 
 from ddcm_casadi.problem import ComplementarityProblem
 from ddcm_casadi.solvers.active_set import ActiveSetSolver
-from ddcm_casadi.solvers.evaluate import NumericFunction
-from ddcm_casadi.solvers.newton import SMOOTHING, SparseJacobian, plus, smoothed_newton_solve
+from ddcm_casadi.solvers.newton import SMOOTHING, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
+from .pairs import PairSystem
 from .registry import register
 
 
@@ -105,12 +105,11 @@ class _BuiltPenalty(BuiltFormulation):
         self.opts = opts
         P = problem.parameters.extend(mu=1)
         self.parameters = P
-        p_of_x = gamma * plus(-problem.gap, P["mu"])
-        r = ca.substitute(problem.residual, problem.p, p_of_x)
-        self._rj = NumericFunction(ca.Function("penalty_rj", [problem.x, P.vector], [r, ca.jacobian(r, problem.x)]))
-        self._r = NumericFunction(ca.Function("penalty_r", [problem.x, P.vector], [r]))
-        self._p = NumericFunction(ca.Function("penalty_p", [problem.x, P.vector], [p_of_x]))
-        self._jac = SparseJacobian(self._rj)
+        S = PairSystem(problem, problem.n_x, P)
+        p_of_x = gamma * plus(-S.affine("gap", problem.gap_map), S.parameter("mu"))
+        built = S.eliminated("penalty", p_of_x)
+        self._rj, self._r, self._jac = built.rj, built.r, built.jacobian
+        self._p = S.values("penalty_p", [p_of_x])
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         o = self.opts
@@ -130,12 +129,13 @@ class _BuiltCompliantProjection(BuiltFormulation):
     def __init__(self, problem: ComplementarityProblem, opts: Penalty.Options, gamma: float) -> None:
         super().__init__(problem)
         self.opts = opts
-        compliant_gap = problem.gap + problem.p / gamma
+        compliant_gap = problem.gap_map + problem.pressure_map / gamma
         self.system = FBSystem(problem, problem.fb_alpha * problem.gap_ref, problem.fb_beta * problem.pressure_ref,
                                gap=compliant_gap)
         self.solver = ActiveSetSolver(self.system, predictor=opts.active_set_predictor)
-        self._pairs = NumericFunction(ca.Function("compliant_pairs", [problem.x, problem.p, problem.params],
-                                                  [ca.fmin(compliant_gap, problem.p)]))
+        S = PairSystem(problem, problem.n_x + problem.n_pairs, problem.parameters)
+        self._pairs = S.values("compliant_pairs", [ca.fmin(S.affine("gap", compliant_gap),
+                                                           S.affine("p", problem.pressure_map))])
 
     def reset(self) -> None:
         self.solver.reset()
@@ -149,7 +149,7 @@ class _BuiltCompliantProjection(BuiltFormulation):
         sol = self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
                            state=st, message=res.message + (f" (smoothing mu={mu:g})" if mu else ""))
         # The penalty law itself (the compliant pairs) must hold, as FB checks its pairs.
-        comp = float(np.max(np.abs(np.asarray(self._pairs(x, p, params), float)), initial=0.0))
+        comp = float(np.max(np.abs(np.asarray(self._pairs(np.concatenate([x, p]), params), float)), initial=0.0))
         if sol.converged and comp > self.opts.comp_tol:
             sol.converged, sol.message = False, f"compliant complementarity {comp:.1e} > comp_tol"
         return sol

@@ -31,10 +31,19 @@ class NewtonResult:
 
 
 class SparseJacobian:
-    """Converts the Jacobian output of a CasADi Function to scipy CSC, reusing its pattern."""
+    """Converts the Jacobian output of a CasADi Function to scipy CSC, reusing its pattern.
 
-    def __init__(self, fun, index: int = 1) -> None:
+    ``pattern``: the output's pattern as a scipy CSC matrix, when the caller built it (reading it
+    back from CasADi costs about 0.1 microseconds per nonzero); its number of nonzeros is checked.
+    """
+
+    def __init__(self, fun, index: int = 1, *, pattern: sp.csc_matrix | None = None) -> None:
         sparsity = fun.sparsity_out(index)
+        if pattern is not None and pattern.nnz == sparsity.nnz() and pattern.shape == sparsity.shape:
+            self.shape = pattern.shape
+            self.indptr = np.asarray(pattern.indptr, dtype=np.int64)
+            self.indices = np.asarray(pattern.indices, dtype=np.int64)
+            return
         colind, row = sparsity.get_ccs()
         self.shape = (sparsity.size1(), sparsity.size2())
         self.indptr = np.asarray(colind, dtype=np.int64)
