@@ -168,6 +168,10 @@ class Affine:
     def __truediv__(self, c: float) -> "Affine":
         return self * (1.0 / float(c))
 
+    def value(self, z: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """``Z z + Q P`` for numbers."""
+        return self.z @ np.asarray(z, float) + self.params @ np.asarray(P, float)
+
     def render(self, z, P):
         """``Z z + Q P`` for symbols ``z``, ``P`` (``SX`` or ``MX``)."""
         return ca.mtimes(to_casadi(self.z), z) + ca.mtimes(to_casadi(self.params), P)

@@ -128,11 +128,19 @@ class FBSystem:
             self.corner = True
             self._ne = ne
         self.parameters = P
-        self._ab = S.values("fb_ab", [a, b], problem.parameters)
         self._branch = None
         self.piece_parameters: Parameters | None = None
         self.rj, self.r, self.jacobian = built.rj, built.r, built.jacobian
-        self.phi = S.values("fb_phi", [phi])
+        self._phi_source, self._phi = (S, phi), None
+
+    @property
+    def phi(self):
+        """``(z, P) -> Phi(a, b; mu)`` per pair (built on first use: only the augmented Lagrangian's
+        multiplier update needs it)."""
+        if self._phi is None:
+            S, phi = self._phi_source
+            self._phi = S.values("fb_phi", [phi])
+        return self._phi
 
     # ------------------------------------------------------------------ parameters by name
     def pack(self, base: np.ndarray, *, mu: float = 0.0, corner: np.ndarray | None = None) -> np.ndarray:
@@ -147,8 +155,9 @@ class FBSystem:
 
     def ab(self, z: np.ndarray, problem_values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The scaled pair arguments ``a = alpha g``, ``b = beta p`` at ``z`` (``problem_values``:
-        the problem's own parameters, :meth:`problem_values`)."""
-        return self._ab(z, problem_values)
+        the problem's own parameters, :meth:`problem_values`): affine, two sparse products."""
+        zxp = np.asarray(z, float)[:self.problem.n_x + self.nc]
+        return self._a.value(zxp, problem_values), self._b.value(zxp, problem_values)
 
     # ---------------------------------------------------------------------- unknowns
     def start(self, x0, p0, state) -> np.ndarray:

@@ -70,11 +70,14 @@ def scatter(rows: int, start: int, count: int) -> sp.csr_matrix:
     return sp.csr_matrix((np.ones(count), (start + np.arange(count), np.arange(count))), shape=(rows, count))
 
 
-def _narrow(Y: sp.csr_matrix) -> tuple[ca.DM, list[int]]:
-    """``Y v`` as ``Y[:, used] v[used]``: the columns a map uses (a few per pair, of perhaps a
-    million; a sparse product costs a step per column)."""
-    used = np.unique(Y.indices)
-    return to_casadi(Y[:, used]), used.tolist()
+def _narrow(row: np.ndarray, col: np.ndarray, val: np.ndarray, n_rows: int) -> tuple[ca.DM, list[int]]:
+    """The entries ``(row, col, val)`` (no duplicates) as a ``DM`` of the columns they use, and
+    those columns."""
+    used, narrow = np.unique(col, return_inverse=True)
+    order = np.lexsort((row, narrow))
+    colind = np.concatenate([[0], np.cumsum(np.bincount(narrow, minlength=used.size))])
+    sparsity = ca.Sparsity(n_rows, used.size, colind.tolist(), row[order].tolist())
+    return ca.DM(sparsity, val[order].tolist()), used.tolist()
 
 
 def _pair_major(order: int, count: int) -> np.ndarray:
@@ -160,32 +163,31 @@ class PairSystem:
         self._slots.append((symbol, z or empty, params or empty))
         return symbol
 
-    def _stacked(self, n_params: int | None = None) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        """``(Y_z, Y_P)``, rows pair-major (``k * n_slots + s``), ``Y_P`` cut to ``n_params`` columns."""
+    def _entries(self, which: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(row, column, value)`` of ``Y_z`` (``which`` 1) or ``Y_P`` (2), rows pair-major
+        (``k * n_slots + s``)."""
         ns = len(self._slots)
-        n_params = self.parameters.size if n_params is None else n_params
-        key = ("stacked", ns, n_params)
-        if key not in self._maps:
-            self._maps[key] = self._stack(ns, n_params)
-        return self._maps[key]
-
-    def _stack(self, ns: int, n_params: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        out = []
-        for which, columns in ((1, self.nz), (2, n_params)):
-            k, c, v = (np.concatenate(a) for a in zip(*[slot[which] for slot in self._slots]))
-            s = np.concatenate([np.full(slot[which][0].size, i) for i, slot in enumerate(self._slots)])
-            keep = c < columns
-            out.append(sp.csr_matrix((v[keep], (k[keep] * ns + s[keep], c[keep])), shape=(self.nc * ns, columns)))
-        return out[0], out[1]
+        k, c, v = (np.concatenate(a) for a in zip(*[slot[which] for slot in self._slots]))
+        s = np.concatenate([np.full(slot[which][0].size, i) for i, slot in enumerate(self._slots)])
+        return k * ns + s, c, v
 
     def _local_values(self, z: ca.MX, P: ca.MX, n_params: int | None = None) -> ca.MX:
-        """The local variables as an ``(n_slots, nc)`` matrix, one column per pair."""
-        key = ("narrow", len(self._slots), self.parameters.size if n_params is None else n_params)
+        """The local variables as an ``(n_slots, nc)`` matrix, one column per pair: ``Y_z z + Y_P P``
+        with ``Y_P`` cut to ``n_params`` columns, each map applied to the few entries it uses
+        (``Y[:, used] v[used]``: of perhaps a million columns; a sparse product costs a step per
+        column)."""
+        ns = len(self._slots)
+        key = ("local", ns, self.parameters.size if n_params is None else n_params)
         if key not in self._maps:  # converted once per system
-            self._maps[key] = tuple(_narrow(Y) for Y in self._stacked(n_params))
+            maps = []
+            for which, columns in ((1, self.nz), (2, key[2])):
+                row, col, val = self._entries(which)
+                keep = col < columns
+                maps.append(_narrow(row[keep], col[keep], val[keep], ns * self.nc))
+            self._maps[key] = maps
         y = sum((ca.mtimes(Y, v[used]) for (Y, used), v in zip(self._maps[key], (z, P)) if used),
-                ca.MX(len(self._slots) * self.nc, 1))
-        return ca.reshape(y, len(self._slots), self.nc)
+                ca.MX(ns * self.nc, 1))
+        return ca.reshape(y, ns, self.nc)
 
     # ------------------------------------------------------------------ functions
     def values(self, name: str, exprs, parameters: Parameters | None = None) -> NumericFunction:
@@ -247,9 +249,9 @@ class PairSystem:
         if outputs:
             y = self._local_values(z, P)
             L = to_casadi(L[:, _pair_major(nout, nc)])
+            # one mapped function for both (the per-pair derivatives cost little next to the products)
             values, derivatives = ca.Function(f"{name}_pair", [y1], [psi, D]).map(nc)(y)
-            r = r + ca.mtimes(L, ca.vec(values))
-            r_only = r_only + ca.mtimes(L, ca.vec(ca.Function(f"{name}_pair_r", [y1], [psi]).map(nc)(y)))
+            r = r_only = r + ca.mtimes(L, ca.vec(values))
             if T.nnz:
                 J = J + ca.MX(J0dm.sparsity(), ca.mtimes(to_casadi(T), ca.vec(derivatives.nz[:])))
         rj = NumericFunction(ca.Function(f"{name}_rj", [z, P], [r, J]))
@@ -268,7 +270,9 @@ class PairSystem:
         # per entry of d (pair-major): the column of L and the row of Y_z it multiplies
         k = np.repeat(np.arange(nc), out_e.size)
         Lsel = L[:, np.tile(out_e, nc) * nc + k]
-        Ysel = self._stacked()[0][k * len(self._slots) + np.tile(slot_e, nc)]
+        row, col, val = self._entries(1)
+        Yz = sp.csr_matrix((val, (row, col)), shape=(len(self._slots) * nc, self.nz))
+        Ysel = Yz[k * len(self._slots) + np.tile(slot_e, nc)]
         nl, ny = np.diff(Lsel.indptr), np.diff(Ysel.indptr)
         count = nl * ny
         e = np.repeat(np.arange(count.size), count)

@@ -1,0 +1,85 @@
+"""The sparse build of problems and Newton systems (``ddcm_casadi.problem``,
+``formulations/pairs.py``) against CasADi's own symbolic derivatives of the same expressions."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from ddcm_casadi import formulations, paper_bar
+from ddcm_casadi.problem import build_problems
+from ddcm_casadi.truss import warren_truss
+from ddcm_casadi.data import MaterialDataset
+
+#: Agreement of two evaluations of the same sums in another order: a few ulps of the largest term.
+ROUNDOFF = 1e-12
+
+
+def _truss():
+    data = MaterialDataset.hookean(200e9, -0.01, 0.01, 50, c=200e9)
+    return warren_truss(panels=12, gap=[0.0, 1e-4, 2e-4], contact_nodes=[2, 6, 10], load_factors=[0.5, 1.0],
+                        dataset=data)
+
+
+def _systems(problem):
+    """Every Newton system the formulations build for ``problem``: ``(label, rj, parameters)``."""
+    out = []
+    for name in ("penalty", "augmented_lagrangian", "fischer_burmeister"):
+        built = formulations.get(name).build(problem)
+        system = getattr(built, "system", None)
+        if system is None:  # the classical penalty and augmented Lagrangian: pressures eliminated
+            out.append((name, built._rj, built.parameters.size))
+            continue
+        out.append((name, system.rj, system.parameters.size))
+        rj, _, _, _ = system.branch_system()
+        out.append((f"{name} pieces", rj, system.piece_parameters.size))
+    return out
+
+
+@pytest.mark.parametrize("model", [paper_bar, _truss], ids=["paper bar", "truss"])
+@pytest.mark.parametrize("kind", ["classical", "projection"])
+def test_jacobians_are_casadi_derivatives_of_the_residuals(model, kind):
+    """``J = J0 + T d`` (constant part and per-pair derivatives scattered) equals CasADi's
+    derivative of the same residual graph, at random unknowns and parameters (the formulations'
+    own ones, selectors and ``rho`` included, in [0.5, 1.5]: any values, the identity is exact)."""
+    problem = getattr(build_problems(model()), kind)
+    rng = np.random.default_rng(0)
+    for label, rj, n_params in _systems(problem):
+        f = rj.function
+        z, P = ca.MX.sym("z", f.nnz_in(0)), ca.MX.sym("P", n_params)
+        r, J = f(z, P)
+        check = ca.Function("check", [z, P], [J, ca.jacobian(r, z)])
+        for _ in range(3):
+            zv, Pv = rng.standard_normal(f.nnz_in(0)), rng.uniform(0.5, 1.5, n_params)
+            Pv[: problem.parameters.size] = rng.standard_normal(problem.parameters.size)
+            mine, ad = (np.asarray(ca.densify(v), float) for v in check(zv, Pv))
+            assert np.all(np.isfinite(mine))
+            assert np.max(np.abs(mine - ad)) <= ROUNDOFF * max(1.0, np.max(np.abs(ad))), label
+
+
+@pytest.mark.parametrize("kind", ["classical", "projection"])
+def test_numeric_evaluation_is_the_symbolic_problem(kind):
+    """The metrics' sparse products and the ``SX`` expressions (rendered for IPOPT and the exact
+    enumeration) are the same residual, terms, gaps and objective."""
+    problem = getattr(build_problems(_truss()), kind)
+    rng = np.random.default_rng(1)
+    x, p, P = (rng.standard_normal(n) for n in (problem.n_x, problem.n_pairs, problem.parameters.size))
+    objective = problem.objective if problem.objective is not None else ca.SX(0)
+    f = ca.Function("f", [problem.x, problem.p, problem.params],
+                    [problem.residual, problem.residual_terms, problem.gap, objective])
+    for symbolic, numeric in zip(f(x, p, P), problem.evaluate(x, p, P)):
+        symbolic = np.asarray(symbolic, float).ravel()
+        assert np.max(np.abs(symbolic - numeric)) <= ROUNDOFF * max(1.0, np.max(np.abs(symbolic)))
+
+
+def test_piece_systems_of_a_linear_model_are_linear():
+    """The piece systems' Jacobians depend on the pieces only (one factorisation per active set),
+    the FB system's on the unknowns."""
+    problems = build_problems(_truss())
+    for problem in (problems.classical, problems.projection):
+        system = formulations.get("fischer_burmeister").build(problem).system
+        assert system.branch_system()[3]
+        f = system.rj.function
+        z, P = ca.MX.sym("z", f.nnz_in(0)), ca.MX.sym("P", f.nnz_in(1))
+        assert ca.depends_on(f(z, P)[1], z)
