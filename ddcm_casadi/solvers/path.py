@@ -593,11 +593,9 @@ class DDCMSolver:
         """The global optimum by enumeration of every data assignment (closed forms per branch)."""
         # Shared by the DDCM solvers of one model (one per formulation): the optimum of a step and
         # the exact objective of an assignment do not depend on the formulation.
-        cache = vars(self.problems).setdefault("_global_optima", {})
-        key = (k, step.data_index.tobytes())
-        if key not in cache:
-            cache[key] = global_optimum(self.problems, self.exact, k, step.data_index)
-        best, mine = cache[key]
+        best, mine = self.problems.projection.shared(
+            ("global_optimum", k, step.data_index.tobytes()),
+            lambda: global_optimum(self.problems, self.exact, k, step.data_index))
         energy = self.problems.scales("mpcc")["energy"]
         step.global_distance = best * energy
         step.global_optimum = bool(mine <= best + 1e-12 + 1e-9 * abs(best))
