@@ -26,11 +26,11 @@ import tempfile
 import time
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi import formulations as registry
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
+from ddcm_casadi.linalg import factorize, solver_name
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.reference import ContactQP
 from ddcm_casadi.solvers.path import DDCMSolver, solve_classical
@@ -100,7 +100,7 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
         built.reset()  # cold factorisation cache: every repeat measures the same work
         path = DDCMSolver(problems, built, search=search).solve(formulation_name=formulation)
         its = sum(s.outer_iterations for s in path.steps)
-        stats = built.stats or dict(predicted=0, newton=0)
+        stats = dict(built.stats or dict(predicted=0, newton=0))
         runs.append((path.solve_seconds / its, path, stats))
     seconds, path, stats = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
     steps = path.steps
@@ -116,6 +116,7 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
                search_seconds_per_iteration=float(sum(s.search_seconds for s in steps)) / int(its.sum()),
                newton_per_projection=float(sum(s.iterations for s in steps) / its.sum()),
                predicted_share=stats["predicted"] / max(1, stats["predicted"] + stats["newton"]),
+               factorizations=stats.get("factorizations", 0), factor_updates=stats.get("updates", 0),
                build_seconds=build, problem_build_seconds=problem_build, converged=bool(path.converged))
     if system is None:  # no saddle-point system to measure the floor on
         return rec
@@ -125,22 +126,28 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
         x, p = problems.scaled_start("mpcc", step.u, step.p, step.stress)
         low = iteration_floor(problems, system, step.step, x, p, (step.strain_star, step.stress_star),
                               (step.strain, step.stress), repeats)
-        rec.update(low, ratio=seconds / low["floor_seconds"], build_ratio=build / low["floor_seconds"])
+        rec.update(low, ratio=seconds / low["floor_seconds"], build_ratio=build / low["floor_seconds"],
+                   ratio_to_cached_floor=seconds / low["cached_floor_seconds"])
     return rec
 
 
 def iteration_floor(problems, system, step: int, x, p, data, states, repeats: int) -> dict:
-    """The floor of one DDCM iteration: one scipy LU factorisation and solve of the FB
-    saddle-point system at scaled ``(x, p)`` with the assigned ``data = (strain*, stress*)`` at
-    load step ``step``, plus one KD-tree query of the ``states = (strain, stress)`` of every
-    material point against the data set."""
+    """The floor of one DDCM iteration: one factorisation and solve, with the package's selected
+    sparse solver (:func:`ddcm_casadi.linalg.factorize`), of the FB saddle-point system at scaled
+    ``(x, p)`` with the assigned ``data = (strain*, stress*)`` at load step ``step``, plus one
+    KD-tree query of the ``states = (strain, stress)`` of every material point against the data
+    set. ``cached_floor_seconds``: the same without the factorisation (one solve with a kept
+    factor plus the query), the floor of an iteration whose active set is unchanged."""
     z = system.start(x, p, None)
     r, J = system.rj(z, system.pack(problems.projection_params(step, *data)))
     A = system.jacobian(J)
     rhs = np.asarray(r, float).ravel() + 1.0
-    t_lu = median_time(lambda: spla.splu(A).solve(rhs), max(3, repeats))
+    t_lu = median_time(lambda: factorize(A).solve(rhs), max(3, repeats))
+    lu = factorize(A)
+    t_solve = median_time(lambda: lu.solve(rhs), max(3, repeats))
     t_kd = median_time(lambda: problems.model.dataset.nearest(*states), max(3, repeats))
-    return dict(floor_seconds=t_lu + t_kd, lu_seconds=t_lu, kdtree_seconds=t_kd)
+    return dict(floor_seconds=t_lu + t_kd, lu_seconds=t_lu, kdtree_seconds=t_kd, solve_seconds=t_solve,
+                cached_floor_seconds=t_solve + t_kd, linear_solver=solver_name())
 
 
 def continuum_block(divisions: int):
@@ -225,6 +232,94 @@ def build_sizes(family: str, sizes, repeats: int) -> list[dict]:
                              "unknowns", unknowns=large["unknowns"], data_points=large["data_points"], seconds=b,
                         floor_seconds=a, ratio=b / a, note="seconds: at the largest size; floor: at the smallest"))
     return out
+
+
+def continuum_record(unknowns: int, repeats: int) -> dict:
+    """A DDCM iteration on the 2-D continuum (:func:`continuum_block` of about ``unknowns``
+    projection unknowns, 21^3 Hookean data, 5 load steps, FB) against both floors
+    (:func:`iteration_floor`), with its build, its factorisations and low-rank factor updates,
+    and the peak resident memory of the process (Linux ``VmHWM``)."""
+    model = BUILD_MODELS["2-D continuum"](unknowns)
+    rec = ddcm_iteration(model, repeats)
+    with open("/proc/self/status") as fh:
+        peak = next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:")) * 1024
+    return dict(name=f"DDCM iteration, 2-D continuum: {model.name}", **rec, peak_memory_bytes=peak)
+
+
+def linear_solvers(unknowns: int, repeats: int, *, colamd_limit: int) -> list[dict]:
+    """One factorisation and solve of the 2-D continuum's projection piece (KKT) matrix (about
+    ``unknowns`` unknowns, a third of the contact pairs closed) with every registered solver of
+    :mod:`ddcm_casadi.linalg`, and with scipy's default SuperLU (COLAMD, partial pivoting) up to
+    ``colamd_limit`` unknowns; ``floor_seconds``: the package's default (SuperLU, ordered by the
+    pattern). Also the solve with a kept factor and a rank-``r`` update (:class:`ReferenceFactor`)
+    for the ``r`` rows of one pair switching piece."""
+    import scipy.sparse.linalg as spla
+
+    from ddcm_casadi import linalg
+
+    model = BUILD_MODELS["2-D continuum"](unknowns)
+    problems = build_problems(model)
+    system = _fb_system(registry.get("fischer_burmeister").build(problems.projection))
+    rj, _, jacobian, _ = system.branch_system()
+    nc, mk = system.nc, model.n_points * model.strain_components
+    P = problems.projection_params(model.n_steps - 1, np.zeros(mk), np.zeros(mk))
+    z = system.start(np.zeros(problems.projection.n_x), np.zeros(nc), None)
+
+    def piece(closed: int):
+        branch = (np.arange(nc) < closed).astype(float)
+        return jacobian(rj(z, system.piece_parameters.pack(P, branch=branch, corner=np.zeros(nc)))[1])
+
+    A, A1 = piece(nc // 3), piece(nc // 3 + 1)
+    b = np.cos(np.arange(A.shape[0]))
+    n = int(A.shape[0])
+    previous = linalg.solver_name()
+    times = {}
+    try:
+        for name in linalg.available_solvers():
+            linalg.use_solver(name)
+            times[name] = median_time(lambda: linalg.factorize(A).solve(b), repeats)
+            reference = linalg.ReferenceFactor(A)
+            times[name + ", solve with a kept factor"] = median_time(lambda: reference.solve(b), max(3, repeats))
+            up = reference.update(A1)
+            if up is not None:
+                times[name + f", low-rank update (rank {up.rank})"] = median_time(
+                    lambda: linalg.ReferenceFactor.update(reference, A1).solve(b), max(3, repeats))
+    finally:
+        linalg.use_solver(previous)
+    if n <= colamd_limit:
+        times["scipy splu default (COLAMD)"] = median_time(lambda: spla.splu(A).solve(b), repeats)
+    floor = times[previous]
+    return [dict(name=f"linear solver, 2-D continuum projection KKT matrix: {label}", unknowns=n, data_points=0,
+                 seconds=t, floor_seconds=floor, ratio=t / floor, nnz=int(A.nnz),
+                 note="floor: factorisation and solve with the default (superlu, ordered by the pattern)")
+            for label, t in times.items()]
+
+
+CONTINUUM_RECORD = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from run import continuum_record, linear_solvers
+u, repeats = int(sys.argv[3]), int(sys.argv[4])
+if sys.argv[2] == "iteration":
+    print(json.dumps([continuum_record(u, repeats)]))
+else:
+    print(json.dumps(linear_solvers(u, repeats, colamd_limit=int(sys.argv[5]))))
+"""
+
+
+def in_fresh_process(kind: str, unknowns: int, repeats: int, *extra: str) -> list[dict]:
+    """:func:`continuum_record` or :func:`linear_solvers` in a fresh process (its memory its own;
+    a size the machine cannot hold is reported, not fatal)."""
+    from pathlib import Path
+
+    cmd = [sys.executable, "-c", CONTINUUM_RECORD, str(Path(__file__).resolve().parent), kind, str(unknowns),
+           str(repeats), *extra]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode == 0:
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+    return [dict(name=f"{kind}, 2-D continuum, about {unknowns:.0e} unknowns", unknowns=unknowns, data_points=0,
+                 seconds=float("nan"), floor_seconds=float("nan"), ratio=float("nan"),
+                 error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}")]
 
 
 PEAK_MEMORY = """
@@ -452,6 +547,12 @@ def main(argv=None) -> int:
     # The one-off build against one iteration's floor, 1e4 to 1e6 unknowns (issue 15).
     for family in BUILD_MODELS:
         for rec in build_sizes(family, (10**4, 10**5) if quick else (10**4, 10**5, 10**6), rep):
+            log(rec)
+    # DDCM on a 2-D continuum against its floors, and the linear solvers on its KKT matrix.
+    for u in ((10**4, 10**5) if quick else (10**4, 10**5, 10**6)):
+        for rec in in_fresh_process("solvers", u, 1 if u > 10**5 else rep, str(3 * 10**4)):
+            log(rec)
+        for rec in in_fresh_process("iteration", u, 1):
             log(rec)
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):
         log(data_set_memory(n_data))

@@ -54,6 +54,11 @@ import numpy as np
 FAR_SPACINGS = 10.0
 #: Extra neighbours searched for a datum's spacing, for the datum itself and its duplicates.
 _DUPLICATES = 8
+#: The neighbourhoods of few data (at most this many points checked at once) are remembered, at
+#: most :data:`_REMEMBERED` sets of them: a small model's steps (and the DDCM runs of every
+#: formulation) come back to the same data.
+_FEW = 64
+_REMEMBERED = 4096
 
 
 class DataCoverage:
@@ -77,6 +82,7 @@ class DataCoverage:
         for d in dataset.datasets:
             X = d.metric.coordinates(d.strain, d.stress)
             self._boxes.append((X.min(axis=0), X.max(axis=0)))
+        self._neighbourhoods: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
 
     def _per_point(self, a) -> np.ndarray:
         return np.asarray(a, dtype=float).reshape((-1,) if self.k == 1 else (-1, self.k))
@@ -114,7 +120,7 @@ class DataCoverage:
         lo, hi = self._boxes[s]
         j = d.nearest(strain, stress)
         X = d.metric.coordinates(strain, stress)
-        h, tangent = neighbourhood(d, j)
+        h, tangent = self._neighbourhood(s, d, j)
         along = np.linalg.norm(np.einsum("mij,mj->mi", tangent, X - d.metric.coordinates(d.strain[j], d.stress[j])),
                                axis=1)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -122,6 +128,18 @@ class DataCoverage:
         half = 0.5 * np.where(np.isfinite(h), h, 0.0)[:, None]
         past = ((X - hi > half) | (lo - X > half)).any(axis=1)
         return past | (ratio > FAR_SPACINGS), ratio
+
+    def _neighbourhood(self, s: int, d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`neighbourhood` of the data ``index`` of set ``s``, remembered for few data."""
+        if index.size > _FEW:
+            return neighbourhood(d, index)
+        key = (s, index.tobytes())
+        hit = self._neighbourhoods.get(key)
+        if hit is None:
+            hit = neighbourhood(d, index)
+            if len(self._neighbourhoods) < _REMEMBERED:
+                self._neighbourhoods[key] = hit
+        return hit
 
 
 def neighbourhood(d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

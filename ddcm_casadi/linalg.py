@@ -2,13 +2,29 @@
 
 Every factorisation in the package (Newton steps, cached active-set systems, exact enumeration,
 the reference scales) goes through :func:`factorize`, so the solver is chosen in one place.
-The default is scipy's SuperLU (``splu``): measured at 1e4 unknowns it is about 100x faster than
-CasADi's ``csparse`` on the same Jacobian. Others can be registered with :func:`register_solver`
-(e.g. a CHOLMOD or MUMPS wrapper) and selected with :func:`use_solver`.
+
+``"superlu"`` (the default, no extra dependency): scipy's SuperLU, with the ordering chosen by the
+matrix's pattern. Every matrix this package factorises is a stiffness or the KKT matrix of a
+projection, whose *pattern* is symmetric; for those, the minimum-degree ordering of ``A + A^T``
+with diagonal pivots (SuperLU's symmetric mode) keeps the fill of a Cholesky-like factor. Its
+default, COLAMD with partial pivoting, orders for ``A^T A`` and pivots off the diagonal, which on
+a saddle-point matrix fills in badly: on the 2-D continuum's projection system of 99 687 unknowns
+the factorisation took 1.3 s in symmetric mode and more than 60 s with the default (measured in
+one run; ``benchmarks/run.py``, ``linear solver`` records). Diagonal pivots without a threshold
+are not backward stable in general, so every symmetric-mode factor is checked: the backward error
+of one solve, ``||A x - b||_inf / (||A||_inf ||x||_inf + ||b||_inf)``, must stay below
+:data:`BACKWARD_ERROR`, else the matrix is factorised again with partial pivoting.
+
+``"pardiso"`` (optional: ``pip install ddcm-casadi[pardiso]``, Intel MKL through ``pypardiso``):
+registered when ``pypardiso`` imports. A symmetric matrix is factorised as symmetric indefinite
+(``mtype = -2``, Bunch-Kaufman pivots within supernodes, one factor of the upper triangle), other
+matrices as general (``mtype = 11``). Others can be registered with :func:`register_solver` (a
+CHOLMOD or MUMPS wrapper, say) and selected with :func:`use_solver`.
 """
 
 from __future__ import annotations
 
+import importlib.util
 from typing import Callable, Protocol
 
 import casadi as ca
@@ -38,14 +54,148 @@ class SingularMatrix(ArithmeticError):
     """The matrix could not be factorised (exactly singular)."""
 
 
-def _superlu(A: sp.csc_matrix) -> Factor:
+#: Largest backward error accepted from a symmetric-mode (diagonal pivot) SuperLU factor.
+BACKWARD_ERROR = 1e-10
+
+
+#: Share of off-diagonal nonzeros with a transposed partner above which the ordering is symmetric.
+SYMMETRIC_PATTERN = 0.5
+
+
+def pattern_symmetry(A: sp.csc_matrix) -> float:
+    """The share of the off-diagonal nonzeros ``a_ij`` of the square ``A`` whose ``a_ji`` is
+    nonzero too (1 for a symmetric pattern; UMFPACK chooses its symmetric strategy on the same
+    measure)."""
+    P = sp.coo_matrix(A)
+    keep = (P.data != 0) & (P.row != P.col)
+    P = sp.csr_matrix((np.ones(int(keep.sum())), (P.row[keep], P.col[keep])), shape=A.shape)
+    off = P.nnz
+    return float(P.multiply(P.T).nnz) / off if off else 1.0
+
+
+def backward_error(A: sp.spmatrix, x: np.ndarray, b: np.ndarray) -> float:
+    """``||A x - b||_inf / (||A||_inf ||x||_inf + ||b||_inf)`` (0 for ``b = 0``, ``x = 0``)."""
+    scale = spla.norm(A, np.inf) * float(np.max(np.abs(x), initial=0.0)) + float(np.max(np.abs(b), initial=0.0))
+    return float(np.max(np.abs(A @ x - b), initial=0.0)) / scale if scale > 0 else 0.0
+
+
+def _checked(lu: Factor, A: sp.csc_matrix) -> bool:
+    """Whether one solve with ``lu`` has a backward error within :data:`BACKWARD_ERROR`."""
+    b = A @ np.linspace(1.0, 2.0, A.shape[0])
+    x = lu.solve(b)
+    return bool(np.all(np.isfinite(x))) and backward_error(A, x, b) <= BACKWARD_ERROR
+
+
+def _splu(A: sp.csc_matrix, **options):
     try:
-        return spla.splu(A)
+        return spla.splu(A, **options)
     except RuntimeError as exc:  # SuperLU: "Factor is exactly singular"
         raise SingularMatrix(str(exc)) from None
 
 
+class _Refined:
+    """A factor whose solves take :data:`REFINEMENT_STEPS` steps of iterative refinement
+    ``x += lu.solve(b - A x)``: with pivot growth ``g`` each step cuts the error by about
+    ``g eps cond(A)``, so a factor that misses :data:`BACKWARD_ERROR` by growth alone passes."""
+
+    def __init__(self, lu, A: sp.csc_matrix) -> None:
+        self._lu, self._A = lu, A
+        self.nnz = getattr(lu, "nnz", None)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        x = self._lu.solve(rhs)
+        for _ in range(REFINEMENT_STEPS):
+            x = x + self._lu.solve(rhs - self._A @ x)
+        return x
+
+
+#: Steps of iterative refinement tried on a symmetric-mode factor that misses its check.
+REFINEMENT_STEPS = 2
+
+
+#: Below this many unknowns the ordering hardly matters and its checks would cost more than the
+#: factorisation (a DDCM run of the paper's bar factorises hundreds of 1 to 6 unknown systems).
+ORDERING_MIN_SIZE = 200
+
+
+def _superlu(A: sp.csc_matrix) -> Factor:
+    if A.shape[0] >= ORDERING_MIN_SIZE and pattern_symmetry(A) >= SYMMETRIC_PATTERN:
+        try:
+            lu = _splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
+        except SingularMatrix:
+            lu = None  # a zero pivot on the diagonal path; partial pivoting may still succeed
+        if lu is not None:
+            if _checked(lu, A):
+                return lu
+            # Growth on the diagonal pivots: refining costs a few solves, partial pivoting
+            # (COLAMD, off-diagonal pivots) far more fill (60x the time on a 1e5 KKT matrix).
+            refined = _Refined(lu, A)
+            if _checked(refined, A):
+                return refined
+    return _splu(A)
+
+
+class _PardisoFactor:
+    """A PARDISO factorisation (``pypardiso``), freed with the object."""
+
+    def __init__(self, A: sp.csc_matrix, symmetric: bool) -> None:
+        import pypardiso
+
+        if symmetric:  # the upper triangle, with every diagonal entry stored (PARDISO requires it)
+            U = sp.triu(A, k=1, format="coo")
+            n = A.shape[0]
+            index = np.arange(n)
+            M = sp.csr_matrix((np.concatenate([U.data, A.diagonal()]),
+                               (np.concatenate([U.row, index]), np.concatenate([U.col, index]))), shape=A.shape)
+        else:
+            M = A.tocsr()
+        M.sort_indices()
+        self._matrix = M
+        self._solver = pypardiso.PyPardisoSolver(mtype=-2 if symmetric else 11)
+        self._solver.set_iparm(18, -1)  # report the factor's nonzeros
+        try:
+            self._solver.factorize(M)
+        except (pypardiso.pardiso_wrapper.PyPardisoError, ValueError) as exc:  # ValueError: an empty row
+            raise SingularMatrix(f"PARDISO: {exc}") from None
+        self.perturbed = int(self._solver.get_iparm(14))  # pivots PARDISO perturbed
+        # nonzeros of L and U (of L only for a symmetric factor, whose U is its transpose)
+        self.nnz = int(self._solver.get_iparm(18)) * (2 if symmetric else 1)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return self._solver.solve(self._matrix, np.asarray(rhs, dtype=float))
+
+    def __del__(self) -> None:
+        solver = getattr(self, "_solver", None)
+        if solver is not None:
+            solver.free_memory(everything=True)
+
+
+def _solves_generic(lu: Factor, A: sp.csc_matrix) -> bool:
+    """Whether ``lu`` solves ``A x = b`` for a generic ``b`` to ``||A x - b|| <= 1e-6 ||b||``. A
+    right-hand side outside the range of a singular ``A`` leaves a residual of the order of
+    ``||b||``, whatever the (perturbed) factor; a nonsingular ``A`` of condition number below
+    about 1e10 passes."""
+    b = np.cos(np.arange(A.shape[0]))
+    x = lu.solve(b)
+    return bool(np.all(np.isfinite(x))) and float(np.max(np.abs(A @ x - b))) <= 1e-6 * float(np.max(np.abs(b)))
+
+
+def _pardiso(A: sp.csc_matrix) -> Factor:
+    # PARDISO perturbs tiny pivots instead of failing (then refines the solution iteratively):
+    # a factor with perturbed pivots is accepted only if it solves a generic system.
+    if A.nnz and abs(A - A.T).max() <= 1e-14 * abs(A).max():
+        lu = _PardisoFactor(A, True)
+        if _checked(lu, A) and (not lu.perturbed or _solves_generic(lu, A)):
+            return lu
+    lu = _PardisoFactor(A, False)
+    if lu.perturbed and not _solves_generic(lu, A):
+        raise SingularMatrix(f"PARDISO: {lu.perturbed} perturbed pivots and no accurate solve (singular matrix)")
+    return lu
+
+
 _SOLVERS: dict[str, Callable[[sp.csc_matrix], Factor]] = {"superlu": _superlu}
+if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on first use (it loads MKL)
+    _SOLVERS["pardiso"] = _pardiso
 _ACTIVE = ["superlu"]
 
 
@@ -62,8 +212,111 @@ def use_solver(name: str) -> None:
     _ACTIVE[0] = name
 
 
+class UpdatedFactor:
+    """``A^{-1}`` from a factor of a nearby ``A0``: ``A = A0 + E_R D_R`` differs from ``A0`` in the
+    ``r`` rows ``R`` only (``E_R`` the identity's columns ``R``, ``D_R`` those rows of ``A - A0``),
+    so by the Sherman-Morrison-Woodbury formula
+
+    ``A^{-1} b = y - W C^{-1} D_R y``, with ``y = A0^{-1} b``, ``W = A0^{-1} E_R`` and the
+    capacitance matrix ``C = I_r + D_R W`` (dense ``r x r``).
+
+    Each solve costs one solve with ``A0`` and two thin products; ``C`` is singular exactly when
+    ``A`` is. Built by :meth:`ReferenceFactor.update`, which keeps the columns of ``W``.
+    """
+
+    def __init__(self, base: Factor, W: np.ndarray, D_rows: sp.csr_matrix) -> None:
+        import scipy.linalg as sla
+
+        r = W.shape[1]
+        C = np.eye(r) + D_rows @ W
+        if not np.all(np.isfinite(C)):
+            raise SingularMatrix("the capacitance matrix of the update is not finite")
+        lu, piv = sla.lu_factor(C, check_finite=False)
+        # A pivot at roundoff: C, hence A, is singular (a merely ill-conditioned C fails the
+        # caller's backward-error check instead, and A is then factorised itself).
+        if np.min(np.abs(np.diag(lu)), initial=np.inf) <= r * np.finfo(float).eps * max(1.0, np.max(np.abs(C), initial=0.0)):
+            raise SingularMatrix("the updated matrix is singular (a capacitance pivot at roundoff)")
+        self.base, self.rank = base, r
+        self._W, self._C, self._D = W, (lu, piv), D_rows
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        import scipy.linalg as sla
+
+        y = np.asarray(self.base.solve(rhs))
+        if not self.rank:
+            return y
+        return y - self._W @ sla.lu_solve(self._C, self._D @ y, check_finite=False)
+
+
+#: A factorisation costs about ``nnz(L+U) / (2 n)`` solves (flops ``~ sum_j c_j^2 >= nnz^2 / n``
+#: against ``2 nnz`` per solve, ``c_j`` the factor's column counts). An update may spend a quarter
+#: of that on new columns of ``W``, and its rank may reach ``nnz / (2 n)`` (then the product with
+#: ``W`` costs at most a quarter of a solve).
+UPDATE_COST_SHARE = 0.25
+
+
+class ReferenceFactor:
+    """A factorisation of ``A0`` from which nearby matrices are solved by low-rank updates
+    (:class:`UpdatedFactor`), for the active-set solver: when a few contact pairs switch piece,
+    their rows of the KKT matrix change, and the symmetric entries in the rows of the unknowns
+    their gaps involve. The columns ``A0^{-1} e_i`` are kept, since the same pairs switch back
+    and forth: an update pays a solve only for rows not seen before.
+
+    Parameters
+    ----------
+    A0 : sparse matrix
+        Factorised with :func:`factorize`.
+    """
+
+    def __init__(self, A0: sp.spmatrix) -> None:
+        self.matrix = sp.csc_matrix(A0)
+        self.factor = factorize(self.matrix)
+        n = self.matrix.shape[0]
+        nnz = getattr(self.factor, "nnz", None)
+        per_factorisation = nnz / (2 * n) if nnz and n else 0.0
+        #: most new columns of ``W`` per update, and the largest rank
+        self.new_columns, self.max_rank = int(UPDATE_COST_SHARE * per_factorisation), int(per_factorisation)
+        self._columns: dict[int, np.ndarray] = {}
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return self.factor.solve(rhs)
+
+    def _column(self, i: int) -> np.ndarray:
+        w = self._columns.get(i)
+        if w is None:
+            e = np.zeros(self.matrix.shape[0])
+            e[i] = 1.0
+            w = self._columns[i] = np.asarray(self.factor.solve(e)).ravel()
+        return w
+
+    def update(self, A: sp.spmatrix) -> UpdatedFactor | None:
+        """A factor of ``A`` (same shape as ``A0``) as a low-rank update, or ``None`` if ``A - A0``
+        has more nonzero rows than :attr:`max_rank` or needs more than :attr:`new_columns` new
+        columns: then factorise ``A`` itself. Raises :class:`SingularMatrix` for a singular
+        ``A``. Not checked here: the caller verifies its solves (the active-set solver's
+        refinement step does) and factorises ``A`` itself if they miss."""
+        if not self.new_columns:
+            return None  # a small system: factorising costs no more than an update
+        D = sp.csr_matrix(A - self.matrix)
+        D.eliminate_zeros()
+        rows = np.flatnonzero(np.diff(D.indptr))
+        new = sum(int(i) not in self._columns for i in rows)
+        if rows.size > self.max_rank or new > self.new_columns:
+            return None
+        W = np.empty((D.shape[0], rows.size))
+        for j, i in enumerate(rows):
+            W[:, j] = self._column(int(i))
+        return UpdatedFactor(self.factor, W, D[rows])
+
+
 def solver_name() -> str:
+    """The name of the selected solver."""
     return _ACTIVE[0]
+
+
+def available_solvers() -> tuple[str, ...]:
+    """The registered solvers (``"pardiso"`` only where ``pypardiso`` imports)."""
+    return tuple(_SOLVERS)
 
 
 def factorize(A: sp.spmatrix) -> Factor:

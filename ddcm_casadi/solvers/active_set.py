@@ -15,7 +15,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..complementarity import CONTACT, b_stationarity, free_sign, identify
-from ..linalg import SingularMatrix, factorize
+from ..linalg import ReferenceFactor, SingularMatrix, UpdatedFactor
 from .newton import NewtonResult, newton_solve, smoothed_newton_solve
 
 
@@ -36,15 +36,17 @@ class ActiveSetSolver:
     def __init__(self, system, *, predictor: bool = True) -> None:
         self.system = system
         self.predictor = bool(predictor) and not system.proximal
-        self.stats = {"predicted": 0, "newton": 0}
+        self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
         self._lu: OrderedDict[bytes, object] = OrderedDict()
+        self._reference: ReferenceFactor | None = None  # the last piece matrix factorised itself
         if self.predictor:
             system.branch_system()  # part of the build, not of the first solve
 
     def reset(self) -> None:
         """Forget the cached factorisations and the counters (for cold-start measurements)."""
         self._lu.clear()
-        self.stats = {"predicted": 0, "newton": 0}
+        self._reference = None
+        self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
 
     def solve(self, z0, base, opts, *, corner_tol: float = 1e-3):
         """Predictor, semismooth Newton, a corner (biactive) polish, smoothing, branch finish.
@@ -109,17 +111,31 @@ class ActiveSetSolver:
         if lu is None:
             res, J = rj(z, Pb)
             try:
-                lu = factorize(jac(J))
+                lu = self._factorize(jac(J))
             except SingularMatrix:  # singular piece (degenerate active set)
                 return None
         else:
             res = r(z, Pb)
+        result = self._refine(z, res, lu, r, Pb, kw)
+        if (result is None or not result.converged) and isinstance(lu, UpdatedFactor):
+            # an update that misses the tolerances (an ill-conditioned capacitance matrix):
+            # factorise this piece itself
+            try:
+                lu = self._factorize(jac(rj(z, Pb)[1]), update=False)
+            except SingularMatrix:
+                return None
+            result = self._refine(z, res, lu, r, Pb, kw)
         self._lu[key] = lu
         while len(self._lu) > self.LU_CACHE:
             self._lu.popitem(last=False)
+        return result
+
+    @staticmethod
+    def _refine(z, res, lu, r, Pb, kw) -> NewtonResult | None:
+        """Newton on a linear piece system with its exact factorised Jacobian ``lu`` from ``z``
+        (residual ``res``): the first step solves it, the next ones refine roundoff."""
         z = np.array(z, dtype=float)
         rnorm, increment, it = float(np.max(np.abs(res), initial=0.0)), np.inf, 0
-        # Exact Jacobian of a linear system: the first step solves it, the next ones refine roundoff.
         for it in range(1, min(3, kw["max_iter"]) + 1):
             dz = -lu.solve(res)
             if not np.all(np.isfinite(dz)):
@@ -131,6 +147,19 @@ class ActiveSetSolver:
             if increment <= kw["tol"] and rnorm <= kw["residual_tol"]:
                 return NewtonResult(z, True, it, rnorm, increment, "converged")
         return NewtonResult(z, False, it, rnorm, increment, "piece system: refinement stalled")
+
+    def _factorize(self, A, *, update: bool = True):
+        """A factor of the piece matrix ``A``: a low-rank update of the last full factorisation
+        when few rows differ (a few pairs switched piece; :class:`~ddcm_casadi.linalg.ReferenceFactor`),
+        else a factorisation of its own, which becomes the reference."""
+        if update and self._reference is not None:
+            lu = self._reference.update(A)
+            if lu is not None:
+                self.stats["updates"] += 1
+                return lu
+        self._reference = ReferenceFactor(A)
+        self.stats["factorizations"] += 1
+        return self._reference
 
     def _signs(self, z, P, branch):
         """The sign each piece leaves free: ``b_i`` where ``a_i = 0`` is imposed, else ``a_i``."""
@@ -168,7 +197,8 @@ class ActiveSetSolver:
         others go on switching; a result with held pairs is accepted only if B-stationary, and a
         held pair whose multiplier says otherwise is released onto the piece it points to. A piece
         solve that misses its tolerance still chooses the switches but is never accepted. ``None``
-        if a piece is singular, a corner is released too often or ``max_switches`` is reached.
+        if a piece is singular, corners are held or released more than ``3 + nc`` times or
+        ``max_switches`` is reached.
         Returns ``(result, spent)``, ``spent`` the linear solves and Newton steps (counted also
         when it fails).
         """
@@ -180,7 +210,9 @@ class ActiveSetSolver:
         a, b = system.ab(z, P)
         branch = (identify(a, b) == CONTACT).astype(float)
         held = np.zeros(system.nc, dtype=bool)
-        seen, total, flips, releases = set(), 0, np.zeros(system.nc, dtype=int), 3
+        # Each release frees at least one held pair, so one per pair (plus a few re-holds) lets a
+        # corner of many biactive pairs be unwound; max_switches still bounds the whole loop.
+        seen, total, flips, releases = set(), 0, np.zeros(system.nc, dtype=int), 3 + system.nc
         for _ in range(max_switches):
             seen.add(branch.tobytes() + held.tobytes())
             res = self._solve_piece(z, P, branch, held, kw)

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import nnls
 
 from ..exact import ExactEnumerator
 from ..linalg import SingularMatrix, factorize
@@ -86,6 +85,8 @@ def elastic_state(model, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     if model.n_contacts:
         q = model.gap_operator @ u + model.gap_offsets[step]
         if np.any(q < 0):  # some pair would penetrate: solve the dual
+            from scipy.optimize import nnls  # scipy.optimize costs a first run 0.08 s to import
+
             scale = float(np.max(np.diag(S))) or 1.0
             Sn = S / scale + 1e-12 * np.eye(S.shape[0])
             L = np.linalg.cholesky(Sn)

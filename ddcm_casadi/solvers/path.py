@@ -314,8 +314,10 @@ class DDCMSolver:
         self.search_stats: dict = {}
         self.problems = problems
         self.built = built
-        # the data's range, once per solver (not timed with the steps)
-        self.coverage = DataCoverage(problems.model.dataset, problems.model.n_points)
+        # The data's range and the exact enumeration, once per problem (not timed with the steps):
+        # the solvers of the formulations of one model share them.
+        self.coverage = problems.projection.shared(
+            ("data_coverage",), lambda: DataCoverage(problems.model.dataset, problems.model.n_points))
         lo, hi = MAX_OUTER_RANGE
         if isinstance(max_outer, bool) or not isinstance(max_outer, (int, np.integer)) or not lo <= max_outer <= hi:
             raise InputError(f"ddcm max_outer must be an integer in {lo}..{hi}, got {max_outer!r:.60}")
@@ -331,8 +333,9 @@ class DDCMSolver:
                                  f"{model.n_points} material points")
             if np.any(initial < offset) or np.any(initial >= offset + size):
                 raise InputError("ddcm option initial: an index is outside its point's data set")
-        self.exact = (ExactEnumerator(problems.projection, max_pairs=enumerate_pairs)
-                      if model.n_contacts <= enumerate_pairs else None)
+        self.exact = (problems.projection.shared(
+            ("exact_enumerator", enumerate_pairs), lambda: ExactEnumerator(problems.projection, max_pairs=enumerate_pairs))
+            if model.n_contacts <= enumerate_pairs else None)
         # N^m assignments, in logarithms: it overflows a float for a continuum's thousands of points.
         log_assign = float(np.sum(np.log(point_ranges(model)[1].astype(float))))
         self.global_search = (global_search and self.exact is not None
@@ -367,8 +370,7 @@ class DDCMSolver:
                 sol.iterations += retry.iterations
         if self.exact is None:
             return sol, None, float("nan")
-        ex = self.exact.solve(params)
-        xe, pe, obj = ex.x[:, 0], ex.p[:, 0], float(ex.objective[0])
+        xe, pe, obj = self._exact_projection(params)
         tol = 1e-10 + 1e-8 * abs(obj)
         is_global = bool(sol.converged and sol.objective <= obj + tol)
         if not is_global:
@@ -379,6 +381,30 @@ class DDCMSolver:
         scale = max(1.0, float(np.max(np.abs(np.concatenate([xe, pe])))))
         err = float(np.max(np.abs(np.concatenate([sol.x - xe, sol.p - pe])))) / scale
         return sol, is_global, err
+
+    #: Exact projections remembered per problem (:meth:`_exact_projection`), keys and answers
+    #: together at most this many floats (8 MB).
+    EXACT_CACHE_VALUES = 1_000_000
+
+    def _exact_projection(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """The exact projection ``(x, p, objective)`` (scaled) for the parameter vector ``params``.
+
+        Remembered per problem (within :attr:`EXACT_CACHE_VALUES`): the DDCM runs of the
+        formulations of one model visit the same data assignments (the paper's bar: the same 46
+        projections for each of the four), and the enumeration's answer does not depend on the
+        formulation. Copies are returned, so that no caller can change a remembered answer.
+        """
+        cache = self.problems.projection.shared(("exact_projections",), lambda: {"values": 0, "items": {}})
+        key = params.tobytes()
+        hit = cache["items"].get(key)
+        if hit is None:
+            ex = self.exact.solve(params)
+            hit = (ex.x[:, 0], ex.p[:, 0], float(ex.objective[0]))
+            size = params.size + hit[0].size + hit[1].size
+            if cache["values"] + size <= self.EXACT_CACHE_VALUES:
+                cache["items"][key] = hit
+                cache["values"] += size
+        return hit[0].copy(), hit[1].copy(), hit[2]
 
     def project_data(self, k: int, strain_star, stress_star, warm: tuple, cost: dict):
         """The ``Z_E`` projection of step ``k``'s assigned material states (warm-started from
