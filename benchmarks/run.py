@@ -8,9 +8,14 @@ Writes ``DIR/benchmarks.json`` (a list of records with ``name``, ``unknowns``, `
 timing is the median of repeated runs, and every comparison is a ratio measured in this process
 run (the machines are shared and noisy). ``--quick`` keeps to about 5 minutes on 2 cores.
 
-The floor of one DDCM iteration is one sparse LU factorisation and solve (scipy) of the same
-saddle-point system the projection solves, plus one KD-tree query of all material points against
-the data set. The one-off build (``build, ...`` records and ``build_seconds``: both problems and
+The floor of one DDCM iteration is one factorisation and solve, with the package's sparse solver
+(:func:`ddcm_casadi.linalg.factorize`), of the same saddle-point system the projection solves,
+plus one KD-tree query of all material points against the data set; the cached-factor floor
+(``cached_floor_seconds``, ``ratio_to_cached_floor``) leaves out the factorisation. DDCM on a 2-D
+continuum (``DDCM iteration, 2-D continuum`` records) and the linear solvers on its KKT matrix
+(``linear solver, ...``) are measured at 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run),
+each in a fresh process; the last record is the paper's first run
+(``benchmarks/first_run.py``). The one-off build (``build, ...`` records and ``build_seconds``: both problems and
 the formulation's CasADi Functions) is measured against the same floor, for bars, trusses and a
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
 """
@@ -24,6 +29,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -212,7 +218,6 @@ def build_sizes(family: str, sizes, repeats: int) -> list[dict]:
     """:func:`build_record` per size, each in a fresh process (its peak memory its own; a size the
     machine cannot hold is reported, not fatal), then the growth: build seconds per 1e5 unknowns
     at the largest size that ran against the smallest (``ratio`` 1 for linear growth)."""
-    from pathlib import Path
 
     out = []
     for u in sizes:
@@ -310,7 +315,6 @@ else:
 def in_fresh_process(kind: str, unknowns: int, repeats: int, *extra: str) -> list[dict]:
     """:func:`continuum_record` or :func:`linear_solvers` in a fresh process (its memory its own;
     a size the machine cannot hold is reported, not fatal)."""
-    from pathlib import Path
 
     cmd = [sys.executable, "-c", CONTINUUM_RECORD, str(Path(__file__).resolve().parent), kind, str(unknowns),
            str(repeats), *extra]
@@ -578,6 +582,10 @@ def main(argv=None) -> int:
             log(rec)
     for rec in paper_shares(3):
         log(rec)
+    sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is a folder of scripts
+    from first_run import first_run
+
+    log(first_run(5 if quick else 9))
     write_json_atomic(out / "benchmarks.json", records)
     write_bytes_atomic(out / "benchmarks.md", markdown(records).encode())
     print(f"wrote benchmarks.json and benchmarks.md to {out}", file=sys.stderr)

@@ -132,7 +132,10 @@ class DataCoverage:
     def _neighbourhood(self, s: int, d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:func:`neighbourhood` of the data ``index`` of set ``s``, remembered for few data."""
         if index.size > _FEW:
-            return neighbourhood(d, index)
+            # many points share their nearest datum (on a continuum, most do): each datum once
+            unique, inverse = np.unique(index, return_inverse=True)
+            h, tangent = neighbourhood(d, unique)
+            return h[inverse], tangent[inverse]
         key = (s, index.tobytes())
         hit = self._neighbourhoods.get(key)
         if hit is None:

@@ -9,11 +9,13 @@ projection, whose *pattern* is symmetric; for those, the minimum-degree ordering
 with diagonal pivots (SuperLU's symmetric mode) keeps the fill of a Cholesky-like factor. Its
 default, COLAMD with partial pivoting, orders for ``A^T A`` and pivots off the diagonal, which on
 a saddle-point matrix fills in badly: on the 2-D continuum's projection system of 99 687 unknowns
-the factorisation took 1.3 s in symmetric mode and more than 60 s with the default (measured in
-one run; ``benchmarks/run.py``, ``linear solver`` records). Diagonal pivots without a threshold
-are not backward stable in general, so every symmetric-mode factor is checked: the backward error
-of one solve, ``||A x - b||_inf / (||A||_inf ||x||_inf + ||b||_inf)``, must stay below
-:data:`BACKWARD_ERROR`, else the matrix is factorised again with partial pivoting.
+the factorisation took 2.9 s in symmetric mode and 13.8 s with the default (measured in one run;
+``benchmarks/run.py``, ``linear solver`` records). Diagonal pivots without a threshold are not
+backward stable in general, so every symmetric-mode factor is checked: the backward error of one
+solve, ``||A x - b||_inf / (||A||_inf ||x||_inf + ||b||_inf)``, must stay below
+:data:`BACKWARD_ERROR` (:data:`ITERATED_BACKWARD_ERROR` for callers that iterate), else two steps
+of iterative refinement are tried, and only then partial pivoting. Matrices of fewer than
+:data:`ORDERING_MIN_SIZE` unknowns go straight to SuperLU's default.
 
 ``"pardiso"`` (optional: ``pip install ddcm-casadi[pardiso]``, Intel MKL through ``pypardiso``):
 registered when ``pypardiso`` imports. A symmetric matrix is factorised as symmetric indefinite
@@ -56,6 +58,9 @@ class SingularMatrix(ArithmeticError):
 
 #: Largest backward error accepted from a symmetric-mode (diagonal pivot) SuperLU factor.
 BACKWARD_ERROR = 1e-10
+#: The same for a caller that corrects its solves by its own iteration (Newton, the active-set
+#: solver's refinement): ``sqrt(eps)``, half the digits, is enough for that iteration to converge.
+ITERATED_BACKWARD_ERROR = float(np.sqrt(np.finfo(float).eps))
 
 
 #: Share of off-diagonal nonzeros with a transposed partner above which the ordering is symmetric.
@@ -79,11 +84,11 @@ def backward_error(A: sp.spmatrix, x: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(A @ x - b), initial=0.0)) / scale if scale > 0 else 0.0
 
 
-def _checked(lu: Factor, A: sp.csc_matrix) -> bool:
-    """Whether one solve with ``lu`` has a backward error within :data:`BACKWARD_ERROR`."""
+def _checked(lu: Factor, A: sp.csc_matrix, tolerance: float = BACKWARD_ERROR) -> bool:
+    """Whether one solve with ``lu`` has a backward error within ``tolerance``."""
     b = A @ np.linspace(1.0, 2.0, A.shape[0])
     x = lu.solve(b)
-    return bool(np.all(np.isfinite(x))) and backward_error(A, x, b) <= BACKWARD_ERROR
+    return bool(np.all(np.isfinite(x))) and backward_error(A, x, b) <= tolerance
 
 
 def _splu(A: sp.csc_matrix, **options):
@@ -118,19 +123,19 @@ REFINEMENT_STEPS = 2
 ORDERING_MIN_SIZE = 200
 
 
-def _superlu(A: sp.csc_matrix) -> Factor:
+def _superlu(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
     if A.shape[0] >= ORDERING_MIN_SIZE and pattern_symmetry(A) >= SYMMETRIC_PATTERN:
         try:
             lu = _splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
         except SingularMatrix:
             lu = None  # a zero pivot on the diagonal path; partial pivoting may still succeed
         if lu is not None:
-            if _checked(lu, A):
+            if _checked(lu, A, tolerance):
                 return lu
             # Growth on the diagonal pivots: refining costs a few solves, partial pivoting
-            # (COLAMD, off-diagonal pivots) far more fill (60x the time on a 1e5 KKT matrix).
+            # (COLAMD, off-diagonal pivots) far more fill (4.7x the time on a 1e5 KKT matrix).
             refined = _Refined(lu, A)
-            if _checked(refined, A):
+            if _checked(refined, A, tolerance):
                 return refined
     return _splu(A)
 
@@ -180,12 +185,12 @@ def _solves_generic(lu: Factor, A: sp.csc_matrix) -> bool:
     return bool(np.all(np.isfinite(x))) and float(np.max(np.abs(A @ x - b))) <= 1e-6 * float(np.max(np.abs(b)))
 
 
-def _pardiso(A: sp.csc_matrix) -> Factor:
+def _pardiso(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
     # PARDISO perturbs tiny pivots instead of failing (then refines the solution iteratively):
     # a factor with perturbed pivots is accepted only if it solves a generic system.
     if A.nnz and abs(A - A.T).max() <= 1e-14 * abs(A).max():
         lu = _PardisoFactor(A, True)
-        if _checked(lu, A) and (not lu.perturbed or _solves_generic(lu, A)):
+        if _checked(lu, A, tolerance) and (not lu.perturbed or _solves_generic(lu, A)):
             return lu
     lu = _PardisoFactor(A, False)
     if lu.perturbed and not _solves_generic(lu, A):
@@ -200,8 +205,9 @@ _ACTIVE = ["superlu"]
 
 
 def register_solver(name: str, factorize_fn: Callable[[sp.csc_matrix], Factor]) -> None:
-    """Register a sparse direct solver: ``factorize_fn(A_csc)`` returns an object with ``solve``
-    and raises :class:`SingularMatrix` for a singular matrix."""
+    """Register a sparse direct solver: ``factorize_fn(A_csc, *, tolerance)`` returns an object
+    with ``solve`` whose backward error stays within ``tolerance``, and raises
+    :class:`SingularMatrix` for a singular matrix."""
     _SOLVERS[name] = factorize_fn
 
 
@@ -268,9 +274,9 @@ class ReferenceFactor:
         Factorised with :func:`factorize`.
     """
 
-    def __init__(self, A0: sp.spmatrix) -> None:
+    def __init__(self, A0: sp.spmatrix, *, iterated: bool = False) -> None:
         self.matrix = sp.csc_matrix(A0)
-        self.factor = factorize(self.matrix)
+        self.factor = factorize(self.matrix, iterated=iterated)
         n = self.matrix.shape[0]
         nnz = getattr(self.factor, "nnz", None)
         per_factorisation = nnz / (2 * n) if nnz and n else 0.0
@@ -319,6 +325,11 @@ def available_solvers() -> tuple[str, ...]:
     return tuple(_SOLVERS)
 
 
-def factorize(A: sp.spmatrix) -> Factor:
-    """Factorise a square sparse matrix with the selected solver; raises :class:`SingularMatrix`."""
-    return _SOLVERS[_ACTIVE[0]](sp.csc_matrix(A))
+def factorize(A: sp.spmatrix, *, iterated: bool = False) -> Factor:
+    """Factorise a square sparse matrix with the selected solver; raises :class:`SingularMatrix`.
+
+    ``iterated``: the caller corrects its solves by its own iteration (Newton steps, iterative
+    refinement), so a backward error up to :data:`ITERATED_BACKWARD_ERROR` is accepted instead of
+    :data:`BACKWARD_ERROR` (a symmetric-mode factor then needs no refinement of its own)."""
+    tolerance = ITERATED_BACKWARD_ERROR if iterated else BACKWARD_ERROR
+    return _SOLVERS[_ACTIVE[0]](sp.csc_matrix(A), tolerance=tolerance)

@@ -157,7 +157,7 @@ class ActiveSetSolver:
             if lu is not None:
                 self.stats["updates"] += 1
                 return lu
-        self._reference = ReferenceFactor(A)
+        self._reference = ReferenceFactor(A, iterated=True)  # _refine corrects its solves
         self.stats["factorizations"] += 1
         return self._reference
 

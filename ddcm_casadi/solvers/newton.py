@@ -57,7 +57,7 @@ class SparseJacobian:
 def solve_linear(J: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray:
     """Sparse LU solve; a singular (semismooth) Jacobian falls back to a tiny Levenberg shift."""
     try:
-        d = factorize(J).solve(rhs)
+        d = factorize(J, iterated=True).solve(rhs)  # Newton corrects an inexact step
         if np.all(np.isfinite(d)):
             return d
     except SingularMatrix:
