@@ -87,6 +87,18 @@ def test_saddle_systems_use_the_symmetric_ordering():
     assert chosen.nnz < 0.6 * default.nnz  # measured: 40 181 against 77 788 nonzeros
 
 
+def test_chain_like_patterns_keep_the_default_ordering():
+    """A chain (a bar's graph) has a thin profile, within CHAIN_ENVELOPE nonzeros per matrix
+    nonzero, and goes to SuperLU's default; a 2-D grid's profile is far wider."""
+    n = 2000
+    chain = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csc")
+    assert linalg._envelope(chain) <= linalg.CHAIN_ENVELOPE * chain.nnz
+    assert linalg._symmetric_mode(chain) is None
+    grid = grid_kkt()
+    assert linalg._envelope(grid) > linalg.CHAIN_ENVELOPE * grid.nnz
+    assert linalg._symmetric_mode(grid) is not None
+
+
 def test_pattern_symmetry():
     A = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [3.0, 1.0, 0.0], [5.0, 0.0, 1.0]]))
     assert linalg.pattern_symmetry(A) == pytest.approx(2 / 3)  # (0,1), (1,0) paired; (2,0) alone
