@@ -15,7 +15,8 @@ backward stable in general, so every symmetric-mode factor is checked: the backw
 solve, ``||A x - b||_inf / (||A||_inf ||x||_inf + ||b||_inf)``, must stay below
 :data:`BACKWARD_ERROR` (:data:`ITERATED_BACKWARD_ERROR` for callers that iterate), else two steps
 of iterative refinement are tried, and only then partial pivoting. Matrices of fewer than
-:data:`ORDERING_MIN_SIZE` unknowns go straight to SuperLU's default.
+:data:`ORDERING_MIN_SIZE` unknowns, unsymmetric patterns and chain-like ones (bars, trusses:
+:data:`CHAIN_ENVELOPE`) go straight to SuperLU's default.
 
 ``"pardiso"`` (optional: ``pip install ddcm-casadi[pardiso]``, Intel MKL through ``pypardiso``):
 registered when ``pypardiso`` imports. A symmetric matrix is factorised as symmetric indefinite
