@@ -294,8 +294,8 @@ class UpdatedFactor:
         if not np.all(np.isfinite(C)):
             raise SingularMatrix("the capacitance matrix of the update is not finite")
         lu, piv = sla.lu_factor(C, check_finite=False)
-        # A pivot at roundoff: C, hence A, is singular (a merely ill-conditioned C fails the
-        # caller's backward-error check instead, and A is then factorised itself).
+        # A pivot at roundoff: C, hence A, is singular (with a merely ill-conditioned C the
+        # caller's solves miss their tolerance, and it factorises A itself).
         if np.min(np.abs(np.diag(lu)), initial=np.inf) <= r * np.finfo(float).eps * max(1.0, np.max(np.abs(C), initial=0.0)):
             raise SingularMatrix("the updated matrix is singular (a capacitance pivot at roundoff)")
         self.base, self.rank = base, r
@@ -315,6 +315,9 @@ class UpdatedFactor:
 #: of that on new columns of ``W``, and its rank may reach ``nnz / (2 n)`` (then the product with
 #: ``W`` costs at most a quarter of a solve).
 UPDATE_COST_SHARE = 0.25
+#: Columns ``A0^{-1} e_i`` kept per unit of the largest rank (memory: ``n`` floats each, 8 MB at
+#: 1e6 unknowns); once full, the next change of rows is factorised, which starts afresh.
+KEPT_COLUMNS_PER_RANK = 4
 
 
 class ReferenceFactor:
@@ -353,8 +356,9 @@ class ReferenceFactor:
 
     def update(self, A: sp.spmatrix) -> UpdatedFactor | None:
         """A factor of ``A`` (same shape as ``A0``) as a low-rank update, or ``None`` if ``A - A0``
-        has more nonzero rows than :attr:`max_rank` or needs more than :attr:`new_columns` new
-        columns: then factorise ``A`` itself. Raises :class:`SingularMatrix` for a singular
+        has more nonzero rows than :attr:`max_rank`, needs more than :attr:`new_columns` new
+        columns or more kept columns than :data:`KEPT_COLUMNS_PER_RANK` ``* max_rank``: then
+        factorise ``A`` itself. Raises :class:`SingularMatrix` for a singular
         ``A``. Not checked here: the caller verifies its solves (the active-set solver's
         refinement step does) and factorises ``A`` itself if they miss."""
         if not self.new_columns:
@@ -363,7 +367,8 @@ class ReferenceFactor:
         D.eliminate_zeros()
         rows = np.flatnonzero(np.diff(D.indptr))
         new = sum(int(i) not in self._columns for i in rows)
-        if rows.size > self.max_rank or new > self.new_columns:
+        if (rows.size > self.max_rank or new > self.new_columns
+                or len(self._columns) + new > KEPT_COLUMNS_PER_RANK * self.max_rank):
             return None
         W = np.empty((D.shape[0], rows.size))
         for j, i in enumerate(rows):
