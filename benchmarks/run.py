@@ -6,7 +6,8 @@ and where the paper's default run spends its time.
 Writes ``DIR/benchmarks.json`` (a list of records with ``name``, ``unknowns``, ``data_points``,
 ``seconds``, ``floor_seconds``, ``ratio`` and extra fields) and ``DIR/benchmarks.md``. Every
 timing is the median of repeated runs, and every comparison is a ratio measured in this process
-run (the machines are shared and noisy). ``--quick`` keeps to about 5 minutes on 2 cores.
+run (the machines are shared and noisy). ``--quick`` keeps to about 10 minutes on 2 cores; the full
+run takes about 2 hours (the 1e6-unknown continuum alone 45 minutes and 15 GB).
 
 The floor of one DDCM iteration is one factorisation and solve, with the package's sparse solver
 (:func:`ddcm_casadi.linalg.factorize`), of the same saddle-point system the projection solves,
@@ -14,9 +15,9 @@ plus one KD-tree query of all material points against the data set; the cached-f
 (``cached_floor_seconds``, ``ratio_to_cached_floor``) leaves out the factorisation. DDCM on a 2-D
 continuum (``DDCM iteration, 2-D continuum`` records) and the linear solvers on its KKT matrix
 (``linear solver, ...``) are measured at 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run),
-each in a fresh process; the last record is the paper's first run
-(``benchmarks/first_run.py``). The one-off build (``build, ...`` records and ``build_seconds``: both problems and
-the formulation's CasADi Functions) is measured against the same floor, for bars, trusses and a
+each in a fresh process; the last record is the paper's first run (``benchmarks/first_run.py``).
+The one-off build (``build, ...`` records and ``build_seconds``: both problems and the
+formulation's CasADi Functions) is measured against the same floor, for bars, trusses and a
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
 """
 
@@ -32,6 +33,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ddcm_casadi import MaterialDataset, compare, paper_bar
@@ -265,9 +267,7 @@ def linear_solvers(unknowns: int, repeats: int, *, colamd_limit: int) -> list[di
     :mod:`ddcm_casadi.linalg`, and with scipy's default SuperLU (COLAMD, partial pivoting) up to
     ``colamd_limit`` unknowns; ``floor_seconds``: the package's default (SuperLU, ordered by the
     pattern). Also the solve with a kept factor and a rank-``r`` update (:class:`ReferenceFactor`)
-    for the ``r`` rows of one pair switching piece."""
-    import scipy.sparse.linalg as spla
-
+    for the ``r`` rows of one pair switching piece (built from its kept columns, then a solve)."""
     from ddcm_casadi import linalg
 
     model = BUILD_MODELS["2-D continuum"](unknowns)
@@ -290,13 +290,14 @@ def linear_solvers(unknowns: int, repeats: int, *, colamd_limit: int) -> list[di
     try:
         for name in linalg.available_solvers():
             linalg.use_solver(name)
+            linalg.factorize(2.0 * sp.identity(4, format="csc"))  # untimed: loads the library (MKL)
             times[name] = median_time(lambda: linalg.factorize(A).solve(b), repeats)
             reference = linalg.ReferenceFactor(A)
             times[name + ", solve with a kept factor"] = median_time(lambda: reference.solve(b), max(3, repeats))
             up = reference.update(A1)
             if up is not None:
-                times[name + f", low-rank update (rank {up.rank})"] = median_time(
-                    lambda: linalg.ReferenceFactor.update(reference, A1).solve(b), max(3, repeats))
+                times[name + f", low-rank update from kept columns and a solve (rank {up.rank})"] = median_time(
+                    lambda: reference.update(A1).solve(b), max(3, repeats))
     finally:
         linalg.use_solver(previous)
     if n <= colamd_limit:

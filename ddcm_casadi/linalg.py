@@ -133,8 +133,12 @@ def _envelope(A: sp.csc_matrix) -> int:
     S = (abs(A) + abs(A.T)).tocsr()
     perm = reverse_cuthill_mckee(S, symmetric_mode=True)
     P = S[perm][:, perm].tocsr()
-    first = np.minimum.reduceat(P.indices, P.indptr[:-1]) if P.nnz else np.zeros(0, int)
-    return int(P.shape[0] + 2 * np.sum(np.maximum(np.arange(P.shape[0]) - first, 0)))
+    rows = np.arange(P.shape[0])
+    first = rows.copy()  # an empty row (a singular matrix) adds nothing
+    filled = np.diff(P.indptr) > 0
+    if filled.any():
+        first[filled] = np.minimum.reduceat(P.indices, P.indptr[:-1][filled])
+    return int(P.shape[0] + 2 * np.sum(np.maximum(rows - first, 0)))
 
 
 #: Whether minimum degree suits a sparsity pattern (:func:`_symmetric_mode`), remembered per
