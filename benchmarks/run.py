@@ -188,6 +188,12 @@ BUILD_MODELS = {
 }
 
 
+def peak_memory_bytes() -> int:
+    """The peak resident set of this process (Linux ``VmHWM``), in bytes."""
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:")) * 1024
+
+
 def build_record(family: str, unknowns: int, repeats: int) -> dict:
     """The one-off build of a DDCM run (both problems, then the projection's Fischer-Burmeister
     system and its piece system) of a ``family`` model of about ``unknowns`` unknowns, against
@@ -208,37 +214,43 @@ def build_record(family: str, unknowns: int, repeats: int) -> dict:
     x, p = np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs)
     low = iteration_floor(problems, system, model.n_steps - 1, x, p, assigned, assigned, repeats)
     n = int(system.jacobian.shape[0])
-    with open("/proc/self/status") as fh:
-        peak = next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:")) * 1024
+    peak = peak_memory_bytes()
     return dict(name=f"build, {family}: {model.name}", unknowns=n, data_points=len(data), seconds=build,
                 ratio=build / low["floor_seconds"], **low, build_seconds=build, problem_build_seconds=t1 - t0,
                 formulation_build_seconds=build - (t1 - t0), build_seconds_per_1e5_unknowns=build * 1e5 / n,
                 peak_memory_bytes=peak)
 
 
-BUILD_RECORD = """
+FRESH = """
 import json, sys
 sys.path.insert(0, sys.argv[1])
-from run import build_record
-print(json.dumps(build_record(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
+import run
+out = getattr(run, sys.argv[2])(*json.loads(sys.argv[3]))
+print(json.dumps(out if isinstance(out, list) else [out]))
 """
+
+
+def in_fresh_process(function: str, *args, label: str, unknowns: int) -> list[dict]:
+    """The records of ``function(*args)`` (a function of this module) run in a fresh process: its
+    peak memory its own, and a size the machine cannot hold (killed for memory, exit status -9)
+    reported as a record named ``label`` (of about ``unknowns`` unknowns) with the error, not fatal."""
+    cmd = [sys.executable, "-c", FRESH, str(Path(__file__).resolve().parent), function, json.dumps(args)]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode == 0:
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+    return [dict(name=label, unknowns=unknowns, data_points=0,
+                 seconds=float("nan"), floor_seconds=float("nan"), ratio=float("nan"),
+                 error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}")]
 
 
 def build_sizes(family: str, sizes, repeats: int) -> list[dict]:
     """:func:`build_record` per size, each in a fresh process (its peak memory its own; a size the
     machine cannot hold is reported, not fatal), then the growth: build seconds per 1e5 unknowns
     at the largest size that ran against the smallest (``ratio`` 1 for linear growth)."""
-
     out = []
     for u in sizes:
-        cmd = [sys.executable, "-c", BUILD_RECORD, str(Path(__file__).resolve().parent), family, str(u), str(repeats)]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode == 0:
-            out.append(json.loads(proc.stdout.strip().splitlines()[-1]))
-        else:  # e.g. killed for memory (exit status -9)
-            out.append(dict(name=f"build, {family}, about {u:.0e} unknowns", unknowns=u, data_points=0,
-                            seconds=float("nan"), floor_seconds=float("nan"), ratio=float("nan"),
-                            error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}"))
+        out += in_fresh_process("build_record", family, u, repeats,
+                                label=f"build, {family}, about {u:.0e} unknowns", unknowns=u)
     done = [r for r in out if np.isfinite(r["seconds"])]
     if len(done) >= 2:
         small, large = done[0], done[-1]
@@ -256,12 +268,11 @@ def continuum_record(unknowns: int, repeats: int) -> dict:
     and the peak resident memory of the process (Linux ``VmHWM``)."""
     model = BUILD_MODELS["2-D continuum"](unknowns)
     rec = ddcm_iteration(model, repeats)
-    with open("/proc/self/status") as fh:
-        peak = next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:")) * 1024
+    peak = peak_memory_bytes()
     return dict(name=f"DDCM iteration, 2-D continuum: {model.name}", **rec, peak_memory_bytes=peak)
 
 
-def linear_solvers(unknowns: int, repeats: int, *, colamd_limit: int) -> list[dict]:
+def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]:
     """One factorisation and solve of the 2-D continuum's projection piece (KKT) matrix (about
     ``unknowns`` unknowns, a third of the contact pairs closed) with every registered solver of
     :mod:`ddcm_casadi.linalg`, and with scipy's default SuperLU (COLAMD, partial pivoting) up to
@@ -307,32 +318,6 @@ def linear_solvers(unknowns: int, repeats: int, *, colamd_limit: int) -> list[di
                  seconds=t, floor_seconds=floor, ratio=t / floor, nnz=int(A.nnz),
                  note="floor: factorisation and solve with the default (superlu, ordered by the pattern)")
             for label, t in times.items()]
-
-
-CONTINUUM_RECORD = """
-import json, sys
-sys.path.insert(0, sys.argv[1])
-from run import continuum_record, linear_solvers
-u, repeats = int(sys.argv[3]), int(sys.argv[4])
-if sys.argv[2] == "iteration":
-    print(json.dumps([continuum_record(u, repeats)]))
-else:
-    print(json.dumps(linear_solvers(u, repeats, colamd_limit=int(sys.argv[5]))))
-"""
-
-
-def in_fresh_process(kind: str, unknowns: int, repeats: int, *extra: str) -> list[dict]:
-    """:func:`continuum_record` or :func:`linear_solvers` in a fresh process (its memory its own;
-    a size the machine cannot hold is reported, not fatal)."""
-
-    cmd = [sys.executable, "-c", CONTINUUM_RECORD, str(Path(__file__).resolve().parent), kind, str(unknowns),
-           str(repeats), *extra]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode == 0:
-        return json.loads(proc.stdout.strip().splitlines()[-1])
-    return [dict(name=f"{kind}, 2-D continuum, about {unknowns:.0e} unknowns", unknowns=unknowns, data_points=0,
-                 seconds=float("nan"), floor_seconds=float("nan"), ratio=float("nan"),
-                 error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}")]
 
 
 PEAK_MEMORY = """
@@ -563,9 +548,11 @@ def main(argv=None) -> int:
             log(rec)
     # DDCM on a 2-D continuum against its floors, and the linear solvers on its KKT matrix.
     for u in ((10**4, 10**5) if quick else (10**4, 10**5, 10**6)):
-        for rec in in_fresh_process("solvers", u, 1 if u > 10**5 else rep, str(3 * 10**4)):
+        for rec in in_fresh_process("linear_solvers", u, 1 if u > 10**5 else rep, 3 * 10**4,
+                                    label=f"linear solvers, 2-D continuum, about {u:.0e} unknowns", unknowns=u):
             log(rec)
-        for rec in in_fresh_process("iteration", u, 1):
+        for rec in in_fresh_process("continuum_record", u, 1,
+                                    label=f"DDCM iteration, 2-D continuum, about {u:.0e} unknowns", unknowns=u):
             log(rec)
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):
         log(data_set_memory(n_data))
