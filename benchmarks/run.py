@@ -234,8 +234,11 @@ def in_fresh_process(function: str, *args, label: str, unknowns: int) -> list[di
     """The records of ``function(*args)`` (a function of this module) run in a fresh process: its
     peak memory its own, and a size the machine cannot hold (killed for memory, exit status -9)
     reported as a record named ``label`` (of about ``unknowns`` unknowns) with the error, not fatal."""
-    cmd = [sys.executable, "-c", FRESH, str(Path(__file__).resolve().parent), function, json.dumps(args)]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    here = Path(__file__).resolve().parent
+    cmd = [sys.executable, "-c", FRESH, str(here), function, json.dumps(args)]
+    # Run from this folder: ``python -c`` puts its working directory first on sys.path, and from the
+    # repository's root that would import the source tree instead of the installed package.
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=here)
     if proc.returncode == 0:
         return json.loads(proc.stdout.strip().splitlines()[-1])
     return [dict(name=label, unknowns=unknowns, data_points=0,
