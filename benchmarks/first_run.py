@@ -31,9 +31,11 @@ FLOOR = ("import casadi, numpy, scipy.sparse.linalg, scipy.spatial, matplotlib; 
 BARE = "import casadi, numpy, scipy, matplotlib"
 
 
-def _wall(argv: list[str], env: dict) -> float:
+def _wall(argv: list[str], env: dict, cwd: str) -> float:
     t0 = time.perf_counter()
-    subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    # ``cwd``: a scratch folder, since ``python -m`` / ``-c`` put the working directory first on
+    # sys.path (from the repository's root the source tree would shadow the installed package).
+    subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=cwd)
     return time.perf_counter() - t0
 
 
@@ -59,12 +61,12 @@ def first_run(repeats: int = 5) -> dict:
             return [sys.executable, "-m", "ddcm_casadi.cli", "--out", os.path.join(tmp, out), "-q"]
 
         for argv in (floor_cmd, bare_cmd, run_cmd("warm-up")):  # untimed: fills the bytecode cache
-            _wall(argv, cached)
+            _wall(argv, cached, tmp)
         for i in range(repeats):
-            floor.append(_wall(floor_cmd, cached))
-            bare.append(_wall(bare_cmd, cached))
-            run.append(_wall(run_cmd(f"r{i}"), cached))
-            uncompiled.append(_wall(run_cmd(f"u{i}"), uncached))
+            floor.append(_wall(floor_cmd, cached, tmp))
+            bare.append(_wall(bare_cmd, cached, tmp))
+            run.append(_wall(run_cmd(f"r{i}"), cached, tmp))
+            uncompiled.append(_wall(run_cmd(f"u{i}"), uncached, tmp))
     s, f = statistics.median(run), statistics.median(floor)
     return dict(name="first run: ddcm-compare --out DIR (paper example) / imports", unknowns=1, data_points=500,
                 seconds=s, floor_seconds=f, ratio=s / f, bare_import_seconds=statistics.median(bare),
