@@ -26,6 +26,8 @@ import sys
 import tempfile
 import time
 
+from ddcm_casadi.parallel import resolve_jobs
+
 FLOOR = ("import casadi, numpy, scipy.sparse.linalg, scipy.spatial, matplotlib; "
          "matplotlib.use('Agg'); import matplotlib.pyplot")
 BARE = "import casadi, numpy, scipy, matplotlib"
@@ -50,9 +52,11 @@ def _environments(tmp: str) -> tuple[dict, dict]:
 
 def first_run(repeats: int = 5) -> dict:
     """A ``benchmarks.json`` record: ``seconds`` (the default run with its figures and results),
-    ``floor_seconds`` (the imports it needs), ``ratio``, ``bare_import_seconds``, and
-    ``seconds_without_bytecode_cache`` (the run compiling the project's sources)."""
-    run, floor, bare, uncompiled = [], [], [], []
+    ``floor_seconds`` (the imports it needs), ``ratio``, ``bare_import_seconds``,
+    ``seconds_without_bytecode_cache`` (the run compiling the project's sources) and
+    ``seconds_in_one_process`` (``--jobs 1``; by default the 8 runs and the 2 figures go side by
+    side in ``jobs`` processes, one per available core)."""
+    run, serial, floor, bare, uncompiled = [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         cached, uncached = _environments(tmp)
         floor_cmd, bare_cmd = [sys.executable, "-c", FLOOR], [sys.executable, "-c", BARE]
@@ -66,12 +70,14 @@ def first_run(repeats: int = 5) -> dict:
             floor.append(_wall(floor_cmd, cached, tmp))
             bare.append(_wall(bare_cmd, cached, tmp))
             run.append(_wall(run_cmd(f"r{i}"), cached, tmp))
+            serial.append(_wall(run_cmd(f"s{i}") + ["--jobs", "1"], cached, tmp))
             uncompiled.append(_wall(run_cmd(f"u{i}"), uncached, tmp))
     s, f = statistics.median(run), statistics.median(floor)
     return dict(name="first run: ddcm-compare --out DIR (paper example) / imports", unknowns=1, data_points=500,
                 seconds=s, floor_seconds=f, ratio=s / f, bare_import_seconds=statistics.median(bare),
                 ratio_to_bare_import=s / statistics.median(bare),
-                seconds_without_bytecode_cache=statistics.median(uncompiled), repeats=repeats)
+                seconds_without_bytecode_cache=statistics.median(uncompiled),
+                seconds_in_one_process=statistics.median(serial), jobs=resolve_jobs(None, 8), repeats=repeats)
 
 
 def main(argv=None) -> int:
@@ -81,7 +87,8 @@ def main(argv=None) -> int:
     print(f"default run {rec['seconds']:.2f} s, imports it needs {rec['floor_seconds']:.2f} s "
           f"(ratio {rec['ratio']:.2f}), bare imports {rec['bare_import_seconds']:.2f} s "
           f"(ratio {rec['ratio_to_bare_import']:.2f}); without a bytecode cache the run takes "
-          f"{rec['seconds_without_bytecode_cache']:.2f} s")
+          f"{rec['seconds_without_bytecode_cache']:.2f} s; in one process (--jobs 1) "
+          f"{rec['seconds_in_one_process']:.2f} s (ratio {rec['seconds_in_one_process'] / rec['floor_seconds']:.2f})")
     return 0
 
 

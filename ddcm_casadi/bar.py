@@ -112,14 +112,13 @@ class BarModel(ContactModel):
                     youngs_modulus=None if self.youngs_modulus is None else float(self.youngs_modulus[0]),
                     positions=self.load_parameter.tolist())
 
-    def save_figures(self, cmp, out_dir: str | Path) -> list[Path]:
-        """The paper's Fig. 2 (tip displacement and contact pressure against the obstacle
-        position, :func:`ddcm_casadi.plots.save_fig2`); returns the paths written."""
-        from .plots import save_fig2  # matplotlib only when a plot is drawn
+    def figures(self, cmp) -> dict:
+        """The paper's Fig. 2: tip displacement and contact pressure against the obstacle position
+        (:func:`ddcm_casadi.plots.figure_displacement`, :func:`~ddcm_casadi.plots.figure_pressure`)."""
+        from .plots import figure_displacement, figure_pressure  # matplotlib only when a plot is drawn
 
-        out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)  # the examples' output/<name>/ may not exist yet
-        return save_fig2(cmp, out_dir)
+        return {"fig2a_tip_displacement.png": lambda: figure_displacement(cmp),
+                "fig2b_contact_pressure.png": lambda: figure_pressure(cmp)}
 
 
 def bar_model(*, length: float, area: float = 1.0, youngs_modulus: float | None = None,

@@ -33,6 +33,7 @@ from .errors import DDCMError, InputError, PhysicsWarning
 from .harness import VARIANTS, Comparison, compare
 from .io import OutputFolder, write_csv_atomic, write_json_atomic
 from .overrides import load_case_with_overrides
+from .parallel import resolve_jobs
 
 EXIT_INPUT = 2
 EXIT_NOT_CONVERGED = 3
@@ -71,9 +72,22 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plots", action="store_true", help="do not draw the figures")
     p.add_argument("--strict", action="store_true",
                    help=f"exit with status {EXIT_NOT_CONVERGED} if any step did not converge")
+    p.add_argument("-j", "--jobs", metavar="N", type=_jobs,
+                   help="run the formulations side by side in N processes (default: one per available core)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return p
+
+
+def _jobs(text: str) -> int:
+    """``--jobs``: a positive integer (argparse turns the error into a one-line usage error)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return n
 
 
 def _split(arg: str | None, option: str) -> list[str] | None:
@@ -119,9 +133,9 @@ class _Progress:
     #: Seconds between two lines of one run when stderr is not a terminal.
     interval: float = 10.0
 
-    def __init__(self, n_steps: int, enabled: bool) -> None:
+    def __init__(self, n_steps: int, enabled: bool, *, in_place: bool = True) -> None:
         self.n, self.enabled = n_steps, enabled
-        self.tty = sys.stderr.isatty()
+        self.tty = in_place and sys.stderr.isatty()
         self.t0 = time.perf_counter()
         self._last: tuple[tuple[str, str], float] | None = None  # the run and time of the last line
 
@@ -139,7 +153,10 @@ class _Progress:
         run = (variant, name)
         if (done == self.n or flag or self._last is None or self._last[0] != run
                 or now - self._last[1] >= self.interval):
-            print(msg, file=sys.stderr, flush=True)
+            # one write per line: the processes of ``--jobs`` share stderr, and print() writes the
+            # line and its end separately
+            sys.stderr.write(msg + "\n")
+            sys.stderr.flush()
             self._last = (run, now)
 
 
@@ -190,12 +207,13 @@ def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
     return {f"{variant}/{name}": model.results_fields(cmp.fields(variant, name)) for (variant, name) in cmp.results}
 
 
-def compare_case(case: Case, names: list[str], variants: list[str], *, progress=None) -> Comparison:
+def compare_case(case: Case, names: list[str], variants: list[str], *, progress=None,
+                 jobs: int | None = 1) -> Comparison:
     """Run a case as ``ddcm-compare`` does: the formulations ``names`` with the case's options, the
-    case's DDCM settings (also what ``ddcm-sweep`` runs per case)."""
+    case's DDCM settings (also what ``ddcm-sweep`` runs per case), in ``jobs`` processes."""
     selection = {n: case.formulation_options.get(n, {}) for n in names}
     return compare(case.model, selection, variants=variants, ddcm_max_outer=case.ddcm_max_outer,
-                   ddcm=case.ddcm_options, progress=progress)
+                   ddcm=case.ddcm_options, progress=progress, jobs=jobs)
 
 
 def versions() -> dict:
@@ -237,13 +255,16 @@ def _run_case(args, case: Case, names: list[str], variants: list[str], overrides
         # missing matplotlib must not leave results without their figures.
         from . import plots  # noqa: F401
 
-    progress = _Progress(case.model.n_steps, not args.quiet)
+    jobs = resolve_jobs(args.jobs, len(names) * len(variants))
+    # Runs side by side print their steps as lines: in-place updates of one line would clash.
+    progress = _Progress(case.model.n_steps, not args.quiet, in_place=jobs == 1)
     if not args.quiet:
         print(f"ddcm-compare: {case.source}: {case.model.n_steps} steps, "
-              f"{len(names)} formulations x {len(variants)} variants", file=sys.stderr)
+              f"{len(names)} formulations x {len(variants)} variants"
+              + (f", {jobs} processes" if jobs > 1 else ""), file=sys.stderr)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsWarning)  # printed above, in one line each
-        cmp = compare_case(case, names, variants, progress=progress)
+        cmp = compare_case(case, names, variants, progress=progress, jobs=jobs)
     print(cmp.table())
 
     if folder is not None:
@@ -260,7 +281,7 @@ def _run_case(args, case: Case, names: list[str], variants: list[str], overrides
         with folder.staging() as stage:
             write_csv_atomic(stage / "results.csv", rows)
             written = ["results.csv"]
-            written += [p.relative_to(stage).as_posix() for p in case.model.save_outputs(cmp, stage, figures=draw)]
+            written += [p.relative_to(stage).as_posix() for p in case.model.save_outputs(cmp, stage, figures=draw, jobs=jobs)]
             written.append("results.json")
             # the manifest: the next run into this folder removes these files if it does not write them
             doc["files"] = written

@@ -20,6 +20,7 @@ from ddcm_casadi.formulations.base import Formulation
 
 from .errors import InputError, PhysicsWarning
 from .model import ContactModel
+from .parallel import map_forked, resolve_jobs
 from .problem import ProblemPair, build_problems
 from .solvers.ddcm_options import KEYS, DDCMOptions
 from .solvers.path import DDCMSolver, PathResult, StepResult, solve_classical
@@ -304,7 +305,7 @@ def as_ddcm_options(ddcm: DDCMOptions | Mapping | None) -> DDCMOptions:
 def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] = VARIANTS,
             raise_on_failure: bool = False, ddcm_max_outer: int = 100, ddcm_search: str = "kdtree",
             ddcm: DDCMOptions | None = None,
-            progress: Callable[[str, str, StepResult], None] | None = None) -> Comparison:
+            progress: Callable[[str, str, StepResult], None] | None = None, jobs: int | None = 1) -> Comparison:
     """Run every formulation in every variant along the model's load path.
 
     Parameters
@@ -326,7 +327,13 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         improvement, certificates and noise-robust variants
         (:class:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions`; default: its defaults).
     progress : callable, optional
-        Called as ``progress(variant, formulation, step_result)`` after every step.
+        Called as ``progress(variant, formulation, step_result)`` after every step (with ``jobs >
+        1``, in the process that runs the step).
+    jobs : int or None
+        Processes that run the formulation x variant runs side by side, this one included
+        (:func:`ddcm_casadi.parallel.map_forked`): 1 (default) runs them here one after the other,
+        ``None`` uses every available core. Results are the same; each run's timings are its own
+        (on a shared machine, runs side by side may slow each other).
 
     Returns
     -------
@@ -338,6 +345,8 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         raise InputError(f"unknown variant {bad[0]!r}; choose from {', '.join(VARIANTS)}")
     if ddcm_search not in DDCMSolver.SEARCHES:
         raise InputError(f"unknown data search {ddcm_search!r}; known: {', '.join(DDCMSolver.SEARCHES)}")
+    if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1):
+        raise InputError(f"jobs must be a positive integer or None (every core), got {jobs!r}")
     ddcm = as_ddcm_options(ddcm)
     forms = resolve_formulations(formulations)
     odd = model.path_warnings()  # refuses a meaningless path before any work
@@ -345,25 +354,28 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         warnings.warn(message, PhysicsWarning, stacklevel=2)
     problems = build_problems(model)
     out = Comparison(model=model, problems=problems, formulations=forms, warnings=odd)
-    for variant in variants:
-        if variant == "classical" and problems.classical is None:
-            continue
-        if variant == "ddcm" and problems.projection is None:
-            continue
-        for form in forms:
-            cb = (lambda s, v=variant, n=form.name: progress(v, n, s)) if progress else None
-            t0 = time.perf_counter()
-            if variant == "classical":
-                built = form.build(problems.classical)
-                build = time.perf_counter() - t0
-                r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb)
-            else:
-                built = form.build(problems.projection)
-                solver = DDCMSolver(problems, built, max_outer=ddcm_max_outer, search=ddcm_search, options=ddcm)
-                build = time.perf_counter() - t0
-                r = solver.solve(formulation_name=form.name, raise_on_failure=raise_on_failure, progress=cb)
-            r.build_seconds = build
-            out.results[(variant, form.name)] = r
+    runs = [(variant, form) for variant in variants
+            if (problems.classical if variant == "classical" else problems.projection) is not None
+            for form in forms]
+
+    def run(task):
+        variant, form = task
+        cb = (lambda s: progress(variant, form.name, s)) if progress else None
+        t0 = time.perf_counter()
+        if variant == "classical":
+            built = form.build(problems.classical)
+            build = time.perf_counter() - t0
+            r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb)
+        else:
+            built = form.build(problems.projection)
+            solver = DDCMSolver(problems, built, max_outer=ddcm_max_outer, search=ddcm_search, options=ddcm)
+            build = time.perf_counter() - t0
+            r = solver.solve(formulation_name=form.name, raise_on_failure=raise_on_failure, progress=cb)
+        r.build_seconds = build
+        return r
+
+    for (variant, form), r in zip(runs, map_forked(run, runs, jobs=resolve_jobs(jobs, len(runs)))):
+        out.results[(variant, form.name)] = r
     return out
 
 

@@ -23,6 +23,7 @@ import scipy.sparse as sp
 from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
 from .linalg import SingularMatrix, factorize
+from .parallel import map_forked
 
 
 #: Imposed strain beyond which :meth:`ContactModel.path_warnings` warns: small-strain kinematics
@@ -388,19 +389,28 @@ class ContactModel:
         writes the fields elsewhere (:meth:`save_outputs`)."""
         return fields
 
-    def save_outputs(self, cmp, out_dir, *, figures: bool = True) -> list:
+    def save_outputs(self, cmp, out_dir, *, figures: bool = True, jobs: int = 1) -> list:
         """Write the outputs that suit this model kind besides ``results.csv``/``results.json``
-        (field files, figures unless ``figures`` is false); returns the paths."""
-        return self.save_figures(cmp, out_dir) if figures else []
+        (field files, figures unless ``figures`` is false, drawn in up to ``jobs`` processes);
+        returns the paths."""
+        return self.save_figures(cmp, out_dir, jobs=jobs) if figures else []
 
-    def save_figures(self, cmp, out_dir) -> list:
-        """Draw the figures that suit this model kind into ``out_dir``; returns the paths.
-        Any model: the contact-force history. Imports matplotlib only here."""
+    def figures(self, cmp) -> dict:
+        """The figures that suit this model kind: ``{file name: function drawing it}``, each
+        function returning a matplotlib ``Figure``. Any model: the contact-force history
+        (``contact_history.png``). Imports matplotlib only here."""
+        from .plots import figure_contact_history
+
+        return {"contact_history.png": lambda: figure_contact_history(cmp, pair_labels=self.contact_pair_labels())}
+
+    def save_figures(self, cmp, out_dir, *, jobs: int = 1) -> list:
+        """Draw :meth:`figures` into ``out_dir`` (each written atomically), side by side in up to
+        ``jobs`` processes (:func:`ddcm_casadi.parallel.map_forked`); returns the paths."""
         from pathlib import Path
 
-        from .plots import figure_contact_history, save_figure
+        from .plots import save_figure
 
         out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        return [save_figure(figure_contact_history(cmp, pair_labels=self.contact_pair_labels()),
-                            out_dir / "contact_history.png")]
+        out_dir.mkdir(parents=True, exist_ok=True)  # the examples' output/<name>/ may not exist yet
+        return map_forked(lambda item: save_figure(item[1](), out_dir / item[0]), list(self.figures(cmp).items()),
+                          jobs=jobs)

@@ -121,10 +121,6 @@ def save_figure(fig: Figure, path: str | Path, *, dpi: int = 150) -> Path:
     return write_bytes_atomic(path, buf.getvalue())
 
 
-def save_fig2(cmp: Comparison, out_dir: str | Path) -> list[Path]:
-    out_dir = Path(out_dir)
-    return [save_figure(figure_displacement(cmp), out_dir / "fig2a_tip_displacement.png"),
-            save_figure(figure_pressure(cmp), out_dir / "fig2b_contact_pressure.png")]
 
 
 # --------------------------------------------------------------------------- trusses
@@ -501,11 +497,13 @@ def structure_formulation(cmp: Comparison, variant: str) -> str | None:
     return "fischer_burmeister" if "fischer_burmeister" in run else run[0]
 
 
-def save_figures(cmp: Comparison, out_dir: str | Path) -> list[Path]:
-    """Save the figures that suit the model; returns the paths written (atomically).
+def save_figures(cmp: Comparison, out_dir: str | Path, *, jobs: int = 1) -> list[Path]:
+    """Save the figures that suit the model, in up to ``jobs`` processes; returns the paths
+    written (atomically).
 
-    The model kind decides (:meth:`~ddcm_casadi.model.ContactModel.save_figures`): the paper's
-    one-element bar draws Fig. 2 (:func:`save_fig2`); a truss ``structure_classical.png`` and
-    ``structure_ddcm.png`` (last step, :func:`structure_formulation`) and ``contact_history.png``.
+    The model kind decides (:meth:`~ddcm_casadi.model.ContactModel.figures`): the paper's
+    one-element bar draws Fig. 2 (:func:`figure_displacement`, :func:`figure_pressure`); a truss
+    ``structure_classical.png`` and ``structure_ddcm.png`` (last step, :func:`structure_formulation`)
+    and ``contact_history.png``.
     """
-    return cmp.model.save_figures(cmp, out_dir)
+    return cmp.model.save_figures(cmp, out_dir, jobs=jobs)

@@ -153,23 +153,18 @@ class TrussModel(ContactModel):
         return dict(nodal_displacement=np.array([self.nodal_displacements(x) for x in u]),
                     member_force=self.member_force(stress))
 
-    def save_figures(self, cmp, out_dir: str | Path) -> list[Path]:
+    def figures(self, cmp) -> dict:
         """``structure_classical.png`` and ``structure_ddcm.png`` (last step, Fischer-Burmeister
         if it was run, else the first formulation of that variant; a variant that was not run is
-        skipped) and ``contact_history.png``; returns the paths written (atomically)."""
+        skipped) and ``contact_history.png``."""
         from . import plots  # matplotlib only when a plot is drawn
 
-        out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)  # the examples' output/<name>/ may not exist yet
-        paths = []
+        drawings = {}
         for variant in ("classical", "ddcm"):
             name = plots.structure_formulation(cmp, variant)
             if name is not None:
-                paths.append(plots.save_figure(plots.figure_structure(cmp, variant, name),
-                                               out_dir / f"structure_{variant}.png"))
-        history = plots.figure_contact_history(cmp, pair_labels=self.contact_pair_labels())
-        paths.append(plots.save_figure(history, out_dir / "contact_history.png"))
-        return paths
+                drawings[f"structure_{variant}.png"] = (lambda v=variant, n=name: plots.figure_structure(cmp, v, n))
+        return {**drawings, **super().figures(cmp)}
 
 
 def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=None,

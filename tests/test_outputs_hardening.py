@@ -16,12 +16,9 @@ from __future__ import annotations
 import errno
 import json
 import os
-import queue
 import re
-import signal
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import pytest
@@ -31,6 +28,7 @@ from ddcm_casadi.cli import EXIT_INPUT, main
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.io import LOCK_FILE, PREVIOUS_PREFIX, STAGING_PREFIX, FolderLock, OutputFolder
 
+from .interrupt import interrupt_at
 from .test_bad_input import FAST, PREFIX, assert_input_error, case_toml, run_cli
 from .test_continuum import _CASE as TINY_CONTINUUM  # a 2 x 2 block under a cylinder, two steps
 
@@ -262,35 +260,9 @@ def test_ctrl_c_during_an_ipopt_solve_stops_the_run(tmp_path):
     argv = [sys.executable, "-m", "ddcm_casadi.cli", "--config", str(CASES / "hertz2d.toml"),
             "--set", "mesh.refine_near.levels=1", "--set", "mesh.divisions=[6,6]",
             "--formulations", "mpcc", "--variants", "classical", "--no-plots", "--out", "out"]
-    # SIGINT as at a terminal even if this test runs where it is ignored (a background job)
-    proc = subprocess.Popen(argv, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    lines: queue.Queue = queue.Queue()
-    err: list[str] = []
-
-    def read():
-        for line in proc.stderr:
-            err.append(line)
-            lines.put(line)
-        lines.put(None)
-
-    threading.Thread(target=read, daemon=True).start()
-    try:
-        while True:  # the progress line of the first step (stderr is a pipe): IPOPT is at work
-            line = lines.get(timeout=300)
-            assert line is not None, "".join(err)
-            if re.search(r"classical/mpcc\s+step\s+1/5", line):
-                break
-        threading.Event().wait(0.5)
-        os.kill(proc.pid, signal.SIGINT)
-        proc.wait(timeout=120)
-    finally:
-        proc.kill()
-        proc.wait()
-    while lines.get(timeout=10) is not None:
-        pass
-    text = "".join(err)
-    assert proc.returncode == 130, text
+    # the progress line of the first step (stderr is a pipe): IPOPT is at work
+    returncode, text = interrupt_at(argv, tmp_path, r"classical/mpcc\s+step\s+1/5")
+    assert returncode == 130, text
     assert text.strip().splitlines()[-1] == "ddcm-compare: interrupted", text
     assert "Traceback" not in text and "step   5/5" not in text
     assert not (tmp_path / "out").exists()

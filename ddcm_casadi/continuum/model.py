@@ -179,16 +179,17 @@ class ContinuumModel(ContactModel):
                     contact_pressure=p, total_contact_force=np.sum(self.contact_area * p, axis=-1),
                     converged=fields["converged"])
 
-    def save_outputs(self, cmp, out_dir, *, figures: bool = True) -> list[Path]:
+    def save_outputs(self, cmp, out_dir, *, figures: bool = True, jobs: int = 1) -> list[Path]:
         """One VTU file per step and run with a ``.pvd`` series each, and the figures."""
         from .results import save_continuum_outputs
 
-        return save_continuum_outputs(self, cmp, out_dir, figures=figures)
+        return save_continuum_outputs(self, cmp, out_dir, figures=figures, jobs=jobs)
 
-    def save_figures(self, cmp, out_dir) -> list[Path]:
-        from .results import save_continuum_figures
+    def figures(self, cmp) -> dict:
+        """``pressure_profile.png``, ``deformed_<variant>.png`` and ``contact_history.png``."""
+        from .results import continuum_figures
 
-        return save_continuum_figures(self, cmp, out_dir)
+        return continuum_figures(self, cmp)
 
 
 # ------------------------------------------------------------------------------------ builder

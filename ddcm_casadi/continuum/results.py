@@ -53,8 +53,9 @@ def _step_data(model, run, step) -> dict:
                 cell_data=cell)
 
 
-def save_continuum_outputs(model, cmp, out_dir, *, figures: bool = True) -> list[Path]:
-    """Write the VTU series of every run (and the figures unless ``figures`` is false)."""
+def save_continuum_outputs(model, cmp, out_dir, *, figures: bool = True, jobs: int = 1) -> list[Path]:
+    """Write the VTU series of every run (and the figures unless ``figures`` is false, in up to
+    ``jobs`` processes)."""
     out_dir = Path(out_dir)
     vtu = out_dir / "vtu"
     vtu.mkdir(parents=True, exist_ok=True)
@@ -64,7 +65,7 @@ def save_continuum_outputs(model, cmp, out_dir, *, figures: bool = True) -> list
         steps = [_step_data(model, run, s) for s in run.steps]
         written += write_vtu_series(vtu, points=points, cells=cells, steps=steps, name=f"{variant}_{name}")
     if figures:
-        written += save_continuum_figures(model, cmp, out_dir)
+        written += model.save_figures(cmp, out_dir, jobs=jobs)
     return written
 
 
@@ -83,13 +84,12 @@ def _pick(cmp, variant: str):
     return next((r for r in runs if r[1] == "fischer_burmeister"), runs[0])
 
 
-def save_continuum_figures(model, cmp, out_dir) -> list[Path]:
-    """``pressure_profile.png``, ``deformed_<variant>.png`` and ``contact_history.png``."""
+def continuum_figures(model, cmp) -> dict:
+    """``pressure_profile.png``, ``deformed_<variant>.png`` and ``contact_history.png`` (file
+    name: function drawing it)."""
     from ..model import ContactModel
-    from ..plots import save_figure
 
-    out_dir = Path(out_dir)
-    written = []
+    drawings = {}
     pairs, x = _profile_coordinate(model)
     # show the contact zone: 1.5 x the farthest pair in contact in any run's last step
     active = np.zeros(pairs.size, dtype=bool)
@@ -108,16 +108,13 @@ def save_continuum_figures(model, cmp, out_dir) -> list[Path]:
             hertz = model.reference.curve(model, last.p)
     if model.n_contacts:
         xlabel = "distance from the indenter's axis (m)" if model.reference is not None else "x (m)"
-        written.append(save_figure(figure_pressure_profile(runs, hertz=hertz, xlabel=xlabel,
-                                                           title=f"{model.name}: contact pressure, last step"),
-                                   out_dir / "pressure_profile.png"))
+        drawings["pressure_profile.png"] = lambda: figure_pressure_profile(
+            runs, hertz=hertz, xlabel=xlabel, title=f"{model.name}: contact pressure, last step")
     for variant in ("classical", "ddcm"):
         key = _pick(cmp, variant)
-        if key is None:
-            continue
-        written.append(save_figure(_deformed(model, cmp.results[key], key), out_dir / f"deformed_{variant}.png"))
-    written += ContactModel.save_figures(model, cmp, out_dir)
-    return written
+        if key is not None:
+            drawings[f"deformed_{variant}.png"] = (lambda k=key: _deformed(model, cmp.results[k], k))
+    return {**drawings, **ContactModel.figures(model, cmp)}
 
 
 def _deformed(model, run, key):

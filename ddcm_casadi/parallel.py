@@ -1,0 +1,162 @@
+"""Independent runs in processes forked from this one (``compare(..., jobs=N)``, ``ddcm-compare --jobs``).
+
+A comparison is a handful of independent runs (formulation x variant) on one model. Forked workers
+inherit the model, its built problems and every loaded library, so nothing is pickled on the way
+in, and only each run's result (small: per-step records) on the way back. Runs are handed out one
+at a time from a shared counter, so a long run does not hold up the others; each result is the
+same as in a serial run (the runs share no state).
+
+Ctrl-C reaches the whole process group: workers ignore it and the parent, which gets the
+``KeyboardInterrupt``, kills them. An exception in a run is re-raised in the parent (the one of the
+first run in order, as a serial loop would have raised it); warnings issued in a worker are
+re-issued in the parent. Where ``os.fork`` does not exist (Windows), runs are serial.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import sys
+import warnings
+from typing import Callable, Sequence, TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the platform reports it)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def resolve_jobs(jobs: int | None, tasks: int) -> int:
+    """Worker processes for ``tasks`` runs: ``jobs`` (``None``: :func:`available_cores`), at most one
+    per run."""
+    n = available_cores() if jobs is None else int(jobs)
+    return max(1, min(n, tasks))
+
+
+def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> list[R]:
+    """``[function(item) for item in items]``, in up to ``jobs`` processes (this one included).
+
+    Parameters
+    ----------
+    function : callable
+        Run in forked workers: it may be a closure over anything (nothing is pickled); its
+        result must pickle.
+    items : sequence
+    jobs : int
+        Processes, this one included; 1 (or a platform without ``fork``) runs serially here.
+
+    Returns
+    -------
+    list
+        The results in the order of ``items``.
+    """
+    items = list(items)
+    jobs = max(1, min(int(jobs), len(items)))
+    if jobs == 1 or not hasattr(os, "fork"):
+        return [function(x) for x in items]
+    import multiprocessing
+
+    counter = multiprocessing.get_context("fork").Value("q", 0)
+
+    def take() -> int:
+        with counter.get_lock():
+            i = counter.value
+            counter.value += 1
+        return i
+
+    sys.stdout.flush()  # else a worker inherits, and would repeat, what is still buffered
+    sys.stderr.flush()
+    workers: list[tuple[int, int]] = []  # (pid, read end of its pipe)
+    try:
+        for _ in range(jobs - 1):
+            read, write = os.pipe()
+            pid = os.fork()
+            if pid == 0:  # pragma: no cover - the worker (coverage does not follow forks)
+                os.close(read)
+                _worker(function, items, take, write)
+            os.close(write)
+            workers.append((pid, read))
+        done: dict[int, tuple[bool, object]] = {}
+        while (i := take()) < len(items):
+            try:
+                done[i] = (True, function(items[i]))
+            except Exception as exc:  # re-raised below, after the workers are collected
+                done[i] = (False, exc)
+                break
+        caught: list = []
+        for pid, read in workers:
+            with os.fdopen(read, "rb") as pipe:
+                payload = pipe.read()
+            os.waitpid(pid, 0)
+            if not payload:
+                raise RuntimeError(f"a worker process (pid {pid}) ended without a result")
+            results, worker_warnings = pickle.loads(payload)
+            done.update(results)
+            caught += worker_warnings
+        workers = []
+    finally:
+        for pid, read in workers:  # interrupted or failed: stop and reap the workers
+            try:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+            except OSError:
+                pass
+            try:
+                os.close(read)
+            except OSError:
+                pass
+    for message, category, filename, lineno in caught:
+        warnings.warn_explicit(message, category, filename, lineno)
+    out = []
+    for i in range(len(items)):
+        # An item nobody took lies after a failed one (every process stops at its failure): the
+        # first failure in order is raised before any gap is reached.
+        ok, value = done.get(i, (False, RuntimeError(f"run {i} was lost between the worker processes")))
+        if not ok:
+            raise value
+        out.append(value)
+    return out
+
+
+def _worker(function, items, take, write: int) -> None:  # pragma: no cover - runs in a fork
+    """A forked worker's life: runs until the counter passes the end, then its results and warnings
+    through the pipe ``write``, and ``os._exit`` (no cleanup of the parent's state)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and kills the workers
+    results: dict[int, tuple[bool, object]] = {}
+    status = 0
+    with warnings.catch_warnings(record=True) as caught:
+        try:
+            while (i := take()) < len(items):
+                try:
+                    results[i] = (True, function(items[i]))
+                except Exception as exc:
+                    results[i] = (False, exc)
+                    break
+        except BaseException:  # noqa: BLE001 - the worker must always reach os._exit
+            status = 1
+    try:
+        ws = [(w.message, w.category, w.filename, w.lineno) for w in caught]
+        for i, (ok, value) in results.items():
+            try:
+                pickle.dumps(value)
+            except Exception as exc:  # say what could not be sent, rather than lose the run
+                what = "result" if ok else f"exception {type(value).__name__}: {value}"
+                results[i] = (False, RuntimeError(f"the run's {what} cannot be sent between processes: {exc}"))
+        try:
+            payload = pickle.dumps((results, ws))
+        except Exception:  # the warnings: send them as text
+            payload = pickle.dumps((results, [(str(m), UserWarning, f, n) for m, _, f, n in ws]))
+        with os.fdopen(write, "wb") as pipe:
+            pipe.write(payload)
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:  # noqa: BLE001
+        status = 1
+    os._exit(status)

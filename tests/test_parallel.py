@@ -1,0 +1,132 @@
+"""Runs and figures side by side in forked processes (``compare(jobs=N)``, ``ddcm-compare --jobs``).
+
+Every result must equal the serial one (the runs share no state), failures and warnings of a worker
+must reach the caller as they would serially, and Ctrl-C must stop every process.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ddcm_casadi import InputError, compare
+from ddcm_casadi.cli import main
+from ddcm_casadi.parallel import map_forked, resolve_jobs
+
+from .interrupt import interrupt_at
+from .test_first_run import FIELDS
+
+CASES = Path(__file__).resolve().parent.parent / "examples" / "cases"
+fork_only = pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+
+
+@fork_only
+@pytest.mark.parametrize("jobs", [2, 3, 8])
+def test_map_forked_returns_every_result_in_order(jobs):
+    def run(i):
+        time.sleep(0.05)  # long enough for every worker to start and take a share
+        return i * i, os.getpid()
+
+    pids = map_forked(run, range(7), jobs=jobs)
+    assert [r for r, _ in pids] == [i * i for i in range(7)]
+    assert len({pid for _, pid in pids}) > 1  # the work was shared
+    assert map_forked(lambda i: i, [], jobs=jobs) == []
+
+
+@fork_only
+def test_map_forked_raises_the_first_failure_in_order():
+    def run(i):
+        if i in (3, 5):
+            raise ValueError(f"run {i} failed")
+        return i
+
+    for jobs in (1, 2, 4):
+        with pytest.raises(ValueError, match="run 3 failed"):
+            map_forked(run, range(8), jobs=jobs)
+
+
+@fork_only
+def test_map_forked_reissues_the_workers_warnings():
+    def run(i):
+        warnings.warn(f"warning of run {i}", UserWarning)
+        return i
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert map_forked(run, range(4), jobs=2) == [0, 1, 2, 3]
+    assert sorted(str(w.message) for w in caught) == [f"warning of run {i}" for i in range(4)]
+
+
+@fork_only
+def test_map_forked_says_what_cannot_be_sent_back():
+    with pytest.raises(RuntimeError, match="cannot be sent between processes"):
+        map_forked(_closure, range(4), jobs=2)
+
+
+def _closure(i):
+    time.sleep(0.05)  # every worker takes a share
+    return lambda: i  # a closure does not pickle
+
+
+def test_resolve_jobs():
+    assert resolve_jobs(1, 8) == 1
+    assert resolve_jobs(16, 3) == 3
+    assert 1 <= resolve_jobs(None, 8) <= 8
+    assert resolve_jobs(4, 0) == 1
+
+
+@fork_only
+def test_compare_side_by_side_equals_one_after_the_other(paper, paper_comparison):
+    side = compare(paper, jobs=3)
+    assert list(side.results) == list(paper_comparison.results)
+    for key, run in paper_comparison.results.items():
+        for field in FIELDS:
+            np.testing.assert_array_equal(side[key].array(field), run.array(field), err_msg=f"{key} {field}")
+
+
+@pytest.mark.parametrize("jobs", [0, -1, 1.5, "2", True])
+def test_compare_refuses_bad_jobs(paper, jobs):
+    with pytest.raises(InputError, match="jobs must be a positive integer"):
+        compare(paper, jobs=jobs)
+
+
+@pytest.mark.parametrize("value", ["0", "-2", "two", "1.5"])
+def test_cli_refuses_bad_jobs(value, capsys, tmp_path):
+    with pytest.raises(SystemExit) as exc:
+        main(["--jobs", value, "--out", str(tmp_path / "out")])
+    assert exc.value.code == 2
+    assert f"--jobs: must be a positive integer, got '{value}'" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+@fork_only
+def test_figures_side_by_side_are_the_serial_figures(paper_comparison, tmp_path):
+    model = paper_comparison.model
+    one = model.save_figures(paper_comparison, tmp_path / "one", jobs=1)
+    two = model.save_figures(paper_comparison, tmp_path / "two", jobs=2)
+    assert [p.name for p in one] == [p.name for p in two] == list(model.figures(paper_comparison))
+    for a, b in zip(one, two):
+        assert a.read_bytes() == b.read_bytes(), a.name
+
+
+@fork_only
+def test_ctrl_c_stops_every_process(tmp_path):
+    """A real SIGINT to ``ddcm-compare --jobs 2`` while two Hertz runs go on side by side:
+    ``interrupted``, exit 130, nothing in ``--out``, and no worker left (:func:`interrupt_at`
+    reads stderr to its end, which a live worker would hold open)."""
+    argv = [sys.executable, "-m", "ddcm_casadi.cli", "--config", str(CASES / "hertz2d.toml"),
+            "--set", "mesh.refine_near.levels=1", "--set", "mesh.divisions=[6,6]",
+            "--formulations", "mpcc,fischer_burmeister", "--variants", "classical", "--jobs", "2",
+            "--no-plots", "--out", "out"]
+    # the first step of the (slow) MPCC run: both processes are at work
+    returncode, text = interrupt_at(argv, tmp_path, r"classical/mpcc\s+step\s+1/5")
+    assert returncode == 130, text
+    assert text.strip().splitlines()[-1] == "ddcm-compare: interrupted", text
+    assert "Traceback" not in text and "mpcc                  step   5/5" not in text
+    assert not (tmp_path / "out").exists()
