@@ -18,6 +18,7 @@ import os
 import pickle
 import signal
 import sys
+import threading
 import warnings
 from typing import Callable, Sequence, TypeVar
 
@@ -50,7 +51,9 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
         result must pickle.
     items : sequence
     jobs : int
-        Processes, this one included; 1 (or a platform without ``fork``) runs serially here.
+        Processes, this one included. Runs are serial here with 1, on a platform without
+        ``fork``, and in a process with other Python threads (a dask worker, say): a fork copies
+        only the calling thread, so a lock another thread holds would never be released.
 
     Returns
     -------
@@ -59,7 +62,7 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
     """
     items = list(items)
     jobs = max(1, min(int(jobs), len(items)))
-    if jobs == 1 or not hasattr(os, "fork"):
+    if jobs == 1 or not hasattr(os, "fork") or threading.active_count() > 1:
         return [function(x) for x in items]
     import multiprocessing
 

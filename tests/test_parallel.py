@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -130,3 +131,16 @@ def test_ctrl_c_stops_every_process(tmp_path):
     assert text.strip().splitlines()[-1] == "ddcm-compare: interrupted", text
     assert "Traceback" not in text and "mpcc                  step   5/5" not in text
     assert not (tmp_path / "out").exists()
+
+
+@fork_only
+def test_map_forked_is_serial_where_other_threads_run():
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        pids = map_forked(lambda i: os.getpid(), range(4), jobs=4)
+    finally:
+        stop.set()
+        other.join()
+    assert set(pids) == {os.getpid()}
