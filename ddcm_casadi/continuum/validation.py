@@ -15,13 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import cases
 from ..data import MaterialDataset
 from ..harness import compare
 from ..metric import Metric, isotropic_elasticity
 from ..ladder import Check
 
 FB = "fischer_burmeister"
-EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "cases" / "hertz2d.toml"
+#: The Hertz example, ``examples/cases/hertz2d.toml``, installed as package data (``ddcm_casadi.cases``).
+EXAMPLE = Path(cases.__file__).resolve().parent / "hertz2d.toml"
 E, NU, R = 200e9, 0.3, 0.05
 
 
