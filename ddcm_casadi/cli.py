@@ -281,7 +281,8 @@ def _run_case(args, case: Case, names: list[str], variants: list[str], overrides
         with folder.staging() as stage:
             write_csv_atomic(stage / "results.csv", rows)
             written = ["results.csv"]
-            written += [p.relative_to(stage).as_posix() for p in case.model.save_outputs(cmp, stage, figures=draw, jobs=jobs)]
+            outputs = case.model.save_outputs(cmp, stage, figures=draw, jobs=jobs)
+            written += [p.relative_to(stage).as_posix() for p in outputs]
             written.append("results.json")
             # the manifest: the next run into this folder removes these files if it does not write them
             doc["files"] = written

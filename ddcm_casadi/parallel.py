@@ -74,16 +74,22 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
             counter.value += 1
         return i
 
+    def stop() -> None:
+        # After a failure no process starts another item (a serial loop would have stopped there);
+        # items already taken finish, so every item before the failure has its outcome.
+        with counter.get_lock():
+            counter.value = max(counter.value, len(items))
+
     sys.stdout.flush()  # else a worker inherits, and would repeat, what is still buffered
     sys.stderr.flush()
-    workers: list[tuple[int, int]] = []  # (pid, read end of its pipe)
+    workers: list[tuple[int, int | None]] = []  # (pid, read end of its pipe while open)
     try:
         for _ in range(jobs - 1):
             read, write = os.pipe()
             pid = os.fork()
             if pid == 0:  # pragma: no cover - the worker (coverage does not follow forks)
                 os.close(read)
-                _worker(function, items, take, write)
+                _worker(function, items, take, stop, write)
             os.close(write)
             workers.append((pid, read))
         done: dict[int, tuple[bool, object]] = {}
@@ -92,29 +98,30 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
                 done[i] = (True, function(items[i]))
             except Exception as exc:  # re-raised below, after the workers are collected
                 done[i] = (False, exc)
+                stop()
                 break
         caught: list = []
-        for pid, read in workers:
-            with os.fdopen(read, "rb") as pipe:
+        while workers:
+            pid, read = workers[0]
+            with os.fdopen(read, "rb") as pipe:  # until the worker's end: it writes once, then exits
+                workers[0] = (pid, None)
                 payload = pipe.read()
             os.waitpid(pid, 0)
+            workers.pop(0)
             if not payload:
                 raise RuntimeError(f"a worker process (pid {pid}) ended without a result")
             results, worker_warnings = pickle.loads(payload)
             done.update(results)
             caught += worker_warnings
-        workers = []
     finally:
-        for pid, read in workers:  # interrupted or failed: stop and reap the workers
+        for pid, read in workers:  # interrupted or failed: stop and reap the workers not yet reaped
             try:
                 os.kill(pid, signal.SIGKILL)
                 os.waitpid(pid, 0)
             except OSError:
                 pass
-            try:
+            if read is not None:  # else closed by its reader
                 os.close(read)
-            except OSError:
-                pass
     for message, category, filename, lineno in caught:
         warnings.warn_explicit(message, category, filename, lineno)
     out = []
@@ -128,7 +135,7 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
     return out
 
 
-def _worker(function, items, take, write: int) -> None:  # pragma: no cover - runs in a fork
+def _worker(function, items, take, stop, write: int) -> None:  # pragma: no cover - runs in a fork
     """A forked worker's life: runs until the counter passes the end, then its results and warnings
     through the pipe ``write``, and ``os._exit`` (no cleanup of the parent's state)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and kills the workers
@@ -141,6 +148,7 @@ def _worker(function, items, take, write: int) -> None:  # pragma: no cover - ru
                     results[i] = (True, function(items[i]))
                 except Exception as exc:
                     results[i] = (False, exc)
+                    stop()
                     break
         except BaseException:  # noqa: BLE001 - the worker must always reach os._exit
             status = 1
@@ -148,7 +156,7 @@ def _worker(function, items, take, write: int) -> None:  # pragma: no cover - ru
         ws = [(w.message, w.category, w.filename, w.lineno) for w in caught]
         for i, (ok, value) in results.items():
             try:
-                pickle.dumps(value)
+                pickle.loads(pickle.dumps(value))  # an exception may pickle but not unpickle
             except Exception as exc:  # say what could not be sent, rather than lose the run
                 what = "result" if ok else f"exception {type(value).__name__}: {value}"
                 results[i] = (False, RuntimeError(f"the run's {what} cannot be sent between processes: {exc}"))

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ddcm_casadi import InputError, compare
+from ddcm_casadi import ConvergenceError, InputError, compare
 from ddcm_casadi.cli import main
 from ddcm_casadi.parallel import map_forked, resolve_jobs
 
@@ -50,6 +50,33 @@ def test_map_forked_raises_the_first_failure_in_order():
     for jobs in (1, 2, 4):
         with pytest.raises(ValueError, match="run 3 failed"):
             map_forked(run, range(8), jobs=jobs)
+
+
+@fork_only
+def test_no_item_starts_after_a_failure(tmp_path):
+    """As a serial loop stops at its failure: items already taken finish, no new one starts."""
+    def run(i):
+        (tmp_path / str(i)).touch()
+        if i == 1:
+            raise ValueError("run 1 failed")
+        time.sleep(0.5)  # the worker's failure comes while this one runs
+        return i
+
+    with pytest.raises(ValueError, match="run 1 failed"):
+        map_forked(run, range(8), jobs=2)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["0", "1"]
+
+
+@fork_only
+def test_compare_side_by_side_raises_as_one_after_the_other(paper):
+    selection = {"penalty": {"max_iter": 1}, "fischer_burmeister": {}}
+    errors = []
+    for jobs in (1, 2):
+        with pytest.raises(ConvergenceError) as exc:
+            compare(paper, selection, raise_on_failure=True, jobs=jobs)
+        errors.append(exc.value)
+    assert str(errors[0]) == str(errors[1]) and "step 11 did not converge" in str(errors[0])
+    assert errors[0].diagnostics.keys() == errors[1].diagnostics.keys()
 
 
 @fork_only
