@@ -317,10 +317,13 @@ def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]
     if n <= colamd_limit:
         times["scipy splu default (COLAMD)"] = median_time(lambda: spla.splu(A).solve(b), repeats)
     floor = times[previous]
-    return [dict(name=f"linear solver, 2-D continuum projection KKT matrix: {label}", unknowns=n, data_points=0,
-                 seconds=t, floor_seconds=floor, ratio=t / floor, nnz=int(A.nnz),
-                 note="floor: factorisation and solve with the default (superlu, ordered by the pattern)")
-            for label, t in times.items()]
+    name = "linear solver, 2-D continuum projection KKT matrix: {}".format
+    return ([dict(name=name(label), unknowns=n, data_points=0, seconds=t, floor_seconds=floor, ratio=t / floor,
+                  nnz=int(A.nnz), note="floor: factorisation and solve with the default (superlu, ordered by the pattern)")
+             for label, t in times.items()]
+            + [dict(name=name(label), unknowns=n, data_points=0, seconds=float("nan"), floor_seconds=floor,
+                    ratio=float("nan"), nnz=int(A.nnz), error=f"not run: {reason}")
+               for label, reason in linalg.unavailable_solvers().items()])
 
 
 PEAK_MEMORY = """

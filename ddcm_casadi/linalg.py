@@ -262,6 +262,20 @@ _SOLVERS: dict[str, Callable[[sp.csc_matrix], Factor]] = {"superlu": _superlu}
 if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on first use (it loads MKL)
     _SOLVERS["pardiso"] = _pardiso
 _ACTIVE = ["superlu"]
+#: Why a registered optional solver cannot run here (its library failed to load), by name.
+_UNUSABLE: dict[str, str] = {}
+
+
+def _check_loads(name: str) -> str | None:
+    """Why solver ``name`` cannot run here, or ``None``. PARDISO is registered when ``pypardiso``
+    is installed, without loading MKL at import; here it is loaded (pypardiso installed without
+    a findable MKL runtime raises ImportError)."""
+    if name == "pardiso" and name not in _UNUSABLE:
+        try:
+            import pypardiso  # noqa: F401
+        except (ImportError, OSError) as exc:
+            _UNUSABLE[name] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return _UNUSABLE.get(name)
 
 
 def register_solver(name: str, factorize_fn: Callable[[sp.csc_matrix], Factor]) -> None:
@@ -275,6 +289,9 @@ def use_solver(name: str) -> None:
     """Select the sparse solver used by every factorisation from now on."""
     if name not in _SOLVERS:
         raise InputError(f"unknown linear solver {name!r}; known: {', '.join(_SOLVERS)}")
+    reason = _check_loads(name)
+    if reason is not None:
+        raise InputError(f"linear solver {name!r} cannot run here: {reason}")
     _ACTIVE[0] = name
 
 
@@ -386,8 +403,14 @@ def solver_name() -> str:
 
 
 def available_solvers() -> tuple[str, ...]:
-    """The registered solvers (``"pardiso"`` only where ``pypardiso`` imports)."""
-    return tuple(_SOLVERS)
+    """The registered solvers that can run here (``"pardiso"`` only where ``pypardiso`` imports,
+    which loads MKL)."""
+    return tuple(name for name in _SOLVERS if _check_loads(name) is None)
+
+
+def unavailable_solvers() -> dict[str, str]:
+    """Registered solvers that cannot run here, with the reason (their library did not load)."""
+    return {name: reason for name in _SOLVERS if (reason := _check_loads(name)) is not None}
 
 
 def factorize(A: sp.spmatrix, *, iterated: bool = False) -> Factor:

@@ -5,6 +5,7 @@ Newton Jacobians) to its backward error, and reports a singular matrix as
 
 from __future__ import annotations
 
+import sys
 from functools import cache
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 import scipy.sparse as sp
 
 from ddcm_casadi import formulations as registry
-from ddcm_casadi import linalg, paper_bar
+from ddcm_casadi import InputError, linalg, paper_bar
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.ladder import warren_truss
 
@@ -189,3 +190,16 @@ def test_low_rank_updates_give_the_factorised_path(monkeypatch):
     for field in ("u", "p", "stress"):
         a, b = with_updates.array(field), factorised.array(field)
         assert np.max(np.abs(a - b)) <= 1e-7 * np.max(np.abs(b))
+
+
+def test_an_optional_solver_whose_library_does_not_load_is_not_offered(monkeypatch):
+    """pypardiso installed without a findable MKL runtime raises ImportError on import: PARDISO is
+    then neither listed nor selectable, with the reason in one line."""
+    monkeypatch.setitem(linalg._SOLVERS, "pardiso", linalg._pardiso)
+    monkeypatch.setattr(linalg, "_UNUSABLE", {})
+    monkeypatch.setitem(sys.modules, "pypardiso", None)  # import pypardiso raises ImportError
+    assert "pardiso" not in linalg.available_solvers() and "superlu" in linalg.available_solvers()
+    assert list(linalg.unavailable_solvers()) == ["pardiso"]
+    with pytest.raises(InputError, match="linear solver 'pardiso' cannot run here: "):
+        linalg.use_solver("pardiso")
+    assert linalg.solver_name() == "superlu"
