@@ -39,6 +39,7 @@ import scipy.sparse.linalg as spla
 
 from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi import formulations as registry
+from ddcm_casadi import linalg
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.linalg import factorize, solver_name
 from ddcm_casadi.problem import build_problems
@@ -265,15 +266,18 @@ def build_sizes(family: str, sizes, repeats: int) -> list[dict]:
     return out
 
 
-def continuum_record(unknowns: int, repeats: int) -> dict:
+def continuum_record(unknowns: int, repeats: int, solver: str = "superlu") -> dict:
     """A DDCM iteration on the 2-D continuum (:func:`continuum_block` of about ``unknowns``
     projection unknowns, 21^3 Hookean data, 5 load steps, FB) against both floors
     (:func:`iteration_floor`), with its build, its factorisations and low-rank factor updates,
-    and the peak resident memory of the process (Linux ``VmHWM``)."""
+    and the peak resident memory of the process (Linux ``VmHWM``). ``solver``: the sparse solver
+    of :mod:`ddcm_casadi.linalg` for every factorisation, the floor's included."""
+    linalg.use_solver(solver)
     model = BUILD_MODELS["2-D continuum"](unknowns)
     rec = ddcm_iteration(model, repeats)
     peak = peak_memory_bytes()
-    return dict(name=f"DDCM iteration, 2-D continuum: {model.name}", **rec, peak_memory_bytes=peak)
+    suffix = "" if solver == "superlu" else f", {solver}"
+    return dict(name=f"DDCM iteration, 2-D continuum: {model.name}{suffix}", **rec, peak_memory_bytes=peak)
 
 
 def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]:
@@ -283,8 +287,6 @@ def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]
     ``colamd_limit`` unknowns; ``floor_seconds``: the package's default (SuperLU, ordered by the
     pattern). Also the solve with a kept factor and a rank-``r`` update (:class:`ReferenceFactor`)
     for the ``r`` rows of one pair switching piece (built from its kept columns, then a solve)."""
-    from ddcm_casadi import linalg
-
     model = BUILD_MODELS["2-D continuum"](unknowns)
     problems = build_problems(model)
     system = _fb_system(registry.get("fischer_burmeister").build(problems.projection))
@@ -338,8 +340,6 @@ def stiffness_solvers(unknowns: int, repeats: int) -> list[dict]:
     this is the choice an iterative solver of a reduced, definite system would face. Without
     ``pyamg`` installed the record says so (``error``)."""
     import importlib.util
-
-    from ddcm_casadi import linalg
 
     model = BUILD_MODELS["2-D continuum"](unknowns)
     B, w, k = model.strain_operator, model.volumes, model.strain_components
@@ -618,9 +618,11 @@ def main(argv=None) -> int:
         for rec in in_fresh_process("stiffness_solvers", u, 1 if u > 10**5 else rep,
                                     label=f"stiffness solvers, 2-D continuum, about {u:.0e} unknowns", unknowns=u):
             log(rec)
-        for rec in in_fresh_process("continuum_record", u, 1,
-                                    label=f"DDCM iteration, 2-D continuum, about {u:.0e} unknowns", unknowns=u):
-            log(rec)
+        for solver in ("superlu", "pardiso"):  # PARDISO where pypardiso loads (measured against SuperLU)
+            if solver in linalg.available_solvers():
+                for rec in in_fresh_process("continuum_record", u, 1, solver, unknowns=u,
+                                            label=f"DDCM iteration, 2-D continuum, about {u:.0e} unknowns, {solver}"):
+                    log(rec)
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):
         log(data_set_memory(n_data))
         model = stopped_bar(3000, n_data)
