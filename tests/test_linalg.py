@@ -192,6 +192,33 @@ def test_low_rank_updates_give_the_factorised_path(monkeypatch):
         assert np.max(np.abs(a - b)) <= 1e-7 * np.max(np.abs(b))
 
 
+
+def test_piece_factor_cache_keeps_few_full_factorisations():
+    """The active-set solver's cache of piece factors holds at most ``FACTORS_KEPT`` full
+    factorisations (an update holds its base's; GBs each at 1e6 unknowns), the least recently
+    used going first."""
+    from collections import OrderedDict
+
+    from ddcm_casadi.solvers.active_set import ActiveSetSolver
+
+    assert ActiveSetSolver.FACTORS_KEPT == 2
+    solver = ActiveSetSolver.__new__(ActiveSetSolver)  # the cache alone, without a system
+    solver._lu = OrderedDict()
+    A = sp.csc_matrix(np.diag([2.0, 3.0, 4.0]))
+    f1, f2, f3 = (linalg.factorize(A) for _ in range(3))
+
+    def update(base):
+        return linalg.UpdatedFactor(base, np.zeros((3, 1)), sp.csr_matrix((1, 3)))
+
+    for key, lu in [(b"a", f1), (b"b", update(f1)), (b"c", f2), (b"d", update(f2)), (b"e", f3)]:
+        solver._lu[key] = lu
+        solver._trim_cache()
+    assert list(solver._lu) == [b"c", b"d", b"e"]  # f1 and the update resting on it went
+    for key in (b"f", b"g"):
+        solver._lu[key] = update(f3)
+        solver._trim_cache()
+    assert list(solver._lu) == [b"d", b"e", b"f", b"g"]  # at most LU_CACHE pieces
+
 def test_an_optional_solver_whose_library_does_not_load_is_not_offered(monkeypatch):
     """pypardiso installed without a findable MKL runtime raises ImportError on import: PARDISO is
     then neither listed nor selectable, with the reason in one line."""

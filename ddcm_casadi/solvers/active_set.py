@@ -30,8 +30,10 @@ class ActiveSetSolver:
         Try the active-set predictor before semismooth Newton (not for proximal systems).
     """
 
-    #: Factorisations of piece systems kept (one per active set).
+    #: Factors of piece systems kept (one per active set).
     LU_CACHE = 4
+    #: Full factorisations those rest on (a few GB each at 1e6 unknowns).
+    FACTORS_KEPT = 2
 
     def __init__(self, system, *, predictor: bool = True) -> None:
         self.system = system
@@ -125,10 +127,25 @@ class ActiveSetSolver:
             except SingularMatrix:
                 return None
             result = self._refine(z, res, lu, r, Pb, kw)
-        self._lu[key] = lu
+        # A reference is cached by its factor only: its kept update columns (up to a few GB at
+        # 1e6 unknowns) serve updates while it is the reference, and go with it.
+        self._lu[key] = lu.factor if isinstance(lu, ReferenceFactor) else lu
+        self._trim_cache()
+        return result
+
+    def _trim_cache(self) -> None:
+        """Keep at most :attr:`LU_CACHE` piece factors, resting on at most :attr:`FACTORS_KEPT`
+        full factorisations (an update holds its base factor): the least recently used go."""
+        bases: list[int] = []
+        for key in reversed(list(self._lu)):
+            lu = self._lu[key]
+            base = id(lu.base if isinstance(lu, UpdatedFactor) else lu)
+            if base not in bases:
+                bases.append(base)
+            if len(bases) > self.FACTORS_KEPT:
+                del self._lu[key]
         while len(self._lu) > self.LU_CACHE:
             self._lu.popitem(last=False)
-        return result
 
     @staticmethod
     def _refine(z, res, lu, r, Pb, kw) -> NewtonResult | None:
@@ -157,6 +174,7 @@ class ActiveSetSolver:
             if lu is not None:
                 self.stats["updates"] += 1
                 return lu
+        self._reference = None  # its factor and kept columns may go before the new one is made
         self._reference = ReferenceFactor(A, iterated=True)  # _refine corrects its solves
         self.stats["factorizations"] += 1
         return self._reference
