@@ -7,7 +7,7 @@ Writes ``DIR/benchmarks.json`` (a list of records with ``name``, ``unknowns``, `
 ``seconds``, ``floor_seconds``, ``ratio`` and extra fields) and ``DIR/benchmarks.md``. Every
 timing is the median of repeated runs, and every comparison is a ratio measured in this process
 run (the machines are shared and noisy). ``--quick`` keeps to about 10 minutes on 2 cores; the full
-run takes about 2 hours (the 1e6-unknown continuum alone 45 minutes and 15 GB).
+run takes 40 minutes to 2 hours (the 1e6-unknown continuum alone 25-45 minutes and 15 GB).
 
 The floor of one DDCM iteration is one factorisation and solve, with the package's sparse solver
 (:func:`ddcm_casadi.linalg.factorize`), of the same saddle-point system the projection solves,
@@ -618,7 +618,9 @@ def main(argv=None) -> int:
         for rec in in_fresh_process("stiffness_solvers", u, 1 if u > 10**5 else rep,
                                     label=f"stiffness solvers, 2-D continuum, about {u:.0e} unknowns", unknowns=u):
             log(rec)
-        for solver in ("superlu", "pardiso"):  # PARDISO where pypardiso loads (measured against SuperLU)
+        # PARDISO where pypardiso loads, up to 1e5 unknowns: at 1e6 its DDCM run went past 24 GB
+        # (killed), where SuperLU's peaked at 14.4 GB.
+        for solver in ("superlu", "pardiso") if u <= 10**5 else ("superlu",):
             if solver in linalg.available_solvers():
                 for rec in in_fresh_process("continuum_record", u, 1, solver, unknowns=u,
                                             label=f"DDCM iteration, 2-D continuum, about {u:.0e} unknowns, {solver}"):
