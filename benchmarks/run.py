@@ -16,7 +16,8 @@ plus one KD-tree query of all material points against the data set; the cached-f
 continuum (``DDCM iteration, 2-D continuum`` records), the linear solvers on its KKT matrix
 (``linear solver, ...``) and on its definite stiffness block (SuperLU against pyamg's algebraic
 multigrid and CG, where ``pyamg`` is installed) are measured at 1e4 and 1e5 unknowns
-(``--quick``) and 1e6 (full run), each in a fresh process; the last record is the paper's first run (``benchmarks/first_run.py``).
+(``--quick``) and 1e6 (full run), each in a fresh process; the last record is the paper's first
+run (``benchmarks/first_run.py``).
 The one-off build (``build, ...`` records and ``build_seconds``: both problems and the
 formulation's CasADi Functions) is measured against the same floor, for bars, trusses and a
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
@@ -25,6 +26,7 @@ formulation's CasADi Functions) is measured against the same floor, for bars, tr
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import statistics
 import subprocess
@@ -329,21 +331,18 @@ def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]
                for label, reason in linalg.unavailable_solvers().items()])
 
 
-
 def stiffness_solvers(unknowns: int, repeats: int) -> list[dict]:
-    """The definite block of the 2-D continuum's projection: one solve with its stiffness
-    ``K = B^T W D B`` (free dofs; the same ``D`` as the reference scales) by the package's
-    default (SuperLU, ordered by the pattern: ``floor_seconds``) against an algebraic multigrid
-    preconditioned conjugate gradient (``pyamg``'s smoothed aggregation with the three rigid-body
-    modes as near-null space, relative residual 1e-10; setup and solve timed together, and each
-    apart). The DDCM projection splits into two solves with ``K`` where no pair is in contact, so
-    this is the choice an iterative solver of a reduced, definite system would face. Without
-    ``pyamg`` installed the record says so (``error``)."""
-    import importlib.util
-
+    """A definite block like the 2-D continuum projection's: one solve with the classical elastic
+    stiffness ``K = B^T W D B`` (:meth:`~ddcm_casadi.model.ContactModel.stiffness`, free dofs) by
+    the package's default (SuperLU, ordered by the pattern: ``floor_seconds``) against an algebraic
+    multigrid preconditioned conjugate gradient (``pyamg``'s smoothed aggregation with the
+    rigid-body modes as near-null space, relative residual 1e-10; setup and solve timed together,
+    and each apart). Where no pair is in contact the DDCM projection splits into two solves with
+    a matrix of this pattern and kind (``B^T W C B``, the metric ``C``): the choice an iterative
+    solver of a reduced, definite system would face. Without ``pyamg`` installed the record says
+    so (``error``)."""
     model = BUILD_MODELS["2-D continuum"](unknowns)
-    B, w, k = model.strain_operator, model.volumes, model.strain_components
-    K = (B.T @ sp.diags(np.repeat(w * model.point_stiffness("ddcm"), k)) @ B).tocsc()
+    K = model.stiffness().tocsc()
     b = np.cos(np.arange(K.shape[0]))
     n = int(K.shape[0])
     name = "linear solver, 2-D continuum stiffness K (definite block): {}".format
@@ -357,12 +356,7 @@ def stiffness_solvers(unknowns: int, repeats: int) -> list[dict]:
                                error="not run: pyamg is not installed (pip install pyamg)")]
     import pyamg
 
-    disc = model.discretisation
-    x, dofs = disc.scalar_basis.doflocs, disc.vector_dofs()
-    modes = np.zeros((disc.n_dofs, 3))  # translations and the in-plane rotation
-    modes[dofs[0], 0] = modes[dofs[1], 1] = 1.0
-    modes[dofs[0], 2], modes[dofs[1], 2] = -x[1], x[0]
-    modes = modes[model.free_dofs]
+    modes = model.discretisation.rigid_body_modes()[model.free_dofs]
     Kr = K.tocsr()
     state = {}
 
@@ -383,6 +377,7 @@ def stiffness_solvers(unknowns: int, repeats: int) -> list[dict]:
                            setup_seconds=t_setup, solve_seconds=t_solve, cg_iterations=state["iterations"],
                            relative_residual=error, operator_complexity=float(state["ml"].operator_complexity()),
                            pyamg_version=pyamg.__version__)]
+
 
 PEAK_MEMORY = """
 import sys, time

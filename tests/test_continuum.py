@@ -51,6 +51,20 @@ def test_linear_displacement_gives_its_exact_strain(dim, degree):
 
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("degree", [1, 2])
+def test_rigid_body_modes_strain_nothing(dim, degree):
+    """Translations and rotations have zero strain at every quadrature point and are linearly
+    independent (3 in 2-D, 6 in 3-D). Coordinates are of order 1e-2 and the modes of order 1, so
+    roundoff in ``B @ mode`` stays below 1e-12 of the largest strain ``B`` gives a unit field."""
+    disc = fem.Discretisation.create(_body(dim, 3), degree)
+    B, _ = fem.strain_operator(disc)
+    modes = disc.rigid_body_modes()
+    assert modes.shape == (disc.n_dofs, 3 if dim == 2 else 6)
+    assert np.linalg.matrix_rank(modes) == modes.shape[1]
+    unit = float(abs(B).sum(axis=1).max())  # the largest strain of a field bounded by 1
+    assert np.max(np.abs(B @ modes)) <= 1e-12 * unit
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("degree", [1, 2])
 def test_tributary_areas_are_positive_and_add_up(dim, degree):
     body = _body(dim, 3)
     disc = fem.Discretisation.create(body, degree)

@@ -192,7 +192,6 @@ def test_low_rank_updates_give_the_factorised_path(monkeypatch):
         assert np.max(np.abs(a - b)) <= 1e-7 * np.max(np.abs(b))
 
 
-
 def test_piece_factor_cache_keeps_few_full_factorisations():
     """The active-set solver's cache of piece factors holds at most ``FACTORS_KEPT`` full
     factorisations (an update holds its base's; GBs each at 1e6 unknowns), the least recently
@@ -218,6 +217,7 @@ def test_piece_factor_cache_keeps_few_full_factorisations():
         solver._lu[key] = update(f3)
         solver._trim_cache()
     assert list(solver._lu) == [b"d", b"e", b"f", b"g"]  # at most LU_CACHE pieces
+
 
 def test_an_optional_solver_whose_library_does_not_load_is_not_offered(monkeypatch):
     """pypardiso installed without a findable MKL runtime raises ImportError on import: PARDISO is

@@ -115,6 +115,22 @@ class Discretisation:
         """``(N_scalar, d)`` coordinates of the scalar dofs (nodes, then edge midpoints)."""
         return self.scalar_basis.doflocs.T.copy()
 
+    def rigid_body_modes(self) -> np.ndarray:
+        """``(N, 3)`` in 2-D, ``(N, 6)`` in 3-D: the translations, then the rotations in the
+        ``(x, y)`` (and ``(y, z)``, ``(x, z)``) planes about the dofs' centroid, as columns over
+        all vector dofs (the near-null space of an elastic stiffness)."""
+        d = self.dimension
+        X = self.dof_locations()
+        X = X - X.mean(axis=0)
+        vd = self.vector_dofs()
+        planes = [(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)]
+        modes = np.zeros((self.n_dofs, d + len(planes)))
+        for c in range(d):
+            modes[vd[c], c] = 1.0
+        for j, (a, b) in enumerate(planes, start=d):
+            modes[vd[a], j], modes[vd[b], j] = -X[:, b], X[:, a]
+        return modes
+
     def quadrature_points(self) -> np.ndarray:
         """``(m, d)`` global coordinates of the material points (element-major)."""
         x = self.basis.mapping.F(self.basis.X)  # (d, nelems, nqp)

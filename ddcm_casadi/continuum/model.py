@@ -396,22 +396,10 @@ def _check_held(model: ContinuumModel) -> None:
     vanishes on every fixed dof. The classical problem would be singular wherever the obstacles
     do not touch. (A mesh of several disconnected bodies is not checked piece by piece.)"""
     disc = model.discretisation
-    d = disc.dimension
-    X = disc.dof_locations()
-    X = X - X.mean(axis=0)
-    vd = disc.vector_dofs()
-    modes = []
-    for c in range(d):  # translations
-        u = np.zeros(disc.n_dofs)
-        u[vd[c]] = 1.0
-        modes.append(u)
-    for a, b in ([(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)]):  # rotations in the (a, b) plane
-        u = np.zeros(disc.n_dofs)
-        u[vd[a]], u[vd[b]] = -X[:, b], X[:, a]
-        modes.append(u)
+    modes = disc.rigid_body_modes()
     fixed = np.setdiff1d(np.arange(disc.n_dofs), model.free_dofs)
-    R = np.array(modes).T[fixed]
-    if R.shape[0] == 0 or np.linalg.matrix_rank(R, tol=1e-9 * max(1.0, float(np.abs(R).max()))) < len(modes):
+    R = modes[fixed]
+    if R.shape[0] == 0 or np.linalg.matrix_rank(R, tol=1e-9 * max(1.0, float(np.abs(R).max()))) < modes.shape[1]:
         raise InputError("the supports leave a rigid-body motion free; fix more displacement components")
 
 
