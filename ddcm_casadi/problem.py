@@ -247,6 +247,14 @@ class ComplementarityProblem:
     fb_beta: float
 
     @property
+    def affine(self) -> bool:
+        """Whether the residual and gaps are affine and the objective quadratic (held as sparse
+        matrices). Methods that need it (the exact enumeration, the greedy screen, the elastic
+        start) are skipped with a note otherwise."""
+        return isinstance(self.residual_map, Affine) and isinstance(self.gap_map, Affine) and (
+            self.distance is None or isinstance(self.distance, Distance))
+
+    @property
     def n_x(self) -> int:
         return sum(n for _, n in self.unknowns)
 
