@@ -5,60 +5,20 @@ pair with the gap ``g = w - u``, ``w = h - l0``. The classical solution, the pen
 the exact projection of a datum onto ``Z_E`` are known in closed form (see the methods).
 
 The model describes itself to the front ends (:meth:`BarModel.describe`,
-:meth:`BarModel.penalty_closed_form`, :meth:`BarModel.save_figures`), and this module parses the
-``[bar]`` case files (registered with :func:`ddcm_casadi.casefile.register_case_kind`).
+:meth:`BarModel.penalty_closed_form`, :meth:`BarModel.figures`); the ``[bar]`` case files are parsed
+by :mod:`ddcm_casadi.bar_case`, and the figures drawn by :mod:`ddcm_casadi.plots`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from . import casefile
-from .casefile import Case
 from .data import MaterialDataset, check_positive
 from .errors import InputError
 from .model import ContactModel
-from .truss import bar_chain
-
-#: The ``[bar]`` case-file format (also part of :mod:`ddcm_casadi.config`'s documentation).
-CASE_FORMAT = """
-The paper's bar
----------------
-::
-
-    [bar]
-    length = 1.0            # m
-    area = 1.0              # m^2 (default 1)
-    youngs_modulus = 200e9  # Pa
-    # elements = 10         # optional: an N-element bar (ddcm_casadi.truss.bar_chain)
-
-    [obstacle]
-    positions = [1.01, 1.0, 0.99]   # m, tip obstacle position, one per load step
-
-    # [[stops]]             # optional, with elements >= 2: a rigid stop behind an interior node,
-    # node = 3              # u_node >= -clearance
-    # clearance = 0.004     # m
-
-    [data]                  # either a CSV file with header strain,stress ...
-    path = "data.csv"       # relative to this file
-    # ... or generated Hookean data, as in the paper:
-    # hookean = { strain_min = -0.05, strain_max = 0.01, points = 500 }   # E defaults to [bar]
-
-    [ddcm]
-    c = 300e9               # Pa
-    max_outer = 100
-
-    [formulations.penalty]  # optional per-formulation options
-    gamma = 2e15            # Pa/m
-
-Without ``elements`` and ``[[stops]]`` this is the one-unknown bar of the paper
-(:func:`~ddcm_casadi.bar.bar_model`); with either it is
-:func:`~ddcm_casadi.truss.bar_chain` (``elements`` defaults to 1).
-"""
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,68 +132,3 @@ def paper_bar(*, n_data: int = 500, c: float = 300e9) -> BarModel:
     data = MaterialDataset.hookean(E, -0.05, 0.01, n_data, c=c)
     return bar_model(length=1.0, area=1.0, youngs_modulus=E, positions=np.linspace(1.01, 0.99, 21),
                      dataset=data, name="paper bar")
-
-
-# ------------------------------------------------------------------------------------- case files
-def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
-    """Build the :class:`~ddcm_casadi.casefile.Case` of a ``[bar]`` document (see
-    :data:`CASE_FORMAT`); section names and keys are checked already.
-
-    Raises
-    ------
-    InputError
-        A missing or invalid value (one line, naming the key).
-    """
-    if "obstacle" not in doc:
-        raise InputError(f"missing section [obstacle] in {source}")
-    bar = doc["bar"]
-    for key in ("length", "youngs_modulus"):
-        if key not in bar:
-            raise InputError(f"missing key {key!r} in [bar]")
-    length = casefile.positive("bar", "length", bar["length"])
-    area = casefile.positive("bar", "area", bar.get("area", 1.0))
-    E = casefile.positive("bar", "youngs_modulus", bar["youngs_modulus"])
-    chain = "elements" in bar or "stops" in doc
-    elements = casefile.integer("bar", "elements", bar.get("elements", 1), low=1, what="a positive integer")
-
-    positions = doc["obstacle"].get("positions")
-    if not isinstance(positions, list) or not positions:
-        raise InputError("[obstacle] positions must be a non-empty list of numbers")
-    h = np.array([casefile.number("obstacle", "positions", v) for v in positions])
-
-    stops: dict[int, float] = {}
-    for k, stop in enumerate(doc.get("stops", [])):
-        label = f"stops {k}"
-        for key in ("node", "clearance"):
-            if key not in stop:
-                raise InputError(f"missing key {key!r} in [{label}]")
-        if elements < 2:
-            raise InputError("[[stops]] tables need [bar] elements >= 2 (stops act on interior nodes)")
-        node = casefile.integer(label, "node", stop["node"], low=1, high=elements - 1,
-                                what="an interior node index")
-        if node in stops:
-            raise InputError(f"[{label}] node {node} has two stops")
-        clearance = casefile.number(label, "clearance", stop["clearance"])
-        if clearance < 0:
-            raise InputError(f"[{label}] clearance must be >= 0, got {casefile.show(stop['clearance'])}")
-        stops[node] = clearance
-
-    if casefile.data_set_count(doc) > 1:
-        raise InputError("[bar] cases take one [data] table (several data sets need a [structure])")
-    specs = casefile.data_specs(doc, base_dir=base_dir, default_modulus=lambda k: E)
-    max_outer, options = casefile.run_options(doc)
-
-    dataset = specs[0].build() if specs else None
-    if chain:
-        model = bar_chain(length=length, elements=elements, area=area, youngs_modulus=E, tip_positions=h,
-                          stops=stops, dataset=dataset, name=name)
-    else:
-        model = bar_model(length=length, area=area, youngs_modulus=E, positions=h, dataset=dataset, name=name)
-    return Case(model=model, formulation_options=options, ddcm_max_outer=max_outer, source=source)
-
-
-casefile.register_case_kind(
-    "bar",
-    sections={"bar": {"length", "area", "youngs_modulus", "elements"}, "obstacle": {"positions"},
-              "stops": {"node", "clearance"}},
-    arrays={"stops"}, parse=parse_case, uses="[obstacle] positions", default=True)

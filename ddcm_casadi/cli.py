@@ -28,11 +28,10 @@ import scipy
 from ddcm_casadi import formulations as registry
 
 from . import __version__
-from .config import Case, default_case
+from .config import Case, default_case, load_case_with_overrides
 from .errors import DDCMError, InputError, PhysicsWarning
 from .harness import VARIANTS, Comparison, compare
 from .io import OutputFolder, write_csv_atomic, write_json_atomic
-from .overrides import load_case_with_overrides
 from .parallel import resolve_jobs
 
 EXIT_INPUT = 2

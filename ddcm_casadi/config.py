@@ -5,15 +5,17 @@ a pin-jointed truss in 1-D, 2-D or 3-D (``[structure]``), or a continuum in 2-D 
 3-D meshed with triangles or tetrahedra (``[mesh]``). They share ``[data]``, ``[ddcm]``
 and ``[formulations.NAME]``.
 
-Each model kind parses its own sections next to its model (the ``[bar]`` format is
-``ddcm_casadi.bar.CASE_FORMAT``, the ``[structure]`` format ``ddcm_casadi.truss.CASE_FORMAT``;
-both are appended to this documentation below), behind one registry of case kinds
-(:func:`ddcm_casadi.casefile.register_case_kind`); the shared machinery (reading files, section
-and key checks, validators, ``[data]``, ``[ddcm]``, ``[formulations]``) is
-:mod:`ddcm_casadi.casefile`. This module is the public entry point: it imports the kinds, so that
-they are registered, and exports :func:`load_case`, :func:`case_from_dict`, :func:`default_case`
-and :class:`Case`. A new model kind is one module that calls ``register_case_kind`` and is
-imported here.
+Each model kind's sections are parsed by a case module of its own, in the case layer (the
+``[bar]`` format is ``ddcm_casadi.bar_case.CASE_FORMAT``, the ``[structure]`` format
+``ddcm_casadi.truss_case.CASE_FORMAT``, the ``[mesh]`` format
+``ddcm_casadi.continuum.case.CASE_FORMAT``; all are appended to this documentation below), behind
+one registry of case kinds keyed by section (:func:`ddcm_casadi.casefile.register_case_kind`); the
+shared machinery (reading files, section and key checks, validators, ``[data]``, ``[ddcm]``,
+``[formulations]``) is :mod:`ddcm_casadi.casefile`. The model modules never import a case module.
+This module is the public entry point: it imports the case modules, so that they are registered,
+and exports :func:`load_case`, :func:`load_case_with_overrides`, :func:`case_from_dict`,
+:func:`default_case` and :class:`Case`. A new model kind's case files are one module that calls
+``register_case_kind`` and is imported here.
 
 Shared sections
 ---------------
@@ -34,12 +36,16 @@ every error is an :class:`~ddcm_casadi.errors.InputError` with a one-line messag
 
 from __future__ import annotations
 
-# The model kinds register their case sections when imported (the paper's bar is the default).
-from . import bar as _bar
-from . import truss as _truss
-from .continuum import case as _continuum
+from pathlib import Path
+from typing import Iterable
+
+# The case modules register their kinds when imported (the paper's bar is the default).
+from . import bar_case as _bar
+from . import truss_case as _truss
 from .bar import paper_bar
 from .casefile import Case, case_from_dict, case_kinds, load_case, register_case_kind
+from .continuum import case as _continuum
+from .overrides import parse_item
 
 if __doc__ is not None:  # None under python -OO
     __doc__ += _bar.CASE_FORMAT + _truss.CASE_FORMAT + _continuum.CASE_FORMAT
@@ -50,4 +56,24 @@ def default_case() -> Case:
     return Case(model=paper_bar())
 
 
-__all__ = ["Case", "case_from_dict", "case_kinds", "default_case", "load_case", "register_case_kind"]
+def load_case_with_overrides(path: str | Path, items: Iterable[str]) -> tuple[Case, dict]:
+    """Read a case file, apply ``--set KEY=VALUE`` items, validate and build the case.
+
+    Parameters
+    ----------
+    path : str or Path
+        The case file (TOML or JSON).
+    items : iterable of str
+        ``KEY=VALUE`` overrides (:func:`ddcm_casadi.overrides.parse_item`), applied in order.
+
+    Returns
+    -------
+    tuple of (Case, dict)
+        The case and the overrides as ``{key: parsed value}`` (for ``results.json``).
+    """
+    pairs = [parse_item(item) for item in items]
+    return load_case(path, overrides=pairs), dict(pairs)
+
+
+__all__ = ["Case", "case_from_dict", "case_kinds", "default_case", "load_case", "load_case_with_overrides",
+           "register_case_kind"]

@@ -18,7 +18,6 @@ from __future__ import annotations
 import copy
 import re
 import sys
-from pathlib import Path
 from typing import Any, Iterable
 
 if sys.version_info >= (3, 11):
@@ -123,18 +122,3 @@ def apply_overrides(doc: dict, items: Iterable[tuple[str, Any]], *, what: str = 
     for key, value in items:
         set_value(out, key, copy.deepcopy(value), what=what)
     return out
-
-
-def load_case_with_overrides(path: str | Path, items: Iterable[str]):
-    """Read a case file, apply ``--set KEY=VALUE`` items, validate and build the case.
-
-    Returns
-    -------
-    tuple of (Case, dict)
-        The case and the overrides as ``{key: parsed value}`` (for ``results.json``).
-    """
-    # Imported here: config imports every model kind (the package's heavier modules).
-    from .config import load_case
-
-    pairs = [parse_item(item) for item in items]
-    return load_case(path, overrides=pairs), dict(pairs)

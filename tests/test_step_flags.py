@@ -86,7 +86,7 @@ def test_bar_beyond_the_data_is_flagged_at_every_step_past_its_range():
 
 
 def _truss(points: int, strain_max: float):
-    from ddcm_casadi.overrides import load_case_with_overrides
+    from ddcm_casadi.config import load_case_with_overrides
 
     case, _ = load_case_with_overrides(CASES / "truss2d.toml", [
         f"data.hookean.strain_min={-strain_max}", f"data.hookean.strain_max={strain_max}",
