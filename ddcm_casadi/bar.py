@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 from .data import MaterialDataset, check_positive
 from .errors import InputError
-from .model import ContactModel
+from .model import ContactModel, FigureSpec
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,13 +72,12 @@ class BarModel(ContactModel):
                     youngs_modulus=None if self.youngs_modulus is None else float(self.youngs_modulus[0]),
                     positions=self.load_parameter.tolist())
 
-    def figures(self, cmp) -> dict:
+    def figures(self, runs) -> dict[str, FigureSpec]:
         """The paper's Fig. 2: tip displacement and contact pressure against the obstacle position
-        (:func:`ddcm_casadi.plots.figure_displacement`, :func:`~ddcm_casadi.plots.figure_pressure`)."""
-        from .plots import figure_displacement, figure_pressure  # matplotlib only when a plot is drawn
-
-        return {"fig2a_tip_displacement.png": lambda: figure_displacement(cmp),
-                "fig2b_contact_pressure.png": lambda: figure_pressure(cmp)}
+        (drawn by :func:`ddcm_casadi.plots.figure_displacement` and
+        :func:`~ddcm_casadi.plots.figure_pressure`)."""
+        return {"fig2a_tip_displacement.png": FigureSpec("tip_displacement"),
+                "fig2b_contact_pressure.png": FigureSpec("contact_pressure")}
 
 
 def bar_model(*, length: float, area: float = 1.0, youngs_modulus: float | None = None,

@@ -32,6 +32,7 @@ from .config import Case, default_case, load_case_with_overrides
 from .errors import DDCMError, InputError, PhysicsWarning
 from .harness import VARIANTS, Comparison, compare
 from .io import OutputFolder, write_csv_atomic, write_json_atomic
+from .outputs import require_matplotlib, save_outputs
 from .parallel import resolve_jobs
 
 EXIT_INPUT = 2
@@ -252,7 +253,7 @@ def _run_case(args, case: Case, names: list[str], variants: list[str], overrides
     if draw:
         # matplotlib only when a plot is drawn, but imported before any result is written: a
         # missing matplotlib must not leave results without their figures.
-        from . import plots  # noqa: F401
+        require_matplotlib()
 
     jobs = resolve_jobs(args.jobs, len(names) * len(variants))
     # Runs side by side print their steps as lines: in-place updates of one line would clash.
@@ -280,7 +281,7 @@ def _run_case(args, case: Case, names: list[str], variants: list[str], overrides
         with folder.staging() as stage:
             write_csv_atomic(stage / "results.csv", rows)
             written = ["results.csv"]
-            outputs = case.model.save_outputs(cmp, stage, figures=draw, jobs=jobs)
+            outputs = save_outputs(cmp, stage, figures=draw, jobs=jobs)
             written += [p.relative_to(stage).as_posix() for p in outputs]
             written.append("results.json")
             # the manifest: the next run into this folder removes these files if it does not write them

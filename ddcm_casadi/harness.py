@@ -377,12 +377,3 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     for (variant, form), r in zip(runs, map_forked(run, runs, jobs=resolve_jobs(jobs, len(runs)))):
         out.results[(variant, form.name)] = r
     return out
-
-
-def compare_and_plot(model: ContactModel, out_dir=None, formulations=None, **options) -> Comparison:
-    """:func:`compare`, then the figures that suit the model (:meth:`ContactModel.save_figures`)
-    in ``out_dir`` (if given; matplotlib is imported only then)."""
-    cmp = compare(model, formulations, **options)
-    if out_dir is not None:
-        model.save_figures(cmp, out_dir)
-    return cmp

@@ -16,6 +16,7 @@ Both the classical and the data-driven problem are built from this one object
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 import scipy.sparse as sp
@@ -23,12 +24,49 @@ import scipy.sparse as sp
 from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
 from .linalg import SingularMatrix, factorize
-from .parallel import map_forked
 
 
 #: Imposed strain beyond which :meth:`ContactModel.path_warnings` warns: small-strain kinematics
 #: then differ from finite-strain ones by more than ~5 % (Green-Lagrange ``e + e^2/2`` vs ``e``).
 LARGE_STRAIN = 0.1
+
+
+@dataclass(frozen=True)
+class FigureSpec:
+    """One figure of a model kind, as data: which drawing makes it, with which options.
+
+    A model kind says *which* figures it has (:meth:`ContactModel.figures`); the output layer owns
+    the functions that draw them, looked up by ``drawing`` in its registry
+    (:func:`ddcm_casadi.drawings.drawing`) and called as ``drawing(comparison, **options)``. So a
+    model never imports the plotting code (nor matplotlib).
+
+    Parameters
+    ----------
+    drawing : str
+        The name of the drawing function in the registry, e.g. ``"contact_history"``.
+    options : mapping
+        Keyword arguments of the drawing function, e.g. ``{"variant": "ddcm"}``.
+    """
+
+    drawing: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+def drawn_formulation(runs: Iterable[tuple[str, str]], variant: str) -> str | None:
+    """The formulation whose run of ``variant`` a one-run figure shows: Fischer-Burmeister if it
+    was run, else the first formulation run in that variant (``None`` if the variant was not run).
+
+    Parameters
+    ----------
+    runs : iterable of (str, str)
+        The ``(variant, formulation)`` keys of the runs made.
+    variant : str
+        ``"classical"`` or ``"ddcm"``.
+    """
+    names = [name for v, name in runs if v == variant]
+    if not names:
+        return None
+    return "fischer_burmeister" if "fischer_burmeister" in names else names[0]
 
 
 def _finite(name: str, a: np.ndarray) -> np.ndarray:
@@ -386,31 +424,27 @@ class ContactModel:
     def results_fields(self, fields: dict) -> dict:
         """What ``results.json`` keeps of one run's per-step fields (:meth:`Comparison.fields`):
         everything for bars and trusses; a model kind with large fields keeps a summary and
-        writes the fields elsewhere (:meth:`save_outputs`)."""
+        has the fields written elsewhere (:meth:`field_outputs`)."""
         return fields
 
-    def save_outputs(self, cmp, out_dir, *, figures: bool = True, jobs: int = 1) -> list:
-        """Write the outputs that suit this model kind besides ``results.csv``/``results.json``
-        (field files, figures unless ``figures`` is false, drawn in up to ``jobs`` processes);
-        returns the paths."""
-        return self.save_figures(cmp, out_dir, jobs=jobs) if figures else []
+    def field_outputs(self) -> tuple[str, ...]:
+        """The field files this model kind has besides ``results.csv`` and ``results.json``, as the
+        names of writers in the output layer's registry (:func:`ddcm_casadi.drawings.field_writer`),
+        e.g. ``("vtu",)`` for a continuum. Bars and trusses have none."""
+        return ()
 
-    def figures(self, cmp) -> dict:
-        """The figures that suit this model kind: ``{file name: function drawing it}``, each
-        function returning a matplotlib ``Figure``. Any model: the contact-force history
-        (``contact_history.png``). Imports matplotlib only here."""
-        from .plots import figure_contact_history
+    def figures(self, runs: Iterable[tuple[str, str]]) -> dict[str, FigureSpec]:
+        """The figures this model kind has, as data: ``{file name: FigureSpec}``, drawn by the
+        output layer (:func:`ddcm_casadi.outputs.save_figures`).
 
-        return {"contact_history.png": lambda: figure_contact_history(cmp, pair_labels=self.contact_pair_labels())}
+        Parameters
+        ----------
+        runs : iterable of (str, str)
+            The ``(variant, formulation)`` keys of the runs made (a figure of one run picks one).
 
-    def save_figures(self, cmp, out_dir, *, jobs: int = 1) -> list:
-        """Draw :meth:`figures` into ``out_dir`` (each written atomically), side by side in up to
-        ``jobs`` processes (:func:`ddcm_casadi.parallel.map_forked`); returns the paths."""
-        from pathlib import Path
-
-        from .plots import save_figure
-
-        out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)  # the examples' output/<name>/ may not exist yet
-        return map_forked(lambda item: save_figure(item[1](), out_dir / item[0]), list(self.figures(cmp).items()),
-                          jobs=jobs)
+        Returns
+        -------
+        dict
+            Any model: the contact-force history (``contact_history.png``).
+        """
+        return {"contact_history.png": FigureSpec("contact_history", {"pair_labels": self.contact_pair_labels()})}

@@ -1,5 +1,10 @@
-"""Figures of a comparison (the drawing code; which figures suit a model, the model kind says:
-:meth:`~ddcm_casadi.model.ContactModel.save_figures`, called by :func:`save_figures`).
+"""Figures of a comparison: the drawing code of bars and trusses, and the contact history of any model.
+
+Which figures suit a model, the model kind says as data
+(:meth:`~ddcm_casadi.model.ContactModel.figures`); the drawings here are registered under the names
+those refer to (:mod:`ddcm_casadi.drawings`: ``tip_displacement``, ``contact_pressure``,
+``structure``, ``contact_history``), and :func:`ddcm_casadi.outputs.save_figures` draws them.
+Matplotlib is imported only by the functions that draw.
 
 - The paper's Fig. 2 (one-element bar): tip displacement and contact pressure vs obstacle.
 - Any truss (:class:`~ddcm_casadi.truss.TrussModel`, 1-D, 2-D or 3-D): the deformed structure
@@ -16,12 +21,17 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.figure import Figure
 
-from .harness import Comparison
+from .drawings import register_drawing
 from .io import write_bytes_atomic
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from .harness import Comparison
 
 _MARKERS = {"penalty": "s", "augmented_lagrangian": "^", "fischer_burmeister": "o", "mpcc": "x"}
 _STYLES = {"penalty": "-", "augmented_lagrangian": "--", "fischer_burmeister": "-.", "mpcc": ":"}
@@ -54,6 +64,8 @@ def _fig2_layout(fig: Figure, ax) -> None:
 
 
 def _panel(cmp: Comparison, quantity: str, ylabel: str, scale: float, title: str) -> Figure:
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(6.4, 4.6))
     ax = fig.add_subplot()
     m = cmp.model
@@ -103,11 +115,13 @@ def _panel(cmp: Comparison, quantity: str, ylabel: str, scale: float, title: str
     return fig
 
 
+@register_drawing("tip_displacement")
 def figure_displacement(cmp: Comparison) -> Figure:
     """Fig. 2a: bar tip displacement against obstacle position."""
     return _panel(cmp, "u", "tip displacement u [mm]", 1e3, "Tip displacement (Fig. 2a)")
 
 
+@register_drawing("contact_pressure")
 def figure_pressure(cmp: Comparison) -> Figure:
     """Fig. 2b: contact pressure against obstacle position."""
     return _panel(cmp, "p", "contact pressure p [GPa]", 1e-9, "Contact pressure (Fig. 2b)")
@@ -172,6 +186,7 @@ def _obstacle_groups(model, gap0: np.ndarray, mag: float) -> list[tuple[np.ndarr
     return [(nrm, lev, np.asarray(idx)) for nrm, lev, idx in groups]
 
 
+@register_drawing("structure")
 def figure_structure(cmp: Comparison, variant: str, formulation: str, step: int = -1, *,
                      magnification: float | None = None) -> Figure:
     """The deformed truss at one step, coloured by member force, with obstacles and contact forces.
@@ -199,6 +214,7 @@ def figure_structure(cmp: Comparison, variant: str, formulation: str, step: int 
     """
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
 
     model = cmp.model
     f = cmp.fields(variant, formulation)
@@ -392,6 +408,7 @@ def _draw_3d(ax, X, Y, members, colors, groups, model, F, active, arrow, size) -
     ax.set_zlabel("z [m] (displacements magnified)")
 
 
+@register_drawing("contact_history")
 def figure_contact_history(cmp: Comparison, *, pair_labels: list[str] | None = None) -> Figure:
     """Contact forces against the load parameter, for every variant and formulation.
 
@@ -401,6 +418,7 @@ def figure_contact_history(cmp: Comparison, *, pair_labels: list[str] | None = N
     lines (one style per formulation), DDCM runs markers; the closed form, where the model has
     one, is dashed black; non-converged steps are circled in red.
     """
+    from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
     m = cmp.model
@@ -486,24 +504,3 @@ def figure_contact_history(cmp: Comparison, *, pair_labels: list[str] | None = N
                  fontsize=10)
     ax.legend(handles=handles, fontsize=7, ncol=2, loc="upper left")
     return fig
-
-
-def structure_formulation(cmp: Comparison, variant: str) -> str | None:
-    """The run of ``variant`` to draw the structure of: Fischer-Burmeister if it was run, else the
-    first formulation of that variant (``None`` if the variant was not run)."""
-    run = [name for v, name in cmp.results if v == variant]
-    if not run:
-        return None
-    return "fischer_burmeister" if "fischer_burmeister" in run else run[0]
-
-
-def save_figures(cmp: Comparison, out_dir: str | Path, *, jobs: int = 1) -> list[Path]:
-    """Save the figures that suit the model, in up to ``jobs`` processes; returns the paths
-    written (atomically).
-
-    The model kind decides (:meth:`~ddcm_casadi.model.ContactModel.figures`): the paper's
-    one-element bar draws Fig. 2 (:func:`figure_displacement`, :func:`figure_pressure`); a truss
-    ``structure_classical.png`` and ``structure_ddcm.png`` (last step, :func:`structure_formulation`)
-    and ``contact_history.png``.
-    """
-    return cmp.model.save_figures(cmp, out_dir, jobs=jobs)

@@ -32,7 +32,7 @@ import scipy.sparse.linalg as spla
 
 from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
-from .model import ContactModel
+from .model import ContactModel, FigureSpec, drawn_formulation
 
 AXES = "xyz"
 
@@ -115,18 +115,17 @@ class TrussModel(ContactModel):
         return dict(nodal_displacement=np.array([self.nodal_displacements(x) for x in u]),
                     member_force=self.member_force(stress))
 
-    def figures(self, cmp) -> dict:
+    def figures(self, runs) -> dict[str, FigureSpec]:
         """``structure_classical.png`` and ``structure_ddcm.png`` (last step, Fischer-Burmeister
         if it was run, else the first formulation of that variant; a variant that was not run is
-        skipped) and ``contact_history.png``."""
-        from . import plots  # matplotlib only when a plot is drawn
-
-        drawings = {}
+        skipped; drawn by :func:`ddcm_casadi.plots.figure_structure`) and ``contact_history.png``."""
+        runs = list(runs)
+        specs = {}
         for variant in ("classical", "ddcm"):
-            name = plots.structure_formulation(cmp, variant)
+            name = drawn_formulation(runs, variant)
             if name is not None:
-                drawings[f"structure_{variant}.png"] = (lambda v=variant, n=name: plots.figure_structure(cmp, v, n))
-        return {**drawings, **super().figures(cmp)}
+                specs[f"structure_{variant}.png"] = FigureSpec("structure", {"variant": variant, "formulation": name})
+        return {**specs, **super().figures(runs)}
 
 
 def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=None,

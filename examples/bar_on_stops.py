@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from ddcm_casadi import MaterialDataset
-from ddcm_casadi.harness import Comparison, compare_and_plot
+from ddcm_casadi.harness import Comparison
+from ddcm_casadi.outputs import compare_and_plot
 from ddcm_casadi.truss import StoppedBarModel, bar_chain
 
 NAME = "bar_on_stops"

@@ -9,6 +9,7 @@ from __future__ import annotations
 import sys
 
 from ddcm_casadi import MaterialDataset, bar_model, compare
+from ddcm_casadi.outputs import save_figures
 
 
 def main(out_dir: str | None = None, *, n_data: int = 500):
@@ -27,8 +28,8 @@ def main(out_dir: str | None = None, *, n_data: int = 500):
     print("h [m]:", fb["load_parameter"][[0, 10, 20]], " p [Pa]:", fb["p"][[0, 10, 20], 0])
 
     if out_dir is not None:
-        # The model draws the figures that suit it (for the bar, the paper's Fig. 2).
-        model.save_figures(result, out_dir)
+        # The figures that suit the model (for the bar, the paper's Fig. 2).
+        save_figures(result, out_dir)
     return result
 
 

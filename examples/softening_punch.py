@@ -38,6 +38,7 @@ from ddcm_casadi import MaterialDataset
 from ddcm_casadi.continuum import Contact, FlatPunch, Material, Support, continuum_model, mesh
 from ddcm_casadi.harness import Comparison, compare
 from ddcm_casadi.metric import Metric, isotropic_elasticity
+from ddcm_casadi.outputs import save_outputs
 
 NAME = "softening_punch"
 E, NU = 50e6, 0.3            # Pa, initial (small-strain) stiffness
@@ -175,7 +176,7 @@ def main(out_dir: str | Path | None = None, *, quick: bool = False, formulations
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        result.outputs = list(model.save_outputs(cmp, out)) + [figure_force(result, out / "force_indentation.png")]
+        result.outputs = list(save_outputs(cmp, out)) + [figure_force(result, out / "force_indentation.png")]
     return result
 
 

@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from ddcm_casadi import MaterialDataset
-from ddcm_casadi.harness import Comparison, compare_and_plot
+from ddcm_casadi.harness import Comparison
+from ddcm_casadi.outputs import compare_and_plot
 from ddcm_casadi.truss import Obstacle, TrussModel, truss_model
 
 NAME = "truss_3d_plane"

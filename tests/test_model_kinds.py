@@ -120,8 +120,9 @@ def test_new_kind_runs_through_the_cli_records(cmp, tmp_path):
 
 def test_new_kind_without_figures_of_its_own(cmp, tmp_path):
     """The figures are the kind's choice: the base draws the contact-force history (it works for
-    any kind), and plots.save_figures asks the model."""
-    from ddcm_casadi.plots import figure_contact_history, save_figures
+    any kind), and outputs.save_figures draws what the model declares."""
+    from ddcm_casadi.outputs import save_figures
+    from ddcm_casadi.plots import figure_contact_history
 
     assert [p.name for p in save_figures(cmp, tmp_path)] == ["contact_history.png"]
     assert (tmp_path / "contact_history.png").stat().st_size > 0

@@ -18,6 +18,7 @@ import pytest
 
 from ddcm_casadi import ConvergenceError, InputError, compare
 from ddcm_casadi.cli import main
+from ddcm_casadi.outputs import save_figures
 from ddcm_casadi.parallel import map_forked, resolve_jobs
 
 from .interrupt import interrupt_at
@@ -136,9 +137,9 @@ def test_cli_refuses_bad_jobs(value, capsys, tmp_path):
 @fork_only
 def test_figures_side_by_side_are_the_serial_figures(paper_comparison, tmp_path):
     model = paper_comparison.model
-    one = model.save_figures(paper_comparison, tmp_path / "one", jobs=1)
-    two = model.save_figures(paper_comparison, tmp_path / "two", jobs=2)
-    assert [p.name for p in one] == [p.name for p in two] == list(model.figures(paper_comparison))
+    one = save_figures(paper_comparison, tmp_path / "one", jobs=1)
+    two = save_figures(paper_comparison, tmp_path / "two", jobs=2)
+    assert [p.name for p in one] == [p.name for p in two] == list(model.figures(paper_comparison.results))
     for a, b in zip(one, two):
         assert a.read_bytes() == b.read_bytes(), a.name
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -31,7 +30,7 @@ import skfem
 from ..data import MaterialDataset, PointData
 from ..errors import InputError
 from ..metric import block_diagonal, isotropic_elasticity
-from ..model import ContactModel
+from ..model import ContactModel, FigureSpec, drawn_formulation
 from . import fem
 from .mesh import check_mesh, describe as describe_mesh, select_facets
 from .obstacles import Obstacle
@@ -179,17 +178,22 @@ class ContinuumModel(ContactModel):
                     contact_pressure=p, total_contact_force=np.sum(self.contact_area * p, axis=-1),
                     converged=fields["converged"])
 
-    def save_outputs(self, cmp, out_dir, *, figures: bool = True, jobs: int = 1) -> list[Path]:
-        """One VTU file per step and run with a ``.pvd`` series each, and the figures."""
-        from .results import save_continuum_outputs
+    def field_outputs(self) -> tuple[str, ...]:
+        """One VTU file per step and run with a ``.pvd`` series each
+        (:func:`ddcm_casadi.continuum.results.write_vtu`)."""
+        return ("vtu",)
 
-        return save_continuum_outputs(self, cmp, out_dir, figures=figures, jobs=jobs)
-
-    def figures(self, cmp) -> dict:
-        """``pressure_profile.png``, ``deformed_<variant>.png`` and ``contact_history.png``."""
-        from .results import continuum_figures
-
-        return continuum_figures(self, cmp)
+    def figures(self, runs) -> dict[str, FigureSpec]:
+        """``pressure_profile.png`` (with contact pairs), ``deformed_<variant>.png`` (last step,
+        Fischer-Burmeister if it was run, else the first formulation of that variant) and
+        ``contact_history.png``; drawn by :mod:`ddcm_casadi.continuum.results`."""
+        runs = list(runs)
+        specs = {"pressure_profile.png": FigureSpec("pressure_profile")} if self.n_contacts else {}
+        for variant in ("classical", "ddcm"):
+            name = drawn_formulation(runs, variant)
+            if name is not None:
+                specs[f"deformed_{variant}.png"] = FigureSpec("deformed_body", {"variant": variant, "formulation": name})
+        return {**specs, **super().figures(runs)}
 
 
 # ------------------------------------------------------------------------------------ builder

@@ -5,8 +5,12 @@ For every run (variant x formulation) one VTU file per step and a ``.pvd`` colle
 and, per element (the mean over its quadrature points), ``strain`` and ``stress`` (tensors),
 ``von_mises``, and for DDCM ``data_stress`` (the assigned data) and ``ddcm_distance`` (the local
 distance ``sqrt(d^2)`` of the states to their data). Figures: the contact pressure of every run
-at the last step against Hertz (when the model has a Hertz reference), the deformed body coloured
-by the von Mises stress, and the contact history.
+at the last step against Hertz (when the model has a Hertz reference) and the deformed body
+coloured by the von Mises stress (the contact history is :func:`ddcm_casadi.plots.figure_contact_history`).
+
+The output layer of :class:`~ddcm_casadi.continuum.model.ContinuumModel`: the writer and the
+drawings are registered (:mod:`ddcm_casadi.drawings`) under the names the model declares
+(``vtu``; ``pressure_profile``, ``deformed_body``), and :mod:`ddcm_casadi.outputs` calls them.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import fem
+from ..drawings import register_drawing, register_field_writer
 from .output import figure_deformed_body, figure_pressure_profile, mandel_to_tensor, von_mises, write_vtu_series
 
 
@@ -53,19 +57,30 @@ def _step_data(model, run, step) -> dict:
                 cell_data=cell)
 
 
-def save_continuum_outputs(model, cmp, out_dir, *, figures: bool = True, jobs: int = 1) -> list[Path]:
-    """Write the VTU series of every run (and the figures unless ``figures`` is false, in up to
-    ``jobs`` processes)."""
-    out_dir = Path(out_dir)
-    vtu = out_dir / "vtu"
+@register_field_writer("vtu")
+def write_vtu(cmp, out_dir) -> list[Path]:
+    """Write the VTU series of every run of a continuum comparison into ``out_dir/vtu/``.
+
+    Parameters
+    ----------
+    cmp : Comparison
+        The results of :func:`~ddcm_casadi.harness.compare` on a continuum.
+    out_dir : str or Path
+        The output folder.
+
+    Returns
+    -------
+    list of Path
+        One ``.vtu`` file per step and run, and a ``.pvd`` series per run.
+    """
+    model = cmp.model
+    vtu = Path(out_dir) / "vtu"
     vtu.mkdir(parents=True, exist_ok=True)
     points, cells = model.discretisation.dof_locations(), _cells(model)
     written: list[Path] = []
     for (variant, name), run in cmp.results.items():
         steps = [_step_data(model, run, s) for s in run.steps]
         written += write_vtu_series(vtu, points=points, cells=cells, steps=steps, name=f"{variant}_{name}")
-    if figures:
-        written += model.save_figures(cmp, out_dir, jobs=jobs)
     return written
 
 
@@ -77,19 +92,11 @@ def _profile_coordinate(model) -> tuple[np.ndarray, np.ndarray]:
     return pairs, model.contact_points[:, 0]
 
 
-def _pick(cmp, variant: str):
-    runs = [(v, n) for (v, n) in cmp.results if v == variant]
-    if not runs:
-        return None
-    return next((r for r in runs if r[1] == "fischer_burmeister"), runs[0])
-
-
-def continuum_figures(model, cmp) -> dict:
-    """``pressure_profile.png``, ``deformed_<variant>.png`` and ``contact_history.png`` (file
-    name: function drawing it)."""
-    from ..model import ContactModel
-
-    drawings = {}
+@register_drawing("pressure_profile")
+def draw_pressure_profile(cmp):
+    """The contact pressure of every run at the last step along the surface, with Hertz's for the
+    measured force when the model has a Hertz reference (``pressure_profile.png``)."""
+    model = cmp.model
     pairs, x = _profile_coordinate(model)
     # show the contact zone: 1.5 x the farthest pair in contact in any run's last step
     active = np.zeros(pairs.size, dtype=bool)
@@ -106,19 +113,18 @@ def continuum_figures(model, cmp) -> dict:
                          converged=bool(last.converged), style=styles[variant]))
         if hertz is None and model.reference is not None and variant == "classical" and last.converged:
             hertz = model.reference.curve(model, last.p)
-    if model.n_contacts:
-        xlabel = "distance from the indenter's axis (m)" if model.reference is not None else "x (m)"
-        drawings["pressure_profile.png"] = lambda: figure_pressure_profile(
-            runs, hertz=hertz, xlabel=xlabel, title=f"{model.name}: contact pressure, last step")
-    for variant in ("classical", "ddcm"):
-        key = _pick(cmp, variant)
-        if key is not None:
-            drawings[f"deformed_{variant}.png"] = (lambda k=key: _deformed(model, cmp.results[k], k))
-    return {**drawings, **ContactModel.figures(model, cmp)}
+    xlabel = "distance from the indenter's axis (m)" if model.reference is not None else "x (m)"
+    return figure_pressure_profile(runs, hertz=hertz, xlabel=xlabel, title=f"{model.name}: contact pressure, last step")
 
 
-def _deformed(model, run, key):
-    last = run.steps[-1]
+@register_drawing("deformed_body")
+def draw_deformed_body(cmp, *, variant: str, formulation: str):
+    """The deformed body of one run at the last step, coloured by the von Mises stress
+    (``deformed_<variant>.png``)."""
+    from . import fem  # scikit-fem only when a 3-D body is drawn (its import takes 0.4 s)
+
+    model, key = cmp.model, (variant, formulation)
+    last = cmp.results[key].steps[-1]
     d, k = model.dimension, model.strain_components
     vm = _per_element(model, von_mises(np.asarray(last.stress).reshape(-1, k), d))
     disc = model.discretisation
