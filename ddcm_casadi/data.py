@@ -10,11 +10,11 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .inputs import input_file
 from .metric import Metric
+from .search import KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
 
 #: Data files larger than this are rejected before reading (bytes).
 MAX_DATA_FILE_BYTES = 2 * 1024**3
@@ -22,16 +22,6 @@ MAX_DATA_FILE_BYTES = 2 * 1024**3
 MAX_DATA_POINTS = 10**8
 #: Rows per block where a pass over the data would otherwise allocate a full-size temporary.
 _CHUNK = 1 << 16
-
-
-def _kd_tree(X: np.ndarray) -> cKDTree:
-    """The KD-tree over the coordinates ``X`` (kept, not copied). Sliding-midpoint splits build
-    2-3x faster than scipy's default medians at the same query time (measured at 1e7 points in 2
-    coordinates and 1e6 in 12). In 2 coordinates leaves of 32 points halve the nodes' memory
-    against the default 16 (27 -> 16 bytes per point beside the coordinates) at the same query
-    time; in 12 they cost 15 % more query time, and the nodes are small beside 96 bytes of
-    coordinates per point."""
-    return cKDTree(X, leafsize=32 if X.shape[1] <= 2 else 16, balanced_tree=False, compact_nodes=False)
 
 
 def check_positive(name: str, value: float) -> float:
@@ -123,8 +113,7 @@ class MaterialDataset:
     stress: np.ndarray
     c: float | np.ndarray | Metric
     metric: Metric = field(init=False, repr=False)
-    _tree: cKDTree = field(init=False, repr=False)
-    _knn: tuple | None = field(init=False, repr=False, default=None)
+    _searches: dict = field(init=False, repr=False, default_factory=dict)
     _frame: tuple = field(init=False, repr=False, default=())
 
     def __post_init__(self) -> None:
@@ -166,7 +155,9 @@ class MaterialDataset:
         for a in range(0, X.shape[0], _CHUNK):
             X[a:a + _CHUNK] = X[a:a + _CHUNK] @ axes
         object.__setattr__(self, "_frame", (mean, axes))
-        object.__setattr__(self, "_tree", _kd_tree(X))
+        # The exact KD-tree is always built (the other backends and k_nearest use it); the
+        # others on first use (:meth:`search`).
+        self._searches["kdtree"] = KDTreeSearch(kd_tree(X))
 
     @property
     def k(self) -> int:
@@ -176,9 +167,9 @@ class MaterialDataset:
     def __len__(self) -> int:
         return self.strain.shape[0]
 
-    def _coords(self, strain: np.ndarray, stress: np.ndarray) -> np.ndarray:
-        """The tree's coordinates: scaled (Euclidean distance is the metric's), centred and
-        rotated to the data's principal axes."""
+    def coordinates(self, strain, stress) -> np.ndarray:
+        """The search's coordinates of states ``(strain, stress)``: scaled (Euclidean distance is
+        the metric's), centred and rotated to the data's principal axes (:mod:`ddcm_casadi.search`)."""
         mean, axes = self._frame
         return np.ascontiguousarray((self.metric.coordinates(strain, stress) - mean) @ axes)
 
@@ -189,83 +180,36 @@ class MaterialDataset:
         ds = np.asarray(stress, dtype=float).reshape(shape) - self.stress[index]
         return self.metric.distance2(de, ds)
 
-    def nearest(self, strain, stress) -> np.ndarray:
-        """Indices of the data points nearest to each state ``(strain, stress)`` (vectorised KD-tree)."""
-        _, idx = self._tree.query(self._coords(strain, stress))
-        return np.asarray(idx, dtype=np.intp)
+    def search(self, name: str = "kdtree") -> NeighbourSearch:
+        """The search backend ``name`` over this data set (:data:`ddcm_casadi.search.SEARCHES`),
+        built on first use and kept (the KD-tree is built with the data set)."""
+        name = search_name(name)
+        backend = self._searches.get(name)
+        if backend is None:
+            tree = self._searches["kdtree"]
+            backend = self._searches[name] = search_class(name).build(tree.points, base=tree)
+        return backend
+
+    def nearest(self, strain, stress, *, search: str = "kdtree", previous=None, stats: dict | None = None) -> np.ndarray:
+        """Indices of the data points nearest to each state ``(strain, stress)`` (vectorised), by
+        the backend ``search``, warm-started from the assignment ``previous`` if given; ``stats``
+        accumulates ``queries`` and ``fallbacks`` (:meth:`NeighbourSearch.nearest`)."""
+        return self.search(search).nearest(self.coordinates(strain, stress), previous=previous, stats=stats)
 
     def k_nearest(self, strain, stress, k: int) -> np.ndarray:
         """Indices of the ``k`` data points nearest to each state, nearest first: ``(n, k)``
         (``k`` is capped at the data set's size)."""
-        k = min(int(k), len(self))
-        _, idx = self._tree.query(self._coords(strain, stress), k=k)
-        return np.asarray(idx, dtype=np.intp).reshape(-1, k)
+        return self._searches["kdtree"].k_nearest(self.coordinates(strain, stress), k)
 
     def describe(self) -> dict:
         """Size, metric and strain range, for results files."""
         return dict(points=len(self), c=self.metric.describe(), components=self.k,
                     strain_min=float(self.strain.min()), strain_max=float(self.strain.max()))
 
-    #: Neighbours per datum in the graph of the warm-started search.
-    NEIGHBOURS = 8
-
-    def _graph(self):
-        """k-nearest-neighbour graph of the data (built once, on first use) and each datum's
-        radius: the distance to its k-th neighbour, rounded down to float32."""
-        graph = self._knn
-        if graph is None:
-            pts = self._tree.data
-            n = pts.shape[0]
-            k = min(self.NEIGHBOURS, n - 1)
-            # Compact and built in blocks: int32 indices, radii rounded down to float32 (a
-            # smaller radius only certifies fewer states), 36 bytes per datum at k = 8; the
-            # query of all data at once held 144 more (1e8 points: 14 GB).
-            nbrs = np.zeros((n, max(k, 0)), dtype=np.int32 if n < 2**31 else np.intp)
-            radius = np.zeros(n, dtype=np.float32)
-            for a in range(0, n if k >= 1 else 0, _CHUNK):
-                dist, idx = self._tree.query(pts[a:a + _CHUNK], k=k + 1)
-                nbrs[a:a + _CHUNK] = idx[:, 1:]
-                r = dist[:, -1].astype(np.float32)
-                radius[a:a + _CHUNK] = np.where(r > dist[:, -1], np.nextafter(r, np.float32(0)), r)
-            graph = (nbrs, radius)
-            object.__setattr__(self, "_knn", graph)
-        return graph
-
-    def nearest_warm(self, strain, stress, previous, *, max_walk: int = 8, stats: dict | None = None) -> np.ndarray:
-        """:meth:`nearest`, started from a previous assignment (Eggersmann et al., 2021), exact.
-
-        Each state walks the k-nearest-neighbour graph of the data from its previous datum to
-        the nearest datum among a datum and its neighbours. The result ``j`` is certified when
-        ``d(q, j) < r_k(j) / 2`` (``r_k`` the distance from ``j`` to its k-th neighbour): any datum
-        outside the neighbourhood is then farther from ``q`` than ``j`` (triangle inequality).
-        Uncertified states, and walks that do not settle, fall back to the KD-tree query, so the
-        answer is always the exact nearest datum. ``stats``, if given, accumulates ``queries`` and
-        ``fallbacks`` (uncertified states).
-        """
-        q = self._coords(strain, stress)
-        j = np.array(previous, dtype=np.intp, copy=True)
-        if j.shape != (q.shape[0],):
-            raise InputError("previous assignment must have one index per state")
-        nbrs, radius = self._graph()
-        pts = self._tree.data
-        rows = np.arange(q.shape[0])
-        settled = False
-        for _ in range(max_walk):
-            cand = np.column_stack([j, nbrs[j]])
-            d2 = np.sum((pts[cand] - q[:, None, :]) ** 2, axis=2)
-            best = cand[rows, np.argmin(d2, axis=1)]
-            settled = bool(np.array_equal(best, j))
-            j = best
-            if settled:
-                break
-        d = np.sqrt(np.sum((pts[j] - q) ** 2, axis=1))
-        uncertain = ~(d < 0.5 * radius[j]) if settled else np.ones(j.size, dtype=bool)
-        if uncertain.any():
-            _, j[uncertain] = self._tree.query(q[uncertain])
-        if stats is not None:
-            stats["queries"] = stats.get("queries", 0) + int(j.size)
-            stats["fallbacks"] = stats.get("fallbacks", 0) + int(uncertain.sum())
-        return j
+    def nearest_warm(self, strain, stress, previous, *, stats: dict | None = None) -> np.ndarray:
+        """:meth:`nearest` by the warm-started graph search from the assignment ``previous``
+        (exact; :class:`~ddcm_casadi.search.GraphSearch`)."""
+        return self.nearest(strain, stress, search="graph", previous=previous, stats=stats)
 
     @property
     def datasets(self) -> tuple["MaterialDataset"]:
@@ -520,12 +464,17 @@ class PointData:
     def _per_point(self, a) -> np.ndarray:
         return np.asarray(a, dtype=float).reshape((-1,) if self.k == 1 else (-1, self.k))
 
-    def nearest(self, strain, stress) -> np.ndarray:
+    def nearest(self, strain, stress, *, search: str = "kdtree", previous=None, stats: dict | None = None) -> np.ndarray:
+        """The nearest datum of each point in its own set (global indices), by the backend
+        ``search`` (:meth:`MaterialDataset.nearest`), warm-started from ``previous`` if given."""
         strain, stress = self._per_point(strain), self._per_point(stress)
+        prev = None if previous is None else np.asarray(previous, dtype=np.intp)
         out = np.empty(strain.shape[0], dtype=np.intp)
         for k, pts in enumerate(self._groups):
             if pts.size:
-                out[pts] = self.datasets[k].nearest(strain[pts], stress[pts]) + self.offsets[k]
+                local = None if prev is None else prev[pts] - self.offsets[k]
+                out[pts] = self.datasets[k].nearest(strain[pts], stress[pts], search=search, previous=local,
+                                                    stats=stats) + self.offsets[k]
         return out
 
     def k_nearest(self, strain, stress, k: int) -> np.ndarray:
@@ -539,15 +488,9 @@ class PointData:
                 out[pts] = self.datasets[j].k_nearest(strain[pts], stress[pts], k) + self.offsets[j]
         return out
 
-    def nearest_warm(self, strain, stress, previous, **kw) -> np.ndarray:
-        strain, stress = self._per_point(strain), self._per_point(stress)
-        previous = np.asarray(previous, dtype=np.intp)
-        out = np.empty(strain.shape[0], dtype=np.intp)
-        for k, pts in enumerate(self._groups):
-            if pts.size:
-                local = self.datasets[k].nearest_warm(strain[pts], stress[pts], previous[pts] - self.offsets[k], **kw)
-                out[pts] = local + self.offsets[k]
-        return out
+    def nearest_warm(self, strain, stress, previous, *, stats: dict | None = None) -> np.ndarray:
+        """:meth:`nearest` by the warm-started graph search from ``previous``."""
+        return self.nearest(strain, stress, search="graph", previous=previous, stats=stats)
 
     def distance2(self, strain, stress, index) -> np.ndarray:
         """Squared DDCM distance of each point's state to its datum ``index``, under its metric."""

@@ -303,7 +303,7 @@ def as_ddcm_options(ddcm: DDCMOptions | Mapping | None) -> DDCMOptions:
 
 
 def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] = VARIANTS,
-            raise_on_failure: bool = False, ddcm_max_outer: int = 100, ddcm_search: str = "kdtree",
+            raise_on_failure: bool = False, ddcm_max_outer: int | None = None, ddcm_search: str | None = None,
             ddcm: DDCMOptions | None = None,
             progress: Callable[[str, str, StepResult], None] | None = None, jobs: int | None = 1) -> Comparison:
     """Run every formulation in every variant along the model's load path.
@@ -317,14 +317,14 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     variants : iterable of {"classical", "ddcm"}
     raise_on_failure : bool
         Raise :class:`~ddcm_casadi.errors.ConvergenceError` at the first non-converged step.
-    ddcm_max_outer : int
-        Alternating-projection iterations per DDCM load step.
-    ddcm_search : {"kdtree", "warm"}
-        Data search of the DDCM iterations: a cold KD-tree query, or the exact warm-started search
-        from the previous assignment (:meth:`~ddcm_casadi.data.MaterialDataset.nearest_warm`).
-    ddcm : DDCMOptions, optional
-        Where DDCM steps start (also an explicit initial assignment), restarts, greedy
-        improvement, certificates and noise-robust variants
+    ddcm_max_outer : int, optional
+        Alternating-projection iterations per DDCM load step: replaces ``ddcm.max_outer``.
+    ddcm_search : str, optional
+        Data search backend of the DDCM iterations (:data:`ddcm_casadi.search.SEARCHES`:
+        ``"kdtree"``, ``"graph"``): replaces ``ddcm.search``.
+    ddcm : DDCMOptions or mapping, optional
+        Iterations, data search, where DDCM steps start (also an explicit initial assignment),
+        restarts, greedy improvement, certificates and noise-robust variants
         (:class:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions`; default: its defaults).
     progress : callable, optional
         Called as ``progress(variant, formulation, step_result)`` after every step (with ``jobs >
@@ -343,11 +343,11 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
         raise InputError(f"unknown variant {bad[0]!r}; choose from {', '.join(VARIANTS)}")
-    if ddcm_search not in DDCMSolver.SEARCHES:
-        raise InputError(f"unknown data search {ddcm_search!r}; known: {', '.join(DDCMSolver.SEARCHES)}")
     if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1):
         raise InputError(f"jobs must be a positive integer or None (every core), got {jobs!r}")
     ddcm = as_ddcm_options(ddcm)
+    given = {k: v for k, v in dict(max_outer=ddcm_max_outer, search=ddcm_search).items() if v is not None}
+    ddcm = dataclasses.replace(ddcm, **given) if given else ddcm  # checked as the options are
     forms = resolve_formulations(formulations)
     odd = model.path_warnings()  # refuses a meaningless path before any work
     for message in odd:
@@ -368,7 +368,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
             r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb)
         else:
             built = form.build(problems.projection)
-            solver = DDCMSolver(problems, built, max_outer=ddcm_max_outer, search=ddcm_search, options=ddcm)
+            solver = DDCMSolver(problems, built, options=ddcm)
             build = time.perf_counter() - t0
             r = solver.solve(formulation_name=form.name, raise_on_failure=raise_on_failure, progress=cb)
         r.build_seconds = build

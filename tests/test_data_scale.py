@@ -53,9 +53,10 @@ def test_compact_graph_radii_never_exceed_the_distances(k):
     strain, stress = _samples(3000, k, noise=0.01)
     strain, stress = np.concatenate([strain, strain[:500]]), np.concatenate([stress, stress[:500]])
     data = MaterialDataset(strain, stress, 200e9 if k == 1 else D3)
-    nbrs, radius = data._graph()
+    graph = data.search("graph")
+    nbrs, radius = graph.neighbours, graph.radius
     assert nbrs.dtype == np.int32 and radius.dtype == np.float32
-    pts = data._tree.data
+    pts = graph.points
     exact = np.sqrt(np.sum((pts[nbrs[:, -1]] - pts) ** 2, axis=1))
     assert np.all(radius.astype(float) <= exact)
     assert np.all(radius.astype(float) >= exact * (1 - 2.0**-23))

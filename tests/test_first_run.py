@@ -43,9 +43,9 @@ def test_exact_projections_are_copies_within_budget(paper, monkeypatch):
     solver = DDCMSolver(problems, built)
     data = paper.dataset
     params = problems.projection_params(3, data.strain[[10]], data.stress[[10]])
-    x, p, obj = solver._exact_projection(params)
+    x, p, obj = solver.projection.exact_projection(params)
     x[:], p[:] = np.nan, np.nan  # a caller that writes into its answer cannot spoil the next one
-    x2, p2, obj2 = solver._exact_projection(params)
+    x2, p2, obj2 = solver.projection.exact_projection(params)
     ex = solver.exact.solve(params)
     np.testing.assert_array_equal(x2, ex.x[:, 0])
     np.testing.assert_array_equal(p2, ex.p[:, 0])
@@ -59,7 +59,7 @@ def test_exact_projections_are_copies_within_budget(paper, monkeypatch):
     fresh = build_problems(paper)
     small = DDCMSolver(fresh, built)
     for j in range(10, 20):
-        small._exact_projection(fresh.projection_params(3, data.strain[[j]], data.stress[[j]]))
+        small.projection.exact_projection(fresh.projection_params(3, data.strain[[j]], data.stress[[j]]))
     cache = fresh.projection.shared(("exact_projections",), dict)
     assert 0 < cache["values"] <= budget
     assert len(cache["items"]) < 10

@@ -1,5 +1,6 @@
-"""Options of the DDCM driver: where each load step starts, restarts, global improvement,
-certificates and the noise-robust variants (one frozen, keyword-only dataclass).
+"""Options of the DDCM driver: iterations, data search, where each load step starts, restarts,
+global improvement, certificates and the noise-robust variants (one frozen, keyword-only
+dataclass, validated on construction).
 
 >>> from ddcm_casadi.solvers.ddcm_options import DDCMOptions
 >>> opts = DDCMOptions(restarts=4, improve="greedy", seed=1)
@@ -19,6 +20,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..errors import InputError
+from ..search import search_name
 
 #: The initial data assignment of a load step (see :class:`DDCMOptions`).
 STARTS = ("origin", "elastic", "random")
@@ -29,13 +31,15 @@ VARIANTS = ("plain", "lcdd", "maxent")
 
 _INTS = {"seed": (0, 2**63 - 1), "restarts": (0, 10_000), "restart_neighbours": (0, 10**6), "greedy_neighbours": (1, 1000),
          "greedy_points": (0, 10**9), "greedy_budget": (1, 10**6), "exact_max": (0, 10**9),
-         "lcdd_neighbours": (2, 64), "maxent_neighbours": (2, 4096), "maxent_steps": (1, 200)}
+         "lcdd_neighbours": (2, 64), "maxent_neighbours": (2, 4096), "maxent_steps": (1, 200),
+         # One alternating projection cannot confirm a fixed point (an unchanged assignment).
+         "max_outer": (2, 10**6)}
 #: Real options: (lower, upper), the lower bound excluded.
 _FLOATS = {"maxent_beta_growth": (1.0, 1e6)}
 _CHOICES = {"start": STARTS, "improve": IMPROVEMENTS, "variant": VARIANTS}
 _BOOLS = ("warm", "greedy_screen")
-#: Alternating projections per step: one cannot confirm a fixed point (an unchanged assignment).
-MAX_OUTER_RANGE = (2, 10**6)
+#: Alternating projections per step.
+MAX_OUTER_RANGE = _INTS["max_outer"]
 
 
 def _checked(name: str, value: Any, where: str) -> Any:
@@ -49,8 +53,14 @@ def _checked(name: str, value: Any, where: str) -> Any:
         if not isinstance(value, (bool, np.bool_)):
             raise InputError(f"{where} {name} must be true or false, got {value!r:.60}")
         return bool(value)
+    if name == "search":
+        return search_name(value)  # a one-line error listing the registered backends
     if name in _INTS:
         lo, hi = _INTS[name]
+        if isinstance(value, float) and value.is_integer():
+            # TOML and JSON read 1e7 and 100.0 as floats: say how to write the integer.
+            raise InputError(f"{where} {name} must be an integer in {lo}..{hi}, got the float {value!r} "
+                             f"(write it without a decimal point or exponent: {int(value)})")
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
             raise InputError(f"{where} {name} must be an integer in {lo}..{hi}, got {value!r:.60}")
         if not lo <= int(value) <= hi:
@@ -83,6 +93,13 @@ class DDCMOptions:
 
     Parameters
     ----------
+    max_outer : int
+        Alternating projections per run of a load step (2..1e6: one projection cannot confirm a
+        fixed point).
+    search : str
+        The data search backend (:data:`ddcm_casadi.search.SEARCHES`): ``"kdtree"``, a cold
+        KD-tree query, or ``"graph"`` (alias ``"warm"``), the exact walk on the data's
+        neighbour graph from the previous assignment. Both are exact: the path is the same.
     start : {"origin", "elastic", "random"}
         The data assignment the first load step starts from (and every step when ``warm`` is
         False). ``origin``: every point at the datum nearest the zero state (the historical
@@ -153,6 +170,8 @@ class DDCMOptions:
         Max-ent: the factor ``g > 1`` of ``beta`` from one annealing stage to the next.
     """
 
+    max_outer: int = 100
+    search: str = "kdtree"
     start: str = "origin"
     initial: tuple[int, ...] | None = None
     warm: bool = True
@@ -193,6 +212,6 @@ class DDCMOptions:
         return d
 
 
-#: The keys of ``[ddcm]`` read by :meth:`DDCMOptions.from_mapping` (``c`` and ``max_outer`` are
-#: read by the case file itself).
+#: The keys of ``[ddcm]`` read by :meth:`DDCMOptions.from_mapping` (``c`` is read by the case
+#: file itself).
 KEYS = frozenset(f.name for f in dataclasses.fields(DDCMOptions))

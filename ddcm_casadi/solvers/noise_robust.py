@@ -2,7 +2,10 @@ r"""Noise-robust data-driven schemes: local convexity (LCDD) and maximum entropy
 
 Both keep the projection onto ``Z_E`` of the DDCM driver (:meth:`DDCMSolver.project_data`, the
 same CasADi problem with the material states passed as parameters) and replace the projection
-onto the data, "the nearest datum", by another *material update* ``z* = M(z)``:
+onto the data, "the nearest datum", by another *material update* ``z* = M(z)``
+(:class:`~ddcm_casadi.solvers.scheme.MaterialScheme`; :class:`~ddcm_casadi.solvers.lcdd.LCDD`,
+:class:`~ddcm_casadi.solvers.maxent.MaxEnt`; this module holds what they share,
+:class:`SettlingScheme`):
 
 .. math::  z \leftarrow P_{Z_E}(z^*) , \qquad z^* \leftarrow M(z) ,
 
@@ -73,9 +76,12 @@ single noisy data).
 from __future__ import annotations
 
 import itertools
-import time
+from abc import abstractmethod
 
 import numpy as np
+
+from .records import MaterialStates
+from .scheme import MaterialScheme, Update
 
 
 #: Change of the material states (metric distance over the data's spread) below which an
@@ -116,18 +122,7 @@ def hull_projection(q: np.ndarray, Y: np.ndarray) -> np.ndarray:
     return best
 
 
-def _lcdd_star(model, strain, stress, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """The LCDD material states of every point: the projection onto the hull of its k nearest data."""
-    data = model.dataset
-    rc = np.sqrt(model.metric)  # per point: coordinates (sqrt(c) e, s / sqrt(c))
-    near = data.k_nearest(strain, stress, k)
-    q = np.column_stack([rc * strain, stress / rc])
-    Y = np.stack([rc[:, None] * data.strain[near], data.stress[near] / rc[:, None]], axis=-1)
-    y = hull_projection(q, Y)
-    return y[:, 0] / rc, y[:, 1] * rc
-
-
-def _point_distance2(model, d_strain: np.ndarray, d_stress: np.ndarray) -> np.ndarray:
+def point_distance2(model, d_strain: np.ndarray, d_stress: np.ndarray) -> np.ndarray:
     """Squared metric distances of strain and stress differences ``(m, K, k)``, each point under
     its own material's metric: ``(m, K)``."""
     metrics, material = model.dataset.point_materials(model.n_points)
@@ -139,14 +134,14 @@ def _point_distance2(model, d_strain: np.ndarray, d_stress: np.ndarray) -> np.nd
     return out
 
 
-def _per_point(model, a) -> np.ndarray:
+def per_point(model, a) -> np.ndarray:
     """A flat point-major field as ``(m, 1, k)``."""
     return np.reshape(np.asarray(a, dtype=float), (model.n_points, 1, model.strain_components))
 
 
-def _largest_distance(model, d_strain, d_stress) -> float:
+def largest_distance(model, d_strain, d_stress) -> float:
     """The largest metric length of per-point strain and stress differences (flat, point-major)."""
-    return float(np.sqrt(np.max(_point_distance2(model, _per_point(model, d_strain), _per_point(model, d_stress)))))
+    return float(np.sqrt(np.max(point_distance2(model, per_point(model, d_strain), per_point(model, d_stress)))))
 
 
 def data_spread(model) -> float:
@@ -162,9 +157,9 @@ def neighbourhoods(model, strain, stress, k: int) -> tuple[np.ndarray, np.ndarra
     near = data.k_nearest(strain, stress, k)
     m, K = near.shape
     shape = (m, K, model.strain_components)
-    de = _per_point(model, strain) - data.strain[near].reshape(shape)
-    ds = _per_point(model, stress) - data.stress[near].reshape(shape)
-    return near, _point_distance2(model, de, ds)
+    de = per_point(model, strain) - data.strain[near].reshape(shape)
+    ds = per_point(model, stress) - data.stress[near].reshape(shape)
+    return near, point_distance2(model, de, ds)
 
 
 def boltzmann_weights(d2: np.ndarray, beta: float) -> tuple[np.ndarray, bool]:
@@ -182,133 +177,70 @@ def boltzmann_weights(d2: np.ndarray, beta: float) -> tuple[np.ndarray, bool]:
     return w, bool(np.all(far < CONCENTRATED * w.max(axis=1)))
 
 
-class _LCDD:
-    """LCDD's material update (no stages)."""
+class SettlingScheme(MaterialScheme):
+    """A material update that settles only in the limit (LCDD, max-ent), in stages.
 
-    def __init__(self, model, opts) -> None:
-        self.model, self.k = model, opts.lcdd_neighbours
+    A run is done when the material states move less than :data:`TOL` of the data's spread
+    (:func:`data_spread`) at the last stage; an intermediate stage settles to its own
+    :meth:`tolerance`, then :meth:`advance` starts the next one from the same state (without a
+    projection). The states are reported with their nearest datum as ``data_index``.
+    Subclasses give :meth:`material` (the update proper) and may give :meth:`start` (called with
+    the first projected state of a run), :meth:`tolerance`, :meth:`advance` and :meth:`settled`.
+    """
 
-    def start(self, strain, stress) -> None:
-        pass
+    def __init__(self, model, options) -> None:
+        super().__init__(model, options)
+        self.tol = TOL * data_spread(model)
+        self._star: MaterialStates | None = None
+        self._started = False
 
-    def star(self, strain, stress) -> tuple[np.ndarray, np.ndarray]:
-        return _lcdd_star(self.model, strain, stress, self.k)
+    def states(self, index: np.ndarray) -> MaterialStates:
+        data = self.model.dataset
+        return MaterialStates(data.strain[index].ravel(), data.stress[index].ravel())
+
+    def begin(self, start: MaterialStates) -> None:
+        self._star, self._started = start, False
+
+    def update(self, strain, stress) -> Update:
+        if not self._started:
+            self.start(strain, stress)
+            self._started = True
+        star, converged = self._star, False
+        while True:
+            # the change is measured from the material states this state was projected from
+            new_e, new_s = self.material(strain, stress)
+            change = largest_distance(self.model, new_e - star.strain, new_s - star.stress)
+            if change > self.tolerance(self.tol):
+                break  # not settled at this stage: project again
+            if self.advance():
+                continue  # settled: the next stage starts from the same state, without a projection
+            converged = change <= self.tol  # the last stage, settled to the final tolerance
+            break
+        self._star = MaterialStates(new_e, new_s)
+        return Update(self._star, done=converged, converged=converged, message=self.settled() if converged else "")
+
+    def distance2(self, strain, stress, star: MaterialStates) -> np.ndarray:
+        model = self.model
+        return point_distance2(model, per_point(model, strain - star.strain), per_point(model, stress - star.stress))[:, 0]
+
+    def finish(self, star: MaterialStates) -> MaterialStates:
+        return MaterialStates(star.strain, star.stress, self.model.dataset.nearest(star.strain, star.stress))
+
+    @abstractmethod
+    def material(self, strain: np.ndarray, stress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The material states ``M(z)`` of the projected state (flat, point-major)."""
+
+    def start(self, strain: np.ndarray, stress: np.ndarray) -> None:
+        """Set up a run from its first projected state (nothing by default)."""
 
     def tolerance(self, tol: float) -> float:
+        """The change below which the current stage has settled (``tol`` at the last)."""
         return tol
 
     def advance(self) -> bool:
+        """Go to the next stage (True), or say that this is the last one (False)."""
         return False
 
     def settled(self) -> str:
-        return "fixed point (LCDD)"
-
-
-class _MaxEnt:
-    """Max-ent's material update and its annealing schedule (see the module's docstring)."""
-
-    def __init__(self, model, opts) -> None:
-        self.model, self.k = model, opts.maxent_neighbours
-        self.steps, self.growth = opts.maxent_steps, opts.maxent_beta_growth
-        self.beta = self.beta0 = float("nan")
-        self.stage, self.concentrated, self.last = 0, False, False
-
-    def start(self, strain, stress) -> None:
-        _, d2 = neighbourhoods(self.model, strain, stress, self.k)
-        # all neighbours on the state (duplicated data): any beta gives the same mean
-        self.beta0 = self.beta = 1.0 / max(float(np.mean(d2)), np.finfo(float).tiny)
-        self.stage, self.concentrated, self.last = 0, False, False
-
-    def star(self, strain, stress) -> tuple[np.ndarray, np.ndarray]:
-        data, model = self.model.dataset, self.model
-        near, d2 = neighbourhoods(model, strain, stress, self.k)
-        w, self.concentrated = boltzmann_weights(d2, self.beta)
-        shape = near.shape + (model.strain_components,)
-        e = np.einsum("ij,ijk->ik", w, data.strain[near].reshape(shape))
-        s = np.einsum("ij,ijk->ik", w, data.stress[near].reshape(shape))
-        return e.reshape(np.shape(strain)), s.reshape(np.shape(stress))
-
-    def tolerance(self, tol: float) -> float:
-        """An intermediate stage only has to follow the minimiser within a small fraction of the
-        kernel's width ``beta^-1/2`` (the next stage moves it anyway); the last one settles to ``tol``."""
-        return tol if self.last else max(tol, STAGE_TOL / np.sqrt(self.beta))
-
-    def advance(self) -> bool:
-        if self.last or self.concentrated or self.stage + 1 >= self.steps:
-            self.last = True
-            return False
-        self.stage += 1
-        self.beta *= self.growth
-        return True
-
-    def settled(self) -> str:
-        how = "weights concentrated" if self.concentrated else "final temperature"
-        return f"fixed point (max-ent, {how} at stage {self.stage + 1}/{self.steps}, beta = {self.beta:.3g}/Pa)"
-
-
-#: The material update of each noise-robust variant.
-SCHEMES = {"lcdd": _LCDD, "maxent": _MaxEnt}
-
-
-def solve_noise_robust(solver, *, formulation_name: str = "", raise_on_failure: bool = False, progress=None):
-    """A noise-robust variant (:data:`SCHEMES`, chosen by :class:`DDCMOptions` ``variant``) along the
-    load path with the driver's projection onto ``Z_E`` (:meth:`DDCMSolver.project_data`) and
-    starts (:class:`DDCMOptions` ``start``, ``initial``, ``warm``)."""
-    from .path import PathResult, StepResult, _check_convergence
-
-    problems, model, opts = solver.problems, solver.problems.model, solver.options
-    data = model.dataset
-    scheme = SCHEMES[opts.variant](model, opts)
-    out = PathResult("ddcm", formulation_name)
-    x, p, state = np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None
-    tol = TOL * data_spread(model)
-    star_e = star_s = None
-    t_all = time.perf_counter()
-    for k in range(model.n_steps):
-        t0 = time.perf_counter()
-        if star_e is None or not opts.warm:
-            index = solver.initial_assignment(k)
-            star_e, star_s = data.strain[index].ravel(), data.stress[index].ravel()
-        cost = dict(inner=0, t_project=0.0)
-        converged, message = False, "maximum outer iterations reached"
-        for outer in range(1, solver.max_outer + 1):
-            sol, is_global, err, failed = solver.project_data(k, star_e, star_s, (x, p, state), cost)
-            if failed:
-                message = failed
-                break
-            x, p, state = sol.x, sol.p, sol.state
-            f = problems.fields("mpcc", sol.x, sol.p)
-            if outer == 1:
-                scheme.start(f["strain"], f["stress"])
-            while True:
-                # the change is measured from the material states this state was projected from
-                new_e, new_s = scheme.star(f["strain"], f["stress"])
-                change = _largest_distance(model, new_e - star_e, new_s - star_s)
-                if change > scheme.tolerance(tol):
-                    break  # not settled at this stage: project again
-                if scheme.advance():
-                    continue  # settled: the next stage starts from the same state, without a projection
-                converged = change <= tol  # the last stage, settled to the final tolerance
-                break
-            star_e, star_s = new_e, new_s
-            if converged:
-                message = scheme.settled()
-                break
-        f = problems.fields("mpcc", sol.x, sol.p)
-        index = data.nearest(star_e, star_s)
-        d2 = _point_distance2(model, _per_point(model, f["strain"] - star_e), _per_point(model, f["stress"] - star_s))
-        step = StepResult(step=k, load_parameter=float(model.load_parameter[k]), u=f["u"], p=f["p"],
-                          converged=converged, iterations=cost["inner"], outer_iterations=outer, residual=sol.residual,
-                          complementarity=sol.complementarity, penetration=sol.penetration, seconds=0.0,
-                          message=message, strain=f["strain"], stress=f["stress"], strain_star=star_e.copy(),
-                          stress_star=star_s.copy(), data_index=index,
-                          distance=float(0.5 * np.dot(model.volumes, d2[:, 0])),
-                          projection_error=err, projection_global=is_global, projection_seconds=cost["t_project"],
-                          projections=outer, runs=1)
-        step.seconds = time.perf_counter() - t0
-        out.steps.append(step)
-        if progress is not None:
-            progress(step)
-        _check_convergence(step, raise_on_failure, f"ddcm/{formulation_name}")
-    out.solve_seconds = time.perf_counter() - t_all
-    return out
+        """The message of a settled run."""
+        return f"fixed point ({self.name})"
