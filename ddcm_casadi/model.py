@@ -23,8 +23,12 @@ import scipy.sparse as sp
 
 from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
-from .linalg import SingularMatrix, factorize
+from .linalg import SingularMatrix, factorize, to_casadi
 
+
+#: Kinematics a model may declare: ``small`` (linear strains and gaps: the problems are affine) or
+#: ``finite`` (a nonlinear strain measure; the problems are nonlinear).
+KINEMATICS = ("small", "finite")
 
 #: Imposed strain beyond which :meth:`ContactModel.path_warnings` warns: small-strain kinematics
 #: then differ from finite-strain ones by more than ~5 % (Green-Lagrange ``e + e^2/2`` vs ``e``).
@@ -120,11 +124,14 @@ class ContactModel:
     name: str = "model"
     load_parameter_name: str = "load parameter"
     strain_components: int = 1
+    kinematics: str = "small"
     _cache: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         B = sp.csr_matrix(self.strain_operator, dtype=float)
         G = sp.csr_matrix(self.gap_operator, dtype=float)
+        if self.kinematics not in KINEMATICS:
+            raise InputError(f"kinematics must be one of {', '.join(map(repr, KINEMATICS))}, got {self.kinematics!r}")
         k = self.strain_components
         if isinstance(k, bool) or int(k) != k or k < 1:
             raise InputError(f"strain_components must be a positive integer, got {k!r}")
@@ -375,7 +382,15 @@ class ContactModel:
         return np.asarray(pressure) > 1e-8 * self.scales["stress"]
 
     def strain(self, u: np.ndarray) -> np.ndarray:
+        """Material-point strains (flat, point-major) of the free displacements ``u``."""
         return self.strain_operator @ np.asarray(u)
+
+    def strain_expression(self, u):
+        """:meth:`strain` for a CasADi symbol ``u``. Small kinematics: ``B u``. A model kind with
+        ``kinematics = "finite"`` overrides both with its nonlinear strain (Green-Lagrange); the
+        problems then take the nonlinear form (:mod:`ddcm_casadi.problem`), and ``B`` is the
+        strain's derivative at the reference configuration (used only for reference scales)."""
+        return to_casadi(self.strain_operator) @ u
 
     def closed_form(self, step: int):
         """Exact classical solution ``(u, p)`` if the model knows one in closed form, else ``None``."""

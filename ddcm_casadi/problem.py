@@ -39,6 +39,11 @@ import scipy.sparse as sp
 from .linalg import to_casadi
 from .metric import block_diagonal, weighted_distance2
 from .model import ContactModel
+from .solvers.evaluate import NumericFunction
+
+
+#: Up to this many unknowns :meth:`ComplementarityProblem.stability` is computed (dense).
+STABILITY_MAX_UNKNOWNS = 2000
 
 
 class Parameters:
@@ -157,7 +162,9 @@ class Affine:
     def rows(self) -> int:
         return self.z.shape[0]
 
-    def __add__(self, other: "Affine") -> "Affine":
+    def __add__(self, other):
+        if not isinstance(other, Affine):
+            return NotImplemented  # a nonlinear map adds itself (NonlinearMap.__radd__)
         return Affine(self.z + other.z, self.params + other.params)
 
     def __mul__(self, c: float) -> "Affine":
@@ -200,6 +207,94 @@ class Distance:
         """``f`` for symbols ``z``, ``P``."""
         d = self.d.render(z, P)
         return 0.5 * ca.dot(d, ca.mtimes(to_casadi(self.weight), d))
+
+
+class NonlinearMap:
+    """A vector function ``v(z, P)`` of the scaled unknowns ``z = [x; p]`` and the parameters
+    ``P``, given as a CasADi ``Function`` (the nonlinear counterpart of :class:`Affine`).
+
+    Jacobians come by automatic differentiation, sparse. ``terms`` (optional) gives, per row, the
+    size of the terms that cancel in it (for relative residuals, as :meth:`Affine.terms`); without
+    it the values' own size is used.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        ``(z, P) -> v``, both inputs dense column vectors.
+    terms : casadi.Function, optional
+        ``(z, P) -> t`` of the same size as ``v``.
+    """
+
+    def __init__(self, function: ca.Function, terms: ca.Function | None = None) -> None:
+        self.function = function
+        self.terms_function = terms
+        self.n_z, self.n_params = function.size1_in(0), function.size1_in(1)
+
+    @classmethod
+    def of(cls, expr: ca.SX, z: ca.SX, P: ca.SX, terms: ca.SX | None = None, name: str = "v") -> "NonlinearMap":
+        """The map of an ``SX`` expression in the symbols ``z`` and ``P``."""
+        return cls(ca.Function(name, [z, P], [expr]),
+                   None if terms is None else ca.Function(f"{name}_terms", [z, P], [terms]))
+
+    @property
+    def rows(self) -> int:
+        return self.function.size1_out(0)
+
+    def render(self, z, P):
+        """``v`` for symbols ``z``, ``P`` (``SX`` inlines the expression)."""
+        return self.function(z, P)
+
+    def terms(self, z, P):
+        return ca.fabs(self.function(z, P)) if self.terms_function is None else self.terms_function(z, P)
+
+    @cached_property
+    def _numeric(self):
+        return NumericFunction(self.function)
+
+    def value(self, z: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """``v`` for numbers."""
+        return np.asarray(self._numeric(np.asarray(z, float), np.asarray(P, float)), float).ravel()
+
+    def _combine(self, other, op, name: str) -> "NonlinearMap":
+        z, P = ca.SX.sym("z", self.n_z), ca.SX.sym("P", self.n_params)
+        expr = op(self.render(z, P), other.render(z, P))
+        terms = self.terms(z, P) + other.terms(z, P)
+        return NonlinearMap.of(expr, z, P, terms, name)
+
+    def __add__(self, other) -> "NonlinearMap":
+        if not isinstance(other, (Affine, NonlinearMap)):
+            return NotImplemented
+        return self._combine(other, lambda a, b: a + b, "sum")
+
+    __radd__ = __add__
+
+    def __mul__(self, c: float) -> "NonlinearMap":
+        c = float(c)
+        z, P = ca.SX.sym("z", self.n_z), ca.SX.sym("P", self.n_params)
+        return NonlinearMap.of(c * self.render(z, P), z, P, abs(c) * self.terms(z, P), "scaled")
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, c: float) -> "NonlinearMap":
+        return self * (1.0 / float(c))
+
+
+class NonlinearObjective:
+    """A scalar objective ``f(z, P)`` given as a CasADi ``Function`` (the nonlinear counterpart
+    of :class:`Distance`): its gradient and Hessian come by automatic differentiation."""
+
+    def __init__(self, function: ca.Function) -> None:
+        self.function = function
+
+    def render(self, z, P):
+        return self.function(z, P)
+
+    @cached_property
+    def _numeric(self):
+        return NumericFunction(self.function)
+
+    def value(self, z: np.ndarray, P: np.ndarray) -> float:
+        return float(np.asarray(self._numeric(np.asarray(z, float), np.asarray(P, float))).ravel()[0])
 
 
 @dataclass(frozen=True, eq=False)
@@ -330,11 +425,57 @@ class ComplementarityProblem:
         """``(residual, residual_terms, gap, objective)`` at scaled ``(x, p)`` and the parameter
         values (objective 0 for ``mcp``): sparse products with the problem's matrices (those of
         :attr:`residual`, :attr:`residual_terms`, :attr:`gap`, :attr:`objective`), nothing to build."""
+        if not self.affine:
+            z, P = np.concatenate([np.ravel(x), np.ravel(p)]), np.ravel(params)
+            values = self._nonlinear_values(z, P)
+            return values[0], values[1], values[2], float(values[3][0]) if self.distance is not None else 0.0
         w = np.concatenate([np.ravel(x), np.ravel(p), np.ravel(params)]).astype(float, copy=False)
         stacked, size, (ne, ng) = self._stacked
         v = stacked @ w
         objective = 0.0 if self.distance is None else 0.5 * float(v[ng:] @ (self.distance.weight @ v[ng:]))
         return v[:ne], size @ np.abs(w), v[ne:ng], objective
+
+    @cached_property
+    def _nonlinear_values(self):
+        """``(z, P) -> (residual, residual terms, gap, objective)`` in one Function (nonlinear form)."""
+        z, P = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
+        objective = ca.SX(1, 1) if self.distance is None else self.distance.render(z, P)
+        return NumericFunction(ca.Function("evaluate", [z, P], [
+            self.residual_map.render(z, P), self.residual_map.terms(z, P), self.gap_map.render(z, P), objective]))
+
+    @cached_property
+    def _tangent(self):
+        """``(z, P) -> (dF/dx, gap)``: the tangent stiffness of a classical problem (scaled)."""
+        z, P = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
+        F = self.residual_map.render(z, P)
+        return NumericFunction(ca.Function("tangent", [z, P], [ca.densify(ca.jacobian(F, z[:self.n_x])),
+                                                                  ca.densify(ca.jacobian(self.gap_map.render(z, P), z[:self.n_x]))]))
+
+    def stability(self, x, p, params, *, contact_tol: float = 1e-9) -> float:
+        """The smallest eigenvalue of the classical tangent stiffness ``dF/dx`` on the directions
+        that keep every touching pair closed (``g <= contact_tol``), relative to the largest
+        ``|dF/dx|``: negative at an unstable equilibrium (a snap-through truss's horizontal
+        members). Dense, for the few unknowns of a nonlinear structure; ``nan`` above
+        :data:`STABILITY_MAX_UNKNOWNS` unknowns or for an affine problem (unique, stable solutions
+        of a positive definite stiffness)."""
+        if self.kind != "mcp" or self.affine or self.n_x > STABILITY_MAX_UNKNOWNS:
+            return float("nan")
+        z = np.concatenate([np.ravel(x), np.ravel(p)])
+        K, dg = (np.asarray(a, float) for a in self._tangent(z, np.ravel(params)))
+        K, dg = K.reshape(self.n_x, self.n_x, order="F"), dg.reshape(self.n_pairs, self.n_x, order="F")
+        gap = self.gap_map.value(z, np.ravel(params))
+        touching = dg[gap <= contact_tol]
+        if touching.size:
+            _, sv, vt = np.linalg.svd(touching)
+            rank = int(np.sum(sv > 1e-12 * max(sv.max(), 1.0)))
+            basis = vt[rank:].T
+        else:
+            basis = np.eye(self.n_x)
+        if not basis.size:
+            return 1.0  # every direction is held by a contact
+        H = basis.T @ (0.5 * (K + K.T)) @ basis
+        scale = max(float(np.max(np.abs(K))), np.finfo(float).tiny)
+        return float(np.linalg.eigvalsh(H)[0]) / scale
 
     def scaled_penalty(self, gamma: float) -> float:
         """A physical contact stiffness (Pa/m) in the problem's scaled units."""
@@ -443,8 +584,66 @@ def distance_weight(model: ContactModel) -> sp.csr_matrix:
     return block_diagonal(blocks[material] * np.asarray(model.volumes, float)[:, None, None])
 
 
+def _internal_force(model: ContactModel, s: dict, uh: ca.SX, stress: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """``(E(u), B(u)^T W stress, |B(u)|^T W |stress|)`` with ``u = s_d uh`` and ``B(u) = dE/du``
+    by automatic differentiation: the internal forces of a nonlinear strain measure, whose
+    virtual work is ``sum_i w_i stress_i . dE_i``."""
+    E = model.strain_expression(s["displacement"] * uh)
+    B = ca.jacobian(E, uh) / s["displacement"]
+    w = ca.DM(np.repeat(np.asarray(model.volumes, float), model.strain_components))
+    return E, ca.mtimes(B.T, w * stress), ca.mtimes(ca.fabs(B).T, w * ca.fabs(stress))
+
+
+def _build_nonlinear(model: ContactModel) -> ProblemPair:
+    """Both problems of a model with nonlinear kinematics, as CasADi expressions
+    (:class:`NonlinearMap`, :class:`NonlinearObjective`).
+
+    Classical: ``F = (B(u)^T W D E(u) - G^T a p - f) / s_f``. Projection: ``h = (B(u)^T W stress -
+    G^T a p - f) / s_f`` and ``f = d^T W d / (2 energy)`` with ``d = [E(u) - E*; stress - S*]`` point
+    by point. The gaps stay affine: a plane obstacle's gap ``n . (X + u) - d`` is exact at any
+    displacement.
+    """
+    n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
+    GtA = to_casadi((model.gap_operator.T @ sp.diags(model.contact_area)).tocsr())
+    absGtA = ca.fabs(GtA)
+    classical = projection = None
+    if model.youngs_modulus is not None:
+        s = model.scales_for("classical")
+        P = Parameters(gap0=nc, f=n)
+        z, Ps = ca.SX.sym("z", n + nc), ca.SX.sym("P", P.size)
+        uh, ph, f = z[:n], z[n:], Ps[P.slice("f")]
+        E = model.strain_expression(s["displacement"] * uh)
+        _, internal, size = _internal_force(model, s, uh, to_casadi(model.material_matrix()) @ E)
+        F = (internal - s["stress"] * ca.mtimes(GtA, ph) - f) / s["force"]
+        terms = (size + s["stress"] * ca.mtimes(absGtA, ca.fabs(ph)) + ca.fabs(f)) / s["force"]
+        classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),),
+                                           residual_map=NonlinearMap.of(F, z, Ps, terms, "residual"), distance=None,
+                                           **_common(model, s, 1.0 / s["modulus"], n + nc, P))
+    if model.dataset is not None:
+        s = model.scales_for("ddcm")
+        mk = m * k
+        P = Parameters(gap0=nc, f=n, strain_star=mk, stress_star=mk)
+        z, Ps = ca.SX.sym("z", n + mk + nc), ca.SX.sym("P", P.size)
+        uh, stress, ph, f = z[:n], s["stress"] * z[n:n + mk], z[n + mk:], Ps[P.slice("f")]
+        E, internal, size = _internal_force(model, s, uh, stress)
+        h = (internal - s["stress"] * ca.mtimes(GtA, ph) - f) / s["force"]
+        terms = (size + s["stress"] * ca.mtimes(absGtA, ca.fabs(ph)) + ca.fabs(f)) / s["force"]
+        stacked = ca.vertcat(E - Ps[P.slice("strain_star")], stress - Ps[P.slice("stress_star")])
+        point, c = np.divmod(np.arange(2 * mk), 2 * k)
+        d = stacked[np.where(c < k, point * k + c, mk + point * k + c - k).tolist()]
+        W = to_casadi(distance_weight(model) / s["energy"])
+        objective = NonlinearObjective(ca.Function("distance", [z, Ps], [0.5 * ca.dot(d, ca.mtimes(W, d))]))
+        projection = ComplementarityProblem(
+            kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=NonlinearMap.of(h, z, Ps, terms, "h"),
+            distance=objective, **_common(model, s, 1.0 / s["metric"], n + mk + nc, P))
+    return ProblemPair(model=model, classical=classical, projection=projection)
+
+
 def build_problems(model: ContactModel) -> ProblemPair:
-    """Build the classical MCP and the DDCM projection MPCC of ``model`` (as sparse matrices, once)."""
+    """Build the classical MCP and the DDCM projection MPCC of ``model`` once: as sparse matrices
+    for small kinematics, as CasADi expressions for finite ones (:func:`_build_nonlinear`)."""
+    if model.kinematics != "small":
+        return _build_nonlinear(model)
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
     GtA = (model.gap_operator.T @ sp.diags(model.contact_area)).tocsr()  # contact forces G^T (a p)
 

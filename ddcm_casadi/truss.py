@@ -26,12 +26,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
+import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
+from .linalg import to_casadi
 from .model import ContactModel, FigureSpec, drawn_formulation
 
 AXES = "xyz"
@@ -89,6 +91,40 @@ class TrussModel(ContactModel):
         full[self.free_dofs] = u
         return full.reshape(self.nodes.shape)
 
+    # ------------------------------------------------------------ kinematics
+    def _differences(self) -> list[sp.csr_matrix]:
+        """Per axis ``c``, ``D_c`` (ne x n): ``(u_j - u_i)_c / L`` of every member (cached)."""
+        D = self._cache.get("differences")
+        if D is None:
+            nn, d = self.nodes.shape
+            ne = self.members.shape[0]
+            L = self.volumes / self.member_area
+            rows = np.repeat(np.arange(ne), 2)
+            D = []
+            for c in range(d):
+                cols = (self.members * d + c).ravel()
+                vals = np.column_stack([-1.0 / L, 1.0 / L]).ravel()
+                D.append(sp.csr_matrix((vals, (rows, cols)), shape=(ne, nn * d))[:, self.free_dofs].tocsr())
+            self._cache["differences"] = D
+        return D
+
+    def strain(self, u: np.ndarray) -> np.ndarray:
+        """Member strains. Small kinematics: ``e . (u_j - u_i) / L``. Finite: the Green-Lagrange
+        strain ``E = (l^2 - L^2) / (2 L^2) = e . du / L + |du|^2 / (2 L^2)``, ``du = u_j - u_i`` and
+        ``l`` the current length (exact for any displacement and rotation)."""
+        u = np.asarray(u, float)
+        linear = self.strain_operator @ u
+        if self.kinematics == "small":
+            return linear
+        return linear + 0.5 * sum((D @ u) ** 2 for D in self._differences())
+
+    def strain_expression(self, u):
+        """:meth:`strain` for a CasADi symbol ``u``."""
+        linear = super().strain_expression(u)
+        if self.kinematics == "small":
+            return linear
+        return linear + 0.5 * sum(ca.mtimes(to_casadi(D), u) ** 2 for D in self._differences())
+
     def contact_force(self, p: np.ndarray) -> np.ndarray:
         """Contact forces (N) from contact pressures: ``area * p``, one per pair."""
         return self.contact_area * np.asarray(p)
@@ -131,7 +167,7 @@ class TrussModel(ContactModel):
 def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=None,
                 distributed_loads=None, obstacles: Sequence[Obstacle] = (), load_factors=None,
                 dataset: MaterialDataset | Sequence[MaterialDataset] | None = None, material=None,
-                name: str = "truss") -> TrussModel:
+                name: str = "truss", kinematics: str = "small") -> TrussModel:
     """Build a truss contact model.
 
     Parameters
@@ -155,6 +191,9 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
         Data for the DDCM variant: one set for all members, or one per material.
     material : (ne,) array_like of int, optional
         Data set of each member when several are given.
+    kinematics : {"small", "finite"}
+        ``"finite"``: large displacements and rotations, Green-Lagrange member strains
+        (:meth:`TrussModel.strain`); data and stresses are then ``(E, S)`` pairs.
     """
     X = np.asarray(nodes, dtype=float)
     if X.ndim == 1:
@@ -260,7 +299,7 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
         if load_factors is None else lf, youngs_modulus=E, dataset=data, length_scale=size, name=name,
         load_parameter_name="load step" if load_factors is None else "load factor",
         nodes=X, members=M.astype(np.intp), free_dofs=free, contact_nodes=np.asarray(pair_nodes, dtype=np.intp),
-        contact_normals=np.asarray(normals).reshape(nc, d), member_area=A)
+        contact_normals=np.asarray(normals).reshape(nc, d), member_area=A, kinematics=kinematics)
 
 
 #: Up to this many unknowns the mechanism check is an exact eigenvalue count (dense, n x n).

@@ -60,7 +60,7 @@ from ddcm_casadi.solvers.uzawa import method_of_multipliers, uzawa
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
-from .pairs import PairSystem
+from .systems import pair_system
 from .registry import register
 
 
@@ -137,7 +137,7 @@ class _BuiltAL(BuiltFormulation):
         if problem.kind == "mcp":
             P = problem.parameters.extend(multiplier=problem.n_pairs, mu=1)
             self.parameters = P
-            S = PairSystem(problem, problem.n_x, P)
+            S = pair_system(problem, problem.n_x, P)
             p_of_x = plus(S.parameter("multiplier") - gamma * S.affine("gap", problem.gap_map), S.parameter("mu"))
             built = S.eliminated("al", p_of_x)
             self._rj, self._r, self._jac = built.rj, built.r, built.jacobian

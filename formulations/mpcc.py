@@ -124,8 +124,16 @@ class _BuiltMPCC(BuiltFormulation):
         self.opts = opts
         nx, nc = problem.n_x, problem.n_pairs
         w = ca.vertcat(problem.x, problem.p)
-        objective = problem.objective if problem.kind == "mpcc" else ca.SX(0)
-        self.parameters = problem.parameters.extend(tau=1)
+        # A classical problem with finite kinematics may have several equilibria (a snap-through
+        # truss: the stable branch, an unstable one, the inverted one): the feasibility problem
+        # then selects the one nearest the start (``anchor``, the previous converged step), the
+        # path a quasi-static loading follows. An affine problem's solution is unique: no objective.
+        self._anchored = problem.kind == "mcp" and not problem.affine
+        base = problem.parameters.extend(anchor=nx) if self._anchored else problem.parameters
+        objective = (problem.objective if problem.kind == "mpcc" else
+                     0.5 * ca.sumsqr(problem.x - base["anchor"]) if self._anchored else ca.SX(0))
+        self._base = base
+        self.parameters = base.extend(tau=1)
         tau = self.parameters["tau"]
         g = ca.vertcat(problem.residual, problem.gap, problem.gap * problem.p - tau)
         ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
@@ -137,7 +145,7 @@ class _BuiltMPCC(BuiltFormulation):
                                  {"ipopt": ipopt, "print_time": False, "error_on_fail": False})
         # Branch NLP: [residual; g; p] with equality bounds chosen per solve.
         gb = ca.vertcat(problem.residual, problem.gap, problem.p)
-        self._bnlp = ca.nlpsol("bnlp", "ipopt", {"x": w, "p": problem.params, "f": objective, "g": gb},
+        self._bnlp = ca.nlpsol("bnlp", "ipopt", {"x": w, "p": base.vector, "f": objective, "g": gb},
                                {"ipopt": ipopt, "print_time": False, "error_on_fail": False})
         self._ne = ne = problem.n_residual
         self._lbg = np.concatenate([np.zeros(ne), np.zeros(nc), np.full(nc, -np.inf)])
@@ -150,20 +158,21 @@ class _BuiltMPCC(BuiltFormulation):
         o = self.opts
         nx = self._nx
         w = np.concatenate([x0, np.maximum(p0, 0.0)])
+        values = self._base.pack(params, anchor=x0) if self._anchored else params  # the NLPs' parameters
         state = state or {}
         same_branch = "branch" in state and np.array_equal(state["branch"], self._branch_of(w, params))
         if state.get("on_branch") or same_branch:
             # The start is a branch solution (e.g. the exact global branch of a projection):
             # the relaxed homotopy would forget its branch (with tau0 both g and p may open), so
             # its branch NLP is solved first, accepted only if its signs hold and it is B-stationary.
-            polished, iters, ok = self._branch_nlp(w, params, 0.0)
+            polished, iters, ok = self._branch_nlp(w, params, 0.0, values)
             if ok:
                 return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
                                     outer=1, message="converged (branch NLP from the start's branch)",
                                     state=self._next_state(True, polished, params))
 
         def relaxed(w, tau, warm):
-            args = dict(x0=w, p=self.parameters.pack(params, tau=tau), lbx=self._lbx, lbg=self._lbg, ubg=self._ubg)
+            args = dict(x0=w, p=self.parameters.pack(values, tau=tau), lbx=self._lbx, lbg=self._lbg, ubg=self._ubg)
             if warm is not None:
                 args.update(lam_x0=warm[0], lam_g0=warm[1])
             sol = self._solver(**args)
@@ -178,7 +187,7 @@ class _BuiltMPCC(BuiltFormulation):
             residual, comp, _, _ = self.metrics(w[:nx], w[nx:], params)
             return residual, comp
 
-        out = scholtes_homotopy(relaxed, measure=measure, branch_nlp=lambda w, tau: self._branch_nlp(w, params, tau),
+        out = scholtes_homotopy(relaxed, measure=measure, branch_nlp=lambda w, tau: self._branch_nlp(w, params, tau, values),
                                 near_corner=lambda w, tau: self._near_corner(w, params, tau), w0=w, tau0=o.tau0,
                                 tau_factor=o.tau_factor, tau_min=o.tau_min, comp_tol=o.comp_tol,
                                 residual_tol=o.residual_tol, max_homotopy=o.max_homotopy,
@@ -206,8 +215,9 @@ class _BuiltMPCC(BuiltFormulation):
         p = w[self._nx:]
         return bool(np.any(np.maximum(np.abs(gap), np.abs(p)) <= 10.0 * np.sqrt(tau)))
 
-    def _branch_nlp(self, w, params, tau):
-        """Solve the branch NLP identified at ``w``; returns ``(w, iterations, accepted)``.
+    def _branch_nlp(self, w, params, tau, values):
+        """Solve the branch NLP identified at ``w`` (``values``: the NLP's parameters, ``params``
+        the problem's); returns ``(w, iterations, accepted)``.
 
         Pairs with both ``g`` and ``p`` below ``10 sqrt(tau) + 100 max_i min(g_i, p_i)`` are first
         tried as biactive (``g = p = 0``); that branch is accepted only if B-stationary (both
@@ -238,7 +248,7 @@ class _BuiltMPCC(BuiltFormulation):
             inf = np.full(nc, np.inf)
             lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
             ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
-            sol = self._bnlp(x0=w, p=params, lbg=lbg, ubg=ubg)
+            sol = self._bnlp(x0=w, p=values, lbg=lbg, ubg=ubg)
             stats = _stats(self._bnlp)
             iters += iteration_count(stats)
             if stats["return_status"] not in _OK:

@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sp
 
 from ddcm_casadi.problem import Affine, ComplementarityProblem, Parameters
 
-from .pairs import PairSystem, scatter
+from .systems import pair_system
 
 
 def fischer_burmeister(a, b, mu=0.0):
@@ -33,15 +32,6 @@ def _saddle_terms(first, b, theta, nu, sel, target=0) -> dict:
     ``sel b + (1 - sel) nu``, all per pair. The FB system and its piece systems differ only in
     ``first``."""
     return dict(lagrangian=theta * first + nu * sel * b, rows=(first - target, sel * b + (1 - sel) * nu))
-
-
-def _mcp_rows(system: PairSystem, name: str, pair_equation):
-    """The classical system ``[F(x, p); pair_equation] = 0`` in ``z = [x; p]``."""
-    problem, nc = system.problem, system.nc
-    R = problem.residual_map
-    rows = problem.n_residual + nc
-    return system.build(name, linear=sp.vstack([R.z, sp.csr_matrix((nc, R.z.shape[1]))]),
-                        linear_params=sp.vstack([R.params, sp.csr_matrix((nc, R.params.shape[1]))]), outputs=[(pair_equation, scatter(rows, problem.n_residual, nc))])
 
 
 class FBSystem:
@@ -110,15 +100,15 @@ class FBSystem:
                 raise ValueError("the proximal FB system is for projections (mpcc) only")
             P = base.extend(mu=1)
             self._nz = nx + nc
-            S = PairSystem(problem, self._nz, P)
+            S = pair_system(problem, self._nz, P)
             a, b = S.affine("a", self._a), S.affine("b", self._b)
             phi = fischer_burmeister(a, b, S.parameter("mu"))
-            built = _mcp_rows(S, "fb", phi)
+            built = S.mcp("fb", phi)
             self.corner = False
         else:
             P = base.extend(mu=1, corner=nc)
             self._nz = nx + 3 * nc + ne
-            S = PairSystem(problem, self._nz, P)
+            S = pair_system(problem, self._nz, P)
             a, b = S.affine("a", self._a), S.affine("b", self._b)
             theta, nu = S.unknowns("theta", nx + nc + ne), S.unknowns("nu", nx + 2 * nc + ne)
             sel = S.parameter("corner")
@@ -198,12 +188,12 @@ class FBSystem:
             problem, nc, nx = self.problem, self.nc, self.problem.n_x
             P = problem.parameters.extend(branch=nc, corner=nc)
             self.piece_parameters = P
-            S = PairSystem(problem, self._nz, P)
+            S = pair_system(problem, self._nz, P)
             a, b = S.affine("a", self._a), S.affine("b", self._b)
             branch, sel = S.parameter("branch"), S.parameter("corner")
             piece = -(branch * a + (1 - branch) * b)
             if problem.kind == "mcp":
-                built = _mcp_rows(S, "fb_branch", piece)
+                built = S.mcp("fb_branch", piece)
             else:
                 theta, nu = S.unknowns("theta", nx + nc + self._ne), S.unknowns("nu", nx + 2 * nc + self._ne)
                 built = S.saddle("fb_branch", **_saddle_terms(sel * a + (1 - sel) * piece, b, theta, nu, sel))

@@ -292,6 +292,17 @@ class PairSystem:
         T.sum_duplicates()
         return J0, T
 
+    # ------------------------------------------------------------------ classical systems
+    def mcp(self, name: str, pair_equation: ca.SX) -> SystemFunctions:
+        """The classical system ``[F(x, p); pair_equation] = 0`` in ``z = [x; p]``, one pair
+        equation per pair (an expression of its local variables)."""
+        problem, nc = self.problem, self.nc
+        R = problem.residual_map
+        rows = problem.n_residual + nc
+        return self.build(name, linear=sp.vstack([R.z, sp.csr_matrix((nc, R.z.shape[1]))]),
+                          linear_params=sp.vstack([R.params, sp.csr_matrix((nc, R.params.shape[1]))]),
+                          outputs=[(pair_equation, scatter(rows, problem.n_residual, nc))])
+
     # ------------------------------------------------------------------ classical, pressures eliminated
     def eliminated(self, name: str, pressure: ca.SX) -> SystemFunctions:
         """The classical residual ``F(x, p(x))`` in ``z = x``, with each pair's pressure an

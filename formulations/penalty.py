@@ -33,7 +33,7 @@ from ddcm_casadi.solvers.newton import SMOOTHING, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
-from .pairs import PairSystem
+from .systems import pair_system
 from .registry import register
 
 
@@ -105,7 +105,7 @@ class _BuiltPenalty(BuiltFormulation):
         self.opts = opts
         P = problem.parameters.extend(mu=1)
         self.parameters = P
-        S = PairSystem(problem, problem.n_x, P)
+        S = pair_system(problem, problem.n_x, P)
         p_of_x = gamma * plus(-S.affine("gap", problem.gap_map), S.parameter("mu"))
         built = S.eliminated("penalty", p_of_x)
         self._rj, self._r, self._jac = built.rj, built.r, built.jacobian
@@ -133,7 +133,7 @@ class _BuiltCompliantProjection(BuiltFormulation):
         self.system = FBSystem(problem, problem.fb_alpha * problem.gap_ref, problem.fb_beta * problem.pressure_ref,
                                gap=compliant_gap)
         self.solver = ActiveSetSolver(self.system, predictor=opts.active_set_predictor)
-        S = PairSystem(problem, problem.n_x + problem.n_pairs, problem.parameters)
+        S = pair_system(problem, problem.n_x + problem.n_pairs, problem.parameters)
         self._pairs = S.values("compliant_pairs", [ca.fmin(S.affine("gap", compliant_gap),
                                                            S.affine("p", problem.pressure_map))])
 

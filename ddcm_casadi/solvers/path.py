@@ -49,11 +49,30 @@ def solve_classical(problems: ProblemPair, built, formulation_name: str, *, rais
                           seconds=time.perf_counter() - t0, message=sol.message,
                           strain=f["strain"], stress=f["stress"])
         finish_step(step, problems.classical, model, penalty_stiffness=getattr(built, "penalty_stiffness", None))
+        _check_stability(step, problems.classical, sol, problems.step_params(k))
         out.steps.append(step)
         if progress is not None:
             progress(step)
         check_convergence(step, raise_on_failure, f"classical/{formulation_name}")
-        if sol.converged and np.all(np.isfinite(sol.x)):
+        if step.converged and np.all(np.isfinite(sol.x)):
             x, p, state = sol.x, sol.p, sol.state
     out.solve_seconds = time.perf_counter() - t_all
     return out
+
+
+#: A classical step whose tangent stiffness on the free directions has an eigenvalue below
+#: ``-STABILITY_TOL`` times its largest entry is an unstable equilibrium (roundoff: ~1e-14).
+STABILITY_TOL = 1e-8
+
+
+def _check_stability(step: StepResult, problem, sol, params: np.ndarray) -> None:
+    """Reject, in place, a converged step of a nonlinear problem that is an unstable equilibrium
+    (:meth:`~ddcm_casadi.problem.ComplementarityProblem.stability`): it solves the equations but a
+    quasi-static load path cannot rest there (a snap-through truss with horizontal members)."""
+    if not step.converged or problem.affine:
+        return
+    smallest = problem.stability(sol.x, sol.p, params)
+    if smallest < -STABILITY_TOL:
+        step.converged = False
+        step.message = (f"{step.message}, but an unstable equilibrium (tangent stiffness eigenvalue "
+                        f"{smallest:.2g} of its largest entry)")

@@ -1,0 +1,194 @@
+r"""Newton systems of nonlinear problems, built symbolically, and the choice of builder.
+
+A problem in the affine form (:attr:`~ddcm_casadi.problem.ComplementarityProblem.affine`) is built
+from its sparse matrices (:class:`~ddcm_casadi.formulations.pairs.PairSystem`: sparse products,
+no symbolic expression per nonzero). A nonlinear problem (finite-strain kinematics: its residual,
+gaps or objective are CasADi expressions, :class:`~ddcm_casadi.problem.NonlinearMap`) is built by
+:class:`ExpressionPairSystem`, which has the same interface: the formulations write one pair's
+expressions (``psi``, ``l``) once and do not know which builder they use. Here the system
+
+.. math::  r(z; P) = A z + A_P P + N(z; P) + \sum_o L_o\, \psi_o(y(z; P))
+
+is one ``SX`` expression and its Jacobian ``dr/dz`` comes by CasADi's sparse automatic
+differentiation. The projection's saddle point is the stationarity of
+``f(x) + eta^T h(x, p) + sum_i l(y_i)`` with exact second derivatives of ``f`` and ``h``.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import scipy.sparse as sp
+
+from ddcm_casadi.linalg import to_casadi
+from ddcm_casadi.problem import ComplementarityProblem, Parameters
+from ddcm_casadi.solvers.evaluate import NumericFunction
+from ddcm_casadi.solvers.newton import SparseJacobian
+
+from .pairs import PairSystem, SystemFunctions
+
+
+def pair_system(problem: ComplementarityProblem, n_unknowns: int, parameters: Parameters):
+    """The builder of ``problem``'s systems: :class:`PairSystem` for the affine form (the fast
+    path), :class:`ExpressionPairSystem` otherwise. Both have the same interface."""
+    cls = PairSystem if problem.affine else ExpressionPairSystem
+    return cls(problem, n_unknowns, parameters)
+
+
+def _product(A, v: ca.SX, columns: int) -> ca.SX:
+    """``A v`` for a sparse ``A`` whose columns beyond ``columns`` are zero (or missing)."""
+    A = sp.csr_matrix(A)
+    if A.shape[1] > columns:
+        if A[:, columns:].nnz:
+            raise ValueError(f"a map depends on columns beyond the first {columns}")
+        A = A[:, :columns]
+    return ca.mtimes(to_casadi(A), v[:A.shape[1]])
+
+
+class ExpressionPairSystem:
+    """Builder of the Newton systems of a nonlinear problem (the interface of
+    :class:`~ddcm_casadi.formulations.pairs.PairSystem`), all in one ``SX`` graph.
+
+    Parameters
+    ----------
+    problem : ComplementarityProblem
+        ``z`` starts with the problem's ``[x; p]`` (or only ``x``).
+    n_unknowns : int
+        Size of ``z``.
+    parameters : Parameters
+        The system's parameters (the problem's first).
+    """
+
+    def __init__(self, problem: ComplementarityProblem, n_unknowns: int, parameters: Parameters) -> None:
+        self.problem = problem
+        self.nc = problem.n_pairs
+        self.nz = int(n_unknowns)
+        self.parameters = parameters
+        self._z = ca.SX.sym("z", self.nz)
+        self._P = ca.SX.sym("P", parameters.size)
+        self._slots: list[tuple[ca.SX, ca.SX]] = []  # (one pair's symbol, the values of every pair)
+
+    # ------------------------------------------------------------------ the problem's pieces
+    def _xp(self) -> ca.SX:
+        """The problem's unknowns ``[x; p]`` within ``z`` (``p`` zero if ``z`` holds only ``x``)."""
+        nxp = self.problem.n_x + self.nc
+        z = self._z
+        return z[:nxp] if self.nz >= nxp else ca.vertcat(z, ca.SX(nxp - self.nz, 1))
+
+    def _problem_params(self) -> ca.SX:
+        return self._P[:self.problem.parameters.size]
+
+    def _render(self, value) -> ca.SX:
+        """A problem map (:class:`Affine` or nonlinear) at the system's symbols."""
+        return value.render(self._xp(), self._problem_params())
+
+    # ------------------------------------------------------------------ local variables
+    def _add(self, name: str, values: ca.SX) -> ca.SX:
+        symbol = ca.SX.sym(name)
+        self._slots.append((symbol, values))
+        return symbol
+
+    def local(self, name: str, z=None, params=None) -> ca.SX:
+        """A local variable, per pair row ``k`` of ``Z z + Q P`` (sparse ``Z``, ``Q``)."""
+        value = ca.SX(self.nc, 1)
+        if z is not None:
+            value += _product(z, self._z, self.nz)
+        if params is not None:
+            value += _product(params, self._P, self.parameters.size)
+        return self._add(name, value)
+
+    def affine(self, name: str, value) -> ca.SX:
+        """A local variable from a problem's map (:class:`Affine` or nonlinear), one row per pair."""
+        return self._add(name, self._render(value))
+
+    def unknowns(self, name: str, start: int) -> ca.SX:
+        return self._add(name, self._z[start:start + self.nc])
+
+    def parameter(self, name: str) -> ca.SX:
+        where = self.parameters.slice(name)
+        size = where.stop - where.start
+        if size not in (1, self.nc):
+            raise ValueError(f"parameter {name!r} has {size} values for {self.nc} pairs")
+        values = self._P[where]
+        return self._add(name, ca.repmat(values, self.nc, 1) if size == 1 and self.nc != 1 else values)
+
+    def _per_pair(self, exprs) -> list[ca.SX]:
+        """Each expression of one pair's local variables, evaluated for every pair (``nc`` vectors)."""
+        exprs = list(exprs)
+        if not self.nc:
+            return [ca.SX(0, 1) for _ in exprs]
+        symbols = ca.vertcat(*[s for s, _ in self._slots])
+        values = ca.horzcat(*[v for _, v in self._slots]).T  # (n_slots, nc)
+        pair = ca.Function("pair", [symbols], [ca.vertcat(*exprs)])
+        out = pair.map(self.nc)(values)
+        return [out[i, :].T for i in range(len(exprs))]
+
+    # ------------------------------------------------------------------ functions
+    def values(self, name: str, exprs, parameters: Parameters | None = None) -> NumericFunction:
+        """``(z, P) -> expr_i`` per pair, ``P`` the values of ``parameters`` (a prefix)."""
+        out = self._per_pair(exprs)
+        n_params = (parameters or self.parameters).size
+        tail = self._P[n_params:]
+        if tail.numel() and any(ca.depends_on(o, tail) for o in out):
+            raise ValueError(f"{name}: needs parameters beyond the first {n_params}")
+        return NumericFunction(ca.Function(name, [self._z, self._P[:n_params]], out))
+
+    def _finish(self, name: str, r: ca.SX) -> SystemFunctions:
+        J = ca.jacobian(r, self._z)
+        varying = ca.vertcat(self._z, self._problem_params())
+        linear = not ca.depends_on(J, varying)
+        rj = NumericFunction(ca.Function(f"{name}_rj", [self._z, self._P], [r, J]))
+        return SystemFunctions(rj=rj, r=NumericFunction(ca.Function(f"{name}_r", [self._z, self._P], [r])),
+                               jacobian=SparseJacobian(rj), linear=bool(linear))
+
+    def _scattered(self, outputs) -> ca.SX | int:
+        """``sum_o L_o psi_o`` (0 without outputs)."""
+        outputs = list(outputs)
+        if not outputs or not self.nc:
+            return 0
+        values = self._per_pair([e for e, _ in outputs])
+        return sum(ca.mtimes(to_casadi(sp.csr_matrix(L)), v) for (_, L), v in zip(outputs, values))
+
+    def build(self, name: str, *, linear=None, linear_params=None, rows: int | None = None,
+              outputs=(), nonlinear: ca.SX | None = None) -> SystemFunctions:
+        """The system ``r = A z + A_P P + N + sum_o L_o psi_o`` (see
+        :meth:`PairSystem.build <ddcm_casadi.formulations.pairs.PairSystem.build>`); ``nonlinear``
+        is ``N``, an expression of the system's symbols."""
+        rows = linear.shape[0] if linear is not None else (nonlinear.size1() if nonlinear is not None else int(rows))
+        r = ca.SX(rows, 1)
+        if linear is not None:
+            r += _product(linear, self._z, self.nz)
+        if linear_params is not None:
+            r += _product(linear_params, self._P, self.parameters.size)
+        if nonlinear is not None:
+            r += nonlinear
+        return self._finish(name, r + self._scattered(outputs))
+
+    # ------------------------------------------------------------------ the systems of the formulations
+    def mcp(self, name: str, pair_equation: ca.SX) -> SystemFunctions:
+        """The classical system ``[F(x, p); pair_equation] = 0`` in ``z = [x; p]``."""
+        F = self._render(self.problem.residual_map)
+        values = self._per_pair([pair_equation])[0]
+        return self._finish(name, ca.vertcat(F, values))
+
+    def eliminated(self, name: str, pressure: ca.SX) -> SystemFunctions:
+        """The classical residual ``F(x, p(x))`` in ``z = x``, each pair's pressure an expression
+        of its local variables."""
+        nx = self.problem.n_x
+        p = self._per_pair([pressure])[0]
+        F = self.problem.residual_map.render(ca.vertcat(self._z[:nx], p), self._problem_params())
+        return self._finish(name, F)
+
+    def saddle(self, name: str, lagrangian: ca.SX, rows=()) -> SystemFunctions:
+        """The projection's saddle-point system in ``z = [x, p, eta, ...]``: the stationarity of
+        ``f + eta^T h + sum_i l(y_i)`` in ``(x, p)``, then ``h``, then one row per pair for each
+        expression of ``rows``."""
+        problem = self.problem
+        nxp, ne = problem.n_x + self.nc, problem.n_residual
+        xp, eta = self._z[:nxp], self._z[nxp:nxp + ne]
+        h = self._render(problem.residual_map)
+        pairs = self._per_pair([lagrangian, *rows])
+        L = self._render(problem.distance) + ca.dot(eta, h) + ca.sum1(pairs[0])
+        return self._finish(name, ca.vertcat(ca.gradient(L, xp), h, *pairs[1:]))
+
+
+__all__ = ["ExpressionPairSystem", "pair_system"]
