@@ -85,13 +85,6 @@ def warren(panels: int, n_data: int, *, steps=TRUSS_STEPS):
                         name=f"Warren truss on a stepped ground, {panels} panels, {nodes.size} contacts")
 
 
-def _fb_system(built):
-    """The semismooth Newton system of a Fischer-Burmeister (or penalty projection) build, or
-    ``None``. Benchmark only: its saddle-point matrix (the floor) is an internal that the
-    formulations do not publish."""
-    return getattr(built, "system", None)
-
-
 def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister", *, search: str = "kdtree",
                    floor: bool = True) -> dict:
     """Seconds per DDCM iteration (projection + data search) along the model's load path, against
@@ -107,7 +100,7 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
     problem_build = time.perf_counter() - t0
     built = registry.get(formulation).build(problems.projection)
     build = time.perf_counter() - t0
-    system = _fb_system(built)
+    system = built.newton_system()
     runs = []
     for _ in range(repeats):
         built.reset()  # cold factorisation cache: every repeat measures the same work
@@ -133,18 +126,18 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
                build_seconds=build, problem_build_seconds=problem_build, converged=bool(path.converged))
     if system is None:  # no saddle-point system to measure the floor on
         return rec
-    rec["unknowns"] = int(system.jacobian.shape[0])
+    rec["unknowns"] = int(system.unknowns.size)
     if floor:
         step = steps[-1]
         x, p = problems.scaled_start("mpcc", step.u, step.p, step.stress)
-        low = iteration_floor(problems, system, step.step, x, p, (step.strain_star, step.stress_star),
+        low = iteration_floor(problems, built, step.step, x, p, (step.strain_star, step.stress_star),
                               (step.strain, step.stress), repeats)
         rec.update(low, ratio=seconds / low["floor_seconds"], build_ratio=build / low["floor_seconds"],
                    ratio_to_cached_floor=seconds / low["cached_floor_seconds"])
     return rec
 
 
-def iteration_floor(problems, system, step: int, x, p, data, states, repeats: int) -> dict:
+def iteration_floor(problems, built, step: int, x, p, data, states, repeats: int) -> dict:
     """The floor of one DDCM iteration: one factorisation and solve, with the faster of the
     package's sparse solver (:func:`ddcm_casadi.linalg.factorize`) and scipy's default SuperLU
     (up to 3e4 unknowns, where it takes seconds at most), of the FB saddle-point system at scaled
@@ -152,10 +145,10 @@ def iteration_floor(problems, system, step: int, x, p, data, states, repeats: in
     KD-tree query of the ``states = (strain, stress)`` of every material point against the data
     set. ``cached_floor_seconds``: the same without the factorisation (one solve with a kept
     factor plus the query), the floor of an iteration whose active set is unchanged."""
-    z = system.start(x, p, None)
-    r, J = system.rj(z, system.pack(problems.projection_params(step, *data)))
-    A = system.jacobian(J)
-    rhs = np.asarray(r, float).ravel() + 1.0
+    system = built.newton_system()
+    z, P = built.newton_point(problems.projection_params(step, *data), x, p)
+    A = system.matrix(z, P)
+    rhs = system.residual(z, P) + 1.0
     t0 = time.perf_counter()
     lu = factorize(A)
     lu.solve(rhs)
@@ -210,14 +203,14 @@ def build_record(family: str, unknowns: int, repeats: int) -> dict:
     t0 = time.perf_counter()
     problems = build_problems(model)
     t1 = time.perf_counter()
-    system = _fb_system(registry.get("fischer_burmeister").build(problems.projection))
+    built = registry.get("fischer_burmeister").build(problems.projection)
     build = time.perf_counter() - t0
     data = model.dataset
     index = random_assignment(model, np.random.default_rng(0))
     assigned = (data.strain[index], data.stress[index])
     x, p = np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs)
-    low = iteration_floor(problems, system, model.n_steps - 1, x, p, assigned, assigned, repeats)
-    n = int(system.jacobian.shape[0])
+    low = iteration_floor(problems, built, model.n_steps - 1, x, p, assigned, assigned, repeats)
+    n = int(built.newton_system().unknowns.size)
     peak = peak_memory_bytes()
     return dict(name=f"build, {family}: {model.name}", unknowns=n, data_points=len(data), seconds=build,
                 ratio=build / low["floor_seconds"], **low, build_seconds=build, problem_build_seconds=t1 - t0,
@@ -291,7 +284,7 @@ def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]
     for the ``r`` rows of one pair switching piece (built from its kept columns, then a solve)."""
     model = BUILD_MODELS["2-D continuum"](unknowns)
     problems = build_problems(model)
-    system = _fb_system(registry.get("fischer_burmeister").build(problems.projection))
+    system = registry.get("fischer_burmeister").build(problems.projection).system
     rj, _, jacobian, _ = system.branch_system()
     nc, mk = system.nc, model.n_points * model.strain_components
     P = problems.projection_params(model.n_steps - 1, np.zeros(mk), np.zeros(mk))

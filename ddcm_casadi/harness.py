@@ -357,6 +357,8 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     runs = [(variant, form) for variant in variants
             if (problems.classical if variant == "classical" else problems.projection) is not None
             for form in forms]
+    for variant, form in runs:  # refuse an unsupported contact law or kinematics before any work
+        form.check_supports(problems.classical if variant == "classical" else problems.projection)
 
     def run(task):
         variant, form = task

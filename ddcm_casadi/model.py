@@ -21,6 +21,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 import scipy.sparse as sp
 
+from .contact_laws import get_contact_law
 from .data import MaterialDataset, PointData, check_positive
 from .errors import InputError
 from .linalg import SingularMatrix, factorize, to_casadi
@@ -125,11 +126,13 @@ class ContactModel:
     load_parameter_name: str = "load parameter"
     strain_components: int = 1
     kinematics: str = "small"
+    contact_law: str = "signorini"
     _cache: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         B = sp.csr_matrix(self.strain_operator, dtype=float)
         G = sp.csr_matrix(self.gap_operator, dtype=float)
+        get_contact_law(self.contact_law)
         if self.kinematics not in KINEMATICS:
             raise InputError(f"kinematics must be one of {', '.join(map(repr, KINEMATICS))}, got {self.kinematics!r}")
         k = self.strain_components
@@ -372,6 +375,20 @@ class ContactModel:
         B = self.strain_operator
         W = sp.diags(np.repeat(self.volumes, self.strain_components))
         return (B.T @ (W @ self.material_matrix()) @ B).tocsr()
+
+    # -------------------------------------------------------------- load steps and their history
+    def history_sizes(self) -> dict[str, int]:
+        """Names and sizes of the parameters a step takes from the previous converged step, after
+        ``gap0`` and ``f`` (none here; a frictional law adds the previous tangential
+        displacements, a follower load the previous configuration)."""
+        return {}
+
+    def step_values(self, step: int, previous: dict | None = None) -> dict[str, np.ndarray]:
+        """The parameter values of load step ``step`` by name: ``gap0``, ``f`` and those of
+        :meth:`history_sizes`. ``previous``: the physical fields (``u``, ``p``; for DDCM also
+        ``strain`` and ``stress``) of the last converged step, ``None`` before the first. The
+        drivers pass it; a model kind whose steps depend on their history overrides this."""
+        return dict(gap0=self.gap_offsets[step], f=self.loads[step])
 
     def gap(self, u: np.ndarray, step: int) -> np.ndarray:
         return self.gap_operator @ np.asarray(u) + self.gap_offsets[step]

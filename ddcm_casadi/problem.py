@@ -321,6 +321,11 @@ class ComplementarityProblem:
     fb_alpha, fb_beta : float
         Default Fischer-Burmeister scalings (1/m and 1/Pa), as in the paper (``beta = 1/c`` for the
         projection, ``1/E`` for the classical problem).
+    contact_law : str
+        What the pairs mean (:mod:`ddcm_casadi.contact_laws`; ``"signorini"``: one normal pair per
+        contact).
+    kinematics : {"small", "finite"}
+        The model's kinematics (finite: the nonlinear form, :attr:`affine` False).
 
     The symbolic (``SX``) quantities :attr:`x`, :attr:`p`, :attr:`params`, :attr:`residual`,
     :attr:`residual_terms` (per row of the residual, the size of the terms that cancel in it,
@@ -340,6 +345,8 @@ class ComplementarityProblem:
     contact_stiffness: float
     fb_alpha: float
     fb_beta: float
+    contact_law: str = "signorini"
+    kinematics: str = "small"
 
     @property
     def affine(self) -> bool:
@@ -501,20 +508,21 @@ class ProblemPair:
     def _problem(self, kind: str) -> ComplementarityProblem:
         return self.classical if kind == "mcp" else self.projection
 
-    def step_params(self, step: int) -> np.ndarray:
-        """Parameters of the classical problem at a load step."""
-        m = self.model
-        return self.classical.parameters.pack(gap0=m.gap_offsets[step], f=m.loads[step])
+    def step_params(self, step: int, previous: dict | None = None) -> np.ndarray:
+        """Parameters of the classical problem at a load step (``previous``: the last converged
+        step's physical fields, for models whose steps have a history,
+        :meth:`~ddcm_casadi.model.ContactModel.step_values`)."""
+        return self.classical.parameters.pack(**self.model.step_values(step, previous))
 
-    def projection_params(self, step: int, strain_star: np.ndarray, stress_star: np.ndarray) -> np.ndarray:
+    def projection_params(self, step: int, strain_star: np.ndarray, stress_star: np.ndarray,
+                          previous: dict | None = None) -> np.ndarray:
         """Parameters of the ``Z_E`` projection: the load step and the assigned data, per point
         (``(m,)`` or ``(m, k)``, flattened point-major). For one-component points, ``(m, N)``
         arrays give an ``(n_params, N)`` matrix, one column per data assignment."""
-        m = self.model
         strain_star, stress_star = np.asarray(strain_star, float), np.asarray(stress_star, float)
         if strain_star.ndim < 2 or self.model.strain_components > 1:
             strain_star, stress_star = strain_star.reshape(-1), stress_star.reshape(-1)
-        return self.projection.parameters.pack(gap0=m.gap_offsets[step], f=m.loads[step],
+        return self.projection.parameters.pack(**self.model.step_values(step, previous),
                                                strain_star=strain_star, stress_star=stress_star)
 
     def scales(self, kind: str) -> dict:
@@ -551,7 +559,7 @@ def _common(model: ContactModel, s: dict, fb_beta: float, n_z: int, P: Parameter
                  sp.hstack([sp.identity(nc) / s["displacement"], sp.csr_matrix((nc, P.size - nc))]))
     return dict(parameters=P, gap_map=gap, gap_ref=s["displacement"], pressure_ref=s["stress"],
                 contact_stiffness=model.contact_stiffness, fb_alpha=1.0 / (0.01 * model.length_scale),
-                fb_beta=fb_beta)
+                fb_beta=fb_beta, contact_law=model.contact_law, kinematics=model.kinematics)
 
 
 def _selection(rows: int, start: int, columns: int, scale: float = 1.0) -> sp.csr_matrix:
@@ -609,7 +617,7 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
     classical = projection = None
     if model.youngs_modulus is not None:
         s = model.scales_for("classical")
-        P = Parameters(gap0=nc, f=n)
+        P = Parameters(gap0=nc, f=n, **model.history_sizes())
         z, Ps = ca.SX.sym("z", n + nc), ca.SX.sym("P", P.size)
         uh, ph, f = z[:n], z[n:], Ps[P.slice("f")]
         E = model.strain_expression(s["displacement"] * uh)
@@ -622,7 +630,7 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
     if model.dataset is not None:
         s = model.scales_for("ddcm")
         mk = m * k
-        P = Parameters(gap0=nc, f=n, strain_star=mk, stress_star=mk)
+        P = Parameters(gap0=nc, f=n, strain_star=mk, stress_star=mk, **model.history_sizes())
         z, Ps = ca.SX.sym("z", n + mk + nc), ca.SX.sym("P", P.size)
         uh, stress, ph, f = z[:n], s["stress"] * z[n:n + mk], z[n + mk:], Ps[P.slice("f")]
         E, internal, size = _internal_force(model, s, uh, stress)
@@ -650,7 +658,7 @@ def build_problems(model: ContactModel) -> ProblemPair:
     classical = None
     if model.youngs_modulus is not None:
         s = model.scales_for("classical")
-        P = Parameters(gap0=nc, f=n)
+        P = Parameters(gap0=nc, f=n, **model.history_sizes())
         # F = (K u - G^T a p - f) / s_f with u = s_d u_hat, p = s_s p_hat
         # (scaled in the order the arithmetic of F does it: each term times its scale, over s_f)
         F = Affine(sp.hstack([model.stiffness() * s["displacement"] / s["force"], GtA * -s["stress"] / s["force"]]),
@@ -661,7 +669,7 @@ def build_problems(model: ContactModel) -> ProblemPair:
     projection = None
     if model.dataset is not None:
         s = model.scales_for("ddcm")
-        P = Parameters(gap0=nc, f=n, strain_star=m * k, stress_star=m * k)
+        P = Parameters(gap0=nc, f=n, strain_star=m * k, stress_star=m * k, **model.history_sizes())
         nz, mk = n + m * k + nc, m * k
         BtW = model.strain_operator.T @ sp.diags(np.repeat(model.volumes, k))
         # h = (B^T W stress - G^T a p - f) / s_f with stress = s_s stress_hat

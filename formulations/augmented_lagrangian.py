@@ -53,13 +53,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.problem import ComplementarityProblem, Parameters
 from ddcm_casadi.solvers.active_set import ActiveSetSolver
 from ddcm_casadi.solvers.newton import SMOOTHING, plus, smoothed_newton_solve
 from ddcm_casadi.solvers.uzawa import method_of_multipliers, uzawa
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
+from .pairs import NewtonSystem
 from .systems import pair_system
 from .registry import register
 
@@ -122,7 +123,7 @@ class AugmentedLagrangian(Formulation):
             opts["gamma_used"] = self.gamma(problem)
         return opts
 
-    def build(self, problem: ComplementarityProblem) -> "_BuiltAL":
+    def _build(self, problem: ComplementarityProblem) -> "_BuiltAL":
         return _BuiltAL(problem, self.options, problem.scaled_penalty(self.gamma(problem)))
 
 
@@ -142,11 +143,23 @@ class _BuiltAL(BuiltFormulation):
             built = S.eliminated("al", p_of_x)
             self._rj, self._r, self._jac = built.rj, built.r, built.jacobian
             self._update = S.values("uzawa", [p_of_x])
+            self._system = NewtonSystem("augmented_lagrangian (inner)", Parameters(x=problem.n_x), P, built)
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)
             self.solver = ActiveSetSolver(self.system, predictor=False)
             # The inner solver reads these names from its options.
             self._inner = _InnerOptions(opts.newton_tol, opts.residual_tol, opts.max_iter, opts.smoothing)
+
+    def newton_system(self):
+        """The inner Newton system (the multipliers are its parameters)."""
+        return self._system if self.problem.kind == "mcp" else self.system.newton_system("augmented_lagrangian (inner)")
+
+    def newton_point(self, params, x, p, state=None):
+        state = state or {}
+        if self.problem.kind == "mcp":
+            return np.asarray(x, float), self.parameters.pack(params, multiplier=np.maximum(p, 0.0), mu=0.0)
+        base = self.system.base_parameters.pack(params, lam=state.get("lam", 0.0), rho=state.get("rho", self.opts.rho))
+        return self.system.start(x, p, state), self.system.pack(base)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         if self.problem.kind == "mcp":

@@ -93,7 +93,7 @@ class FischerBurmeister(Formulation):
         for k in ("alpha", "beta", "tol", "residual_tol", "comp_tol"):
             positive_option(self.name, k, getattr(self.options, k))
 
-    def build(self, problem: ComplementarityProblem) -> "_BuiltFB":
+    def _build(self, problem: ComplementarityProblem) -> "_BuiltFB":
         return _BuiltFB(problem, self.options)
 
 
@@ -104,6 +104,12 @@ class _BuiltFB(BuiltFormulation):
         self.system = FBSystem(problem, (opts.alpha or problem.fb_alpha) * problem.gap_ref,
                                (opts.beta or problem.fb_beta) * problem.pressure_ref)
         self.solver = ActiveSetSolver(self.system, predictor=opts.active_set_predictor)
+
+    def newton_system(self):
+        return self.system.newton_system("fischer_burmeister")
+
+    def newton_point(self, params, x, p, state=None):
+        return self.system.start(x, p, state), self.system.pack(params)
 
     def reset(self) -> None:
         self.solver.reset()

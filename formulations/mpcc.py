@@ -114,7 +114,7 @@ class MPCC(Formulation):
         if self.options.ipopt:
             check_ipopt_options(f"formulation {self.name!r}", self.options.ipopt)
 
-    def build(self, problem: ComplementarityProblem) -> "_BuiltMPCC":
+    def _build(self, problem: ComplementarityProblem) -> "_BuiltMPCC":
         return _BuiltMPCC(problem, self.options)
 
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from ddcm_casadi.problem import Affine, ComplementarityProblem, Parameters
 
+from .pairs import NewtonSystem
 from .systems import pair_system
 
 
@@ -99,28 +100,28 @@ class FBSystem:
             if proximal:
                 raise ValueError("the proximal FB system is for projections (mpcc) only")
             P = base.extend(mu=1)
-            self._nz = nx + nc
-            S = pair_system(problem, self._nz, P)
+            self.unknowns = Parameters(x=nx, p=nc)
+            S = pair_system(problem, self.unknowns.size, P)
             a, b = S.affine("a", self._a), S.affine("b", self._b)
             phi = fischer_burmeister(a, b, S.parameter("mu"))
             built = S.mcp("fb", phi)
             self.corner = False
         else:
             P = base.extend(mu=1, corner=nc)
-            self._nz = nx + 3 * nc + ne
-            S = pair_system(problem, self._nz, P)
+            self.unknowns = Parameters(x=nx, p=nc, eta=ne, theta=nc, nu=nc)
+            S = pair_system(problem, self.unknowns.size, P)
             a, b = S.affine("a", self._a), S.affine("b", self._b)
-            theta, nu = S.unknowns("theta", nx + nc + ne), S.unknowns("nu", nx + 2 * nc + ne)
+            theta, nu = (S.unknowns(name, self.unknowns.slice(name).start) for name in ("theta", "nu"))
             sel = S.parameter("corner")
             phi = fischer_burmeister(a, b, S.parameter("mu"))
             target = (1 - sel) * (theta - S.parameter("lam")) / S.parameter("rho") if proximal else 0
             built = S.saddle("fb", **_saddle_terms(sel * a + (1 - sel) * phi, b, theta, nu, sel, target))
             self.corner = True
-            self._ne = ne
         self.parameters = P
         self._branch = None
         self.piece_parameters: Parameters | None = None
         self.rj, self.r, self.jacobian = built.rj, built.r, built.jacobian
+        self._built = built
         self._phi_source, self._phi = (S, phi), None
 
     @property
@@ -146,31 +147,30 @@ class FBSystem:
     def ab(self, z: np.ndarray, problem_values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The scaled pair arguments ``a = alpha g``, ``b = beta p`` at ``z`` (``problem_values``:
         the problem's own parameters, :meth:`problem_values`): affine, two sparse products."""
-        zxp = np.asarray(z, float)[:self.problem.n_x + self.nc]
+        zxp = np.asarray(z, float)[:self.unknowns.slice("p").stop]  # [x; p] lead the unknowns
         return self._a.value(zxp, problem_values), self._b.value(zxp, problem_values)
 
     # ---------------------------------------------------------------------- unknowns
     def start(self, x0, p0, state) -> np.ndarray:
         """The system's unknowns from a primal start and warm multipliers (``eta``, ``theta``)."""
-        if self.problem.kind == "mcp":
-            return np.concatenate([x0, p0])
+        if not self.corner:
+            return self.unknowns.pack(x=x0, p=p0)
         state = state or {}
-        eta = state.get("eta", np.zeros(self.problem.n_residual))
-        theta = state.get("theta", np.zeros(self.nc))
-        return np.concatenate([x0, p0, eta, theta, np.zeros(self.nc)])
+        return self.unknowns.pack(x=x0, p=p0, eta=state.get("eta", 0.0), theta=state.get("theta", 0.0), nu=0.0)
 
     def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
         """``(x, p, multipliers)`` from the system's unknowns."""
-        nx, nc = self.problem.n_x, self.nc
-        if not self.corner:
-            return z[:nx], z[nx:nx + nc], {}
-        ne = self._ne
-        return z[:nx], z[nx:nx + nc], dict(eta=z[nx + nc:nx + nc + ne], theta=z[nx + nc + ne:nx + 2 * nc + ne])
+        get = self.unknowns.get
+        multipliers = dict(eta=get(z, "eta"), theta=get(z, "theta")) if self.corner else {}
+        return get(z, "x"), get(z, "p"), multipliers
 
     def corner_multipliers(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(theta, nu)``: the multipliers of ``a = 0`` and ``b = 0`` on the biactive branch."""
-        nx, ne, nc = self.problem.n_x, self._ne, self.nc
-        return z[nx + nc + ne:nx + 2 * nc + ne], z[nx + 2 * nc + ne:]
+        return self.unknowns.get(z, "theta"), self.unknowns.get(z, "nu")
+
+    def newton_system(self, name: str) -> NewtonSystem:
+        """The system Newton solves, by name (:class:`~ddcm_casadi.formulations.pairs.NewtonSystem`)."""
+        return NewtonSystem(name, self.unknowns, self.parameters, self._built)
 
     def branch_system(self):
         """The system with each pair on one piece: ``-a_i = 0`` (``branch_i = 1``) or ``-b_i = 0``.
@@ -185,17 +185,17 @@ class FBSystem:
         predictor is on, else on first use (most solves never need it).
         """
         if self._branch is None:
-            problem, nc, nx = self.problem, self.nc, self.problem.n_x
+            problem, nc = self.problem, self.nc
             P = problem.parameters.extend(branch=nc, corner=nc)
             self.piece_parameters = P
-            S = pair_system(problem, self._nz, P)
+            S = pair_system(problem, self.unknowns.size, P)
             a, b = S.affine("a", self._a), S.affine("b", self._b)
             branch, sel = S.parameter("branch"), S.parameter("corner")
             piece = -(branch * a + (1 - branch) * b)
             if problem.kind == "mcp":
                 built = S.mcp("fb_branch", piece)
             else:
-                theta, nu = S.unknowns("theta", nx + nc + self._ne), S.unknowns("nu", nx + 2 * nc + self._ne)
+                theta, nu = (S.unknowns(name, self.unknowns.slice(name).start) for name in ("theta", "nu"))
                 built = S.saddle("fb_branch", **_saddle_terms(sel * a + (1 - sel) * piece, b, theta, nu, sel))
             self._branch = (built.rj, built.r, built.jacobian, built.linear)
         return self._branch

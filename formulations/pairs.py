@@ -108,6 +108,46 @@ class SystemFunctions:
     linear: bool
 
 
+@dataclass(frozen=True)
+class NewtonSystem:
+    """The Newton system a built formulation solves, published by name
+    (:meth:`~ddcm_casadi.formulations.base.BuiltFormulation.newton_system`): ``r(z; P) = 0`` with
+    the sparse Jacobian ``J = dr/dz``. The unknowns ``z`` and the parameters ``P`` are named blocks
+    (:class:`~ddcm_casadi.problem.Parameters`): nothing outside the formulation slices them by
+    position.
+
+    Attributes
+    ----------
+    name : str
+    unknowns : Parameters
+        The blocks of ``z`` (``x``, ``p``; multipliers ``eta``, ``theta``, ``nu`` for a saddle point).
+    parameters : Parameters
+        The problem's parameters, then the formulation's (smoothing, multipliers, selectors).
+    functions : SystemFunctions
+        ``rj``, ``r``, the CSC converter and whether ``J`` is constant.
+    """
+
+    name: str
+    unknowns: Parameters
+    parameters: Parameters
+    functions: SystemFunctions
+
+    def residual(self, z: np.ndarray, P: np.ndarray) -> np.ndarray:
+        return np.asarray(self.functions.r(z, P), float).ravel()
+
+    def matrix(self, z: np.ndarray, P: np.ndarray) -> sp.csc_matrix:
+        """``J(z; P)`` as a scipy CSC matrix."""
+        return self.functions.jacobian(self.functions.rj(z, P)[1])
+
+    def pack(self, **blocks) -> np.ndarray:
+        """``z`` from its blocks by name."""
+        return self.unknowns.pack(**blocks)
+
+    def unpack(self, z: np.ndarray) -> dict[str, np.ndarray]:
+        """The blocks of ``z`` by name."""
+        return {name: self.unknowns.get(z, name) for name in self.unknowns.names}
+
+
 class PairSystem:
     """Builder of systems ``r(z; P) = A z + A_P P + L psi(y)`` (see the module notes).
 

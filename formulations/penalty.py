@@ -27,12 +27,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.problem import ComplementarityProblem, Parameters
 from ddcm_casadi.solvers.active_set import ActiveSetSolver
 from ddcm_casadi.solvers.newton import SMOOTHING, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
+from .pairs import NewtonSystem
 from .systems import pair_system
 from .registry import register
 
@@ -90,7 +91,7 @@ class Penalty(Formulation):
             opts["gamma_used"] = self.gamma(problem)
         return opts
 
-    def build(self, problem: ComplementarityProblem) -> BuiltFormulation:
+    def _build(self, problem: ComplementarityProblem) -> BuiltFormulation:
         gamma = problem.scaled_penalty(self.gamma(problem))
         built = (_BuiltPenalty if problem.kind == "mcp" else _BuiltCompliantProjection)(problem, self.options, gamma)
         built.penalty_stiffness = self.penalty_stiffness(problem)  # its expected penetration is p / gamma
@@ -110,6 +111,13 @@ class _BuiltPenalty(BuiltFormulation):
         built = S.eliminated("penalty", p_of_x)
         self._rj, self._r, self._jac = built.rj, built.r, built.jacobian
         self._p = S.values("penalty_p", [p_of_x])
+        self._system = NewtonSystem("penalty", Parameters(x=problem.n_x), P, built)
+
+    def newton_system(self):
+        return self._system
+
+    def newton_point(self, params, x, p, state=None):
+        return np.asarray(x, float), self.parameters.pack(params, mu=0.0)
 
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
         o = self.opts
@@ -136,6 +144,12 @@ class _BuiltCompliantProjection(BuiltFormulation):
         S = pair_system(problem, problem.n_x + problem.n_pairs, problem.parameters)
         self._pairs = S.values("compliant_pairs", [ca.fmin(S.affine("gap", compliant_gap),
                                                            S.affine("p", problem.pressure_map))])
+
+    def newton_system(self):
+        return self.system.newton_system("penalty (compliant pairs)")
+
+    def newton_point(self, params, x, p, state=None):
+        return self.system.start(x, p, state), self.system.pack(params)
 
     def reset(self) -> None:
         self.solver.reset()

@@ -69,10 +69,10 @@ def test_built_formulation_is_reused_across_steps():
     model = bar_model(length=1.0, youngs_modulus=200e9, positions=np.linspace(1.01, 0.99, 5))
     problems = build_problems(model)
     built = formulations.get("fischer_burmeister").build(problems.classical)
-    f = built.system.rj
+    f = built.newton_system().functions.rj
     for k in range(model.n_steps):
         built.solve(problems.step_params(k), np.zeros(1), np.zeros(1))
-    assert built.system.rj is f
+    assert built.newton_system().functions.rj is f
 
 
 def test_model_rejects_bad_values():

@@ -23,17 +23,16 @@ def _truss():
 
 
 def _systems(problem):
-    """Every Newton system the formulations build for ``problem``: ``(label, rj, parameters)``."""
+    """Every Newton system the formulations build for ``problem``: ``(label, rj, parameters)``
+    (their published systems, and the FB piece systems)."""
     out = []
     for name in ("penalty", "augmented_lagrangian", "fischer_burmeister"):
         built = formulations.get(name).build(problem)
-        system = getattr(built, "system", None)
-        if system is None:  # the classical penalty and augmented Lagrangian: pressures eliminated
-            out.append((name, built._rj, built.parameters.size))
-            continue
-        out.append((name, system.rj, system.parameters.size))
-        rj, _, _, _ = system.branch_system()
-        out.append((f"{name} pieces", rj, system.piece_parameters.size))
+        system = built.newton_system()
+        out.append((name, system.functions.rj, system.parameters.size))
+        if name == "fischer_burmeister":
+            rj, _, _, _ = built.system.branch_system()
+            out.append((f"{name} pieces", rj, built.system.piece_parameters.size))
     return out
 
 

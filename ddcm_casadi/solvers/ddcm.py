@@ -220,7 +220,7 @@ class DDCMSolver:
         problems, model = self.problems, self.problems.model
         out = PathResult("ddcm", formulation_name, warnings=list(self.notes))
         warm = (np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None)
-        start = None
+        start, self.projection.previous = None, None
         t_all = time.perf_counter()
         for k in range(model.n_steps):
             t0 = time.perf_counter()
@@ -233,6 +233,8 @@ class DDCMSolver:
                 progress(step)
             check_convergence(step, raise_on_failure, f"ddcm/{formulation_name}")
             start = best.star
+            if step.converged:
+                self.projection.previous = dict(u=step.u, p=step.p, strain=step.strain, stress=step.stress)
         out.solve_seconds = time.perf_counter() - t_all
         return out
 

@@ -35,6 +35,9 @@ class Projection:
 
     def __init__(self, problems, built, exact, cache_values: int) -> None:
         self.problems, self.built, self.exact, self.cache_values = problems, built, exact, cache_values
+        #: The last converged step's physical fields (the history a model's step may depend on,
+        #: :meth:`~ddcm_casadi.model.ContactModel.step_values`); set by the driver.
+        self.previous: dict | None = None
 
     def solve(self, params: np.ndarray, x0, p0, state):
         """Projection onto Z_E, restarted on the exact global branch if it may have stopped elsewhere.
@@ -94,7 +97,7 @@ class Projection:
         message of a projection that did not converge, else ``""``. Adds its Newton iterations
         and seconds to ``cost["inner"]`` and ``cost["t_project"]``."""
         t0 = time.perf_counter()
-        params = self.problems.projection_params(k, strain_star, stress_star)
+        params = self.problems.projection_params(k, strain_star, stress_star, self.previous)
         sol, is_global, err = self.solve(params, *warm)
         cost["inner"] += sol.iterations
         cost["t_project"] += time.perf_counter() - t0

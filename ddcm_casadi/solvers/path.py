@@ -36,11 +36,12 @@ def solve_classical(problems: ProblemPair, built, formulation_name: str, *, rais
     out = PathResult("classical", formulation_name)
     x = np.zeros(problems.classical.n_x)
     p = np.zeros(problems.classical.n_pairs)
-    state = None
+    state, previous = None, None
     t_all = time.perf_counter()
     for k in range(model.n_steps):
         t0 = time.perf_counter()
-        sol = built.solve(problems.step_params(k), x, p, state)
+        params = problems.step_params(k, previous)
+        sol = built.solve(params, x, p, state)
         f = problems.fields("mcp", sol.x, sol.p)
         step = StepResult(step=k, load_parameter=float(model.load_parameter[k]), u=f["u"], p=f["p"],
                           converged=sol.converged, iterations=sol.iterations,
@@ -49,13 +50,14 @@ def solve_classical(problems: ProblemPair, built, formulation_name: str, *, rais
                           seconds=time.perf_counter() - t0, message=sol.message,
                           strain=f["strain"], stress=f["stress"])
         finish_step(step, problems.classical, model, penalty_stiffness=getattr(built, "penalty_stiffness", None))
-        _check_stability(step, problems.classical, sol, problems.step_params(k))
+        _check_stability(step, problems.classical, sol, params)
         out.steps.append(step)
         if progress is not None:
             progress(step)
         check_convergence(step, raise_on_failure, f"classical/{formulation_name}")
         if step.converged and np.all(np.isfinite(sol.x)):
             x, p, state = sol.x, sol.p, sol.state
+            previous = dict(u=step.u, p=step.p)
     out.solve_seconds = time.perf_counter() - t_all
     return out
 
