@@ -7,31 +7,20 @@ Three layers:
   CasADi problem;
 - a solver (:mod:`ddcm_casadi.solvers`) drives it: Newton, Uzawa, IPOPT homotopy, or the DDCM
   alternating projections.
-"""
 
-from importlib.metadata import PackageNotFoundError, version as _version
+:func:`compare` runs a model; :func:`run_case` runs a case and writes its results (the entry point
+of ``ddcm-compare`` and ``ddcm-sweep``).
+"""
 
 from .data import MaterialDataset
 from .errors import ConvergenceError, DDCMError, InputError, PhysicsWarning
 from .bar import BarModel, bar_model, paper_bar
 from .model import ContactModel
 from .problem import build_problems
+from .harness import Comparison, compare
+from .run import CaseRun, run_case
+from .version import __version__
 
-try:
-    __version__ = _version("ddcm-casadi")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0+unknown"
-
-
-def __getattr__(name: str):
-    # The harness imports the `formulations` package, which imports this package's core modules:
-    # load it on first use to keep the import graph acyclic.
-    if name in ("compare", "Comparison"):
-        from . import harness
-
-        return getattr(harness, name)
-    raise AttributeError(f"module 'ddcm_casadi' has no attribute {name!r}")
-
-
-__all__ = ["BarModel", "Comparison", "ConvergenceError", "ContactModel", "DDCMError", "InputError", "PhysicsWarning",
-           "MaterialDataset", "bar_model", "build_problems", "compare", "paper_bar", "__version__"]
+__all__ = ["BarModel", "CaseRun", "Comparison", "ConvergenceError", "ContactModel", "DDCMError", "InputError",
+           "PhysicsWarning", "MaterialDataset", "bar_model", "build_problems", "compare", "paper_bar", "run_case",
+           "__version__"]

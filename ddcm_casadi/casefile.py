@@ -39,6 +39,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from . import formulations as registry
 from .data import MAX_DATA_POINTS, MaterialDataset, check_positive
 from .errors import InputError
 from .inputs import input_file
@@ -479,10 +480,6 @@ def data_set_count(doc: dict) -> int:
 
 def run_options(doc: dict) -> tuple[int, dict[str, dict]]:
     """``[ddcm] max_outer`` and the per-formulation options (validated against the registry)."""
-    # Imported here: the kinds import this module while the package initialises, and the
-    # formulations import the package's core modules (keep the import graph acyclic).
-    from ddcm_casadi import formulations as registry
-
     # One alternating projection cannot confirm a fixed point (that takes an unchanged assignment).
     max_outer = integer("ddcm", "max_outer", doc.get("ddcm", {}).get("max_outer", 100), low=MAX_OUTER_RANGE[0],
                         high=MAX_OUTER_RANGE[1])

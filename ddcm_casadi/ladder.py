@@ -22,9 +22,7 @@ Rungs
 from __future__ import annotations
 
 import functools
-import math
 import time
-from dataclasses import asdict, dataclass
 from typing import Callable
 
 import numpy as np
@@ -38,31 +36,14 @@ from .bar import paper_bar
 from .reference import ContactQP
 from . import truss
 from .truss import Obstacle, bar_chain, truss_model
+from .continuum import validation as continuum_rungs
+from .quality_rungs import rung_search_quality
 from .validate import check_fixed_points
+from .verification import Check, as_records, markdown  # noqa: F401 - as_records, markdown: ddcm-validate's API
 
 EXACT = ("augmented_lagrangian", "fischer_burmeister", "mpcc")
 #: Solver tolerances are 1e-9..1e-11 (scaled); results must agree to 1e-8 relative.
 EXACT_TOL = 1e-8
-
-
-@dataclass
-class Check:
-    """One verified claim."""
-
-    name: str
-    quantity: str
-    value: float
-    reference: float
-    tolerance: float
-    passed: bool
-    note: str = ""
-
-    @classmethod
-    def make(cls, name: str, quantity: str, value: float, reference: float, tolerance: float,
-             note: str = "") -> "Check":
-        value, reference = float(value), float(reference)
-        ok = bool(np.isfinite(value) and abs(value - reference) <= tolerance)
-        return cls(name, quantity, value, reference, float(tolerance), ok, note)
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> float:
@@ -320,27 +301,6 @@ def rung_active_sets() -> list[Check]:
     return out
 
 
-def rung_hertz() -> list[Check]:
-    """Hertz in plane strain (:mod:`ddcm_casadi.continuum.validation`)."""
-    from .continuum.validation import rung_hertz as rung
-
-    return rung()
-
-
-def rung_continuum_ddcm() -> list[Check]:
-    """DDCM on a continuum against the data size (:mod:`ddcm_casadi.continuum.validation`)."""
-    from .continuum.validation import rung_continuum_ddcm as rung
-
-    return rung()
-
-
-def rung_search_quality() -> list[Check]:
-    """DDCM restarts + greedy on noisy data against the enumerated optimum (:mod:`ddcm_casadi.quality_rungs`)."""
-    from .quality_rungs import rung_search_quality as rung
-
-    return rung()
-
-
 RUNGS: dict[str, Callable] = {
     "paper bar (closed form)": rung_paper,
     "bar with stops (closed form)": rung_stops,
@@ -348,8 +308,8 @@ RUNGS: dict[str, Callable] = {
     "DDCM convergence with data size": rung_data_convergence,
     "4-member truss without contact": rung_no_contact,
     "active sets (enumeration)": rung_active_sets,
-    "Hertz contact in plane strain": rung_hertz,
-    "DDCM on a continuum with data size": rung_continuum_ddcm,
+    "Hertz contact in plane strain": continuum_rungs.rung_hertz,
+    "DDCM on a continuum with data size": continuum_rungs.rung_continuum_ddcm,
     "DDCM search quality on noisy data": rung_search_quality,
 }
 
@@ -367,22 +327,3 @@ def run_ladder(*, progress: Callable[[str], None] | None = None) -> list[Check]:
             progress(f"{title}: {len(new) - failed}/{len(new)} passed ({time.perf_counter() - t0:.1f} s)")
     _compare.cache_clear()
     return checks
-
-
-def as_records(checks: list[Check]) -> list[dict]:
-    return [asdict(c) for c in checks]
-
-
-def markdown(checks: list[Check]) -> str:
-    passed = sum(c.passed for c in checks)
-    lines = [f"# Validation: {passed}/{len(checks)} checks passed", "",
-             "| case | quantity | value | reference | tolerance | passed |", "|---|---|---|---|---|---|"]
-    for c in checks:
-        tol = "inf" if math.isinf(c.tolerance) else f"{c.tolerance:.1e}"
-        val = f"{c.value:.3g}" if abs(c.value) >= 1e-3 or c.value == 0 else f"{c.value:.2e}"
-        lines.append(f"| {c.name} | {c.quantity} | {val} | {c.reference:g} | {tol} | "
-                     f"{'yes' if c.passed else '**NO**'} |")
-    notes = [c for c in checks if c.note]
-    if notes:
-        lines += ["", "Notes:", ""] + [f"- {c.name}, {c.quantity}: {c.note}" for c in notes]
-    return "\n".join(lines) + "\n"

@@ -24,6 +24,7 @@ from .bar import bar_model
 from .data import MaterialDataset
 from .harness import compare
 from .solvers.ddcm_options import DDCMOptions
+from .verification import Check
 
 #: Noise levels of the measurements (fractions of the data's spread).
 NOISE_LEVELS = (0.01, 0.02, 0.05)
@@ -123,14 +124,12 @@ def measure(options: DDCMOptions, noise: float, seeds, *, name: str = "", formul
                    converged)
 
 
-def rung_search_quality(*, seeds=range(4)) -> list:
+def rung_search_quality(*, seeds=range(4)) -> list[Check]:
     """``ddcm-validate`` rung: on the noisy paper bar at 1, 2 and 5 % noise, the target
     configuration reaches the enumerated global optimum at >= 95 % of the steps, at no more than
     5x the ``Z_E`` projections of plain alternating (an iteration-count ratio, not wall time);
     max-ent's error of ``p`` against the noise-free closed form is at most
     :data:`MAXENT_ERROR_RATIO` times plain alternating's."""
-    from .ladder import Check
-
     out = []
     for noise in NOISE_LEVELS:
         plain = measure(CONFIGURATIONS["plain"], noise, seeds, name="plain")

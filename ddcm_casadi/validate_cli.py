@@ -12,24 +12,22 @@ import sys
 import time
 import warnings
 
+from .commands import EXIT_INPUT, Parser
 from .errors import DDCMError, PhysicsWarning
 from .io import prepare_output_dir, write_bytes_atomic, write_json_atomic
+from .ladder import as_records, markdown, run_ladder
 
 EXIT_FAILED = 1
-EXIT_INPUT = 2
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .cli import _Parser  # one-line usage errors, exit status 2
-
-    p = _Parser(prog="ddcm-validate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    """``ddcm-validate ARGS``: run the ladder, print its report; returns the exit status."""
+    p = Parser(prog="ddcm-validate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", metavar="DIR", help="write validation.json and validation.md here")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     args = p.parse_args(argv)
     try:
         out = prepare_output_dir(args.out) if args.out is not None else None  # --out "" is an error
-        from .ladder import as_records, markdown, run_ladder
-
         t0 = time.perf_counter()
         say = None if args.quiet else (lambda msg: print(f"ddcm-validate: {msg}", file=sys.stderr, flush=True))
         with warnings.catch_warnings():

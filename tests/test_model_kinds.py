@@ -17,7 +17,7 @@ import pytest
 import scipy.sparse as sp
 
 from ddcm_casadi import MaterialDataset, compare
-from ddcm_casadi import cli
+from ddcm_casadi import run
 from ddcm_casadi.config import Case
 from ddcm_casadi.io import write_json_atomic
 from ddcm_casadi.model import ContactModel
@@ -99,23 +99,24 @@ def test_new_kind_runs_through_the_harness(cmp):
 
 def test_new_kind_runs_through_the_cli_records(cmp, tmp_path):
     case = Case(model=cmp.model, source="test kind")
-    params = cli.parameters(case, cmp)
+    params = run.parameters(case, cmp)
     assert params["case"] == "test kind"
     assert params["kind"] == "two springs in series" and params["springs"] == 2  # its own describe()
     assert params["positions"] == POSITIONS.tolist()
     assert params["data"]["points"] == 301 and params["data"]["c"] == 1.5 * E
     assert params["formulations"]["penalty"]["gamma_used"] > 0  # resolved options
     assert "gamma_used" not in params["formulations"]["fischer_burmeister"]
-    per_step = cli.fields(cmp)
+    per_step = run.fields(cmp)
     assert set(per_step) == {f"{v}/{f}" for v, f in cmp.results}
 
-    doc = dict(parameters=params, versions=cli.versions(), summary=cmp.summary(), fields=per_step)
+    doc = run.results_document(case, cmp, files=["results.csv", "results.json"])
+    assert doc["parameters"] == params and doc["fields"].keys() == per_step.keys()
     write_json_atomic(tmp_path / "results.json", doc)
     back = json.loads((tmp_path / "results.json").read_text())
     assert back["parameters"] == json.loads(json.dumps(params))  # tuples of options become lists
-    run = back["fields"]["ddcm/fischer_burmeister"]
-    assert np.asarray(run["spring_force"]).shape == (POSITIONS.size, 2)
-    assert np.asarray(run["u"]).shape == (POSITIONS.size, 2)
+    fields = back["fields"]["ddcm/fischer_burmeister"]
+    assert np.asarray(fields["spring_force"]).shape == (POSITIONS.size, 2)
+    assert np.asarray(fields["u"]).shape == (POSITIONS.size, 2)
 
 
 def test_new_kind_without_figures_of_its_own(cmp, tmp_path):
@@ -132,7 +133,7 @@ def test_new_kind_without_figures_of_its_own(cmp, tmp_path):
 
 
 # --------------------------------------------------------------------- front ends carry no type checks
-FRONT_ENDS = ("harness.py", "cli.py", "plots.py", "config.py")
+FRONT_ENDS = ("harness.py", "cli.py", "plots.py", "config.py", "run.py", "outputs.py")
 MODEL_CLASSES = {"BarModel", "TrussModel", "StoppedBarModel"}
 PACKAGE = Path(__file__).resolve().parent.parent / "ddcm_casadi"
 

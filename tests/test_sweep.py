@@ -21,6 +21,7 @@ import pytest
 from ddcm_casadi.data import MaterialDataset
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.sweep import generator_from_dict, load_spec, run_case, run_sweep
+from ddcm_casadi.cli import main as cli_main
 from ddcm_casadi.sweep.cli import main as sweep_main
 from ddcm_casadi.sweep.runner import CASES, read_record
 from ddcm_casadi.sweep.table import TIMINGS, fit_loglog
@@ -125,6 +126,36 @@ def test_local_cluster_of_two_workers_runs_a_small_sweep(tmp_path):
         assert {k: v for k, v in mine.items() if k not in TIMINGS} == {k: v for k, v in theirs.items()
                                                                       if k not in TIMINGS}
     assert len(read_csv(folder / "results.csv")) == 2 * 4  # per step
+
+
+def test_case_results_json_is_the_document_of_ddcm_compare(tmp_path, scheduler):
+    """A sweep case's results.json comes from the same builder as ddcm-compare's
+    (ddcm_casadi.run.results_document): warnings, fields, files and overrides included."""
+    base = case_toml(positions="[0.9995, 0.999, 0.998]", extra="[formulations.penalty]\ngamma = 2e15\n",
+                     data="hookean = { strain_min = -0.01, strain_max = 0.002, points = 40, youngs_modulus = 200e9 }")
+    spec_text = ('base = "base.toml"\nvariants = ["classical", "ddcm"]\nformulations = ["fischer_burmeister"]\n'
+                 '[set]\n"bar.elements" = 2\n[grid]\n"ddcm.c" = [3e11]\n')
+    spec = load_spec(write_spec(tmp_path / "spec", spec_text, base))
+    out = tmp_path / "out"
+    report = run_sweep(spec, out, scheduler=scheduler, figures=False)
+    assert report.ran == 1 and not report.failed
+    folder = out / CASES / spec.cases[0].id
+    doc = json.loads((folder / "results.json").read_text())
+    # the obstacle starts inside the bar: the warning ddcm-compare records too
+    assert doc["warnings"] and "start inside the body" in doc["warnings"][0]
+    assert set(doc["fields"]) == {"classical/fischer_burmeister", "ddcm/fischer_burmeister"}  # two elements
+    assert doc["files"] == ["results.csv", "results.json"] == sorted(p.name for p in folder.glob("results.*"))
+    assert doc["parameters"]["overrides"] == {"bar.elements": 2, "ddcm.c": 3e11}
+
+    # ddcm-compare on the same case writes the same keys
+    case_file = tmp_path / "case.toml"
+    case_file.write_text(base)
+    assert cli_main(["--config", str(case_file), "--set", "bar.elements=2", "--set", "ddcm.c=3e11",
+                     "--formulations", "fischer_burmeister", "--no-plots", "-q", "--out", str(tmp_path / "cmp")]) == 0
+    direct = json.loads((tmp_path / "cmp" / "results.json").read_text())
+    assert list(direct) == list(doc)
+    assert direct["parameters"]["overrides"] == doc["parameters"]["overrides"]
+    assert direct["fields"].keys() == doc["fields"].keys() and direct["warnings"] == doc["warnings"]
 
 
 def test_noiseless_error_is_at_most_half_a_data_spacing(tmp_path):

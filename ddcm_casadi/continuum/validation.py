@@ -16,10 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from .. import cases
+from ..casefile import read_document
+from ..config import case_from_dict, load_case
 from ..data import MaterialDataset
 from ..harness import compare
 from ..metric import Metric, isotropic_elasticity
-from ..ladder import Check
+from ..verification import Check
+from .obstacles import Circle
 
 FB = "fischer_burmeister"
 #: The Hertz example, ``examples/cases/hertz2d.toml``, installed as package data (``ddcm_casadi.cases``).
@@ -31,9 +34,6 @@ def hertz_block(levels: int, *, degree: int = 1, data: bool = False):
     """The Hertz example (``examples/cases/hertz2d.toml``) with ``degree`` elements and ``levels``
     gradings of the contact zone (element size ``2 mm / 2^levels`` there), classical only unless
     ``data`` (then with the example's Hookean data)."""
-    from ..casefile import read_document
-    from ..config import case_from_dict  # the public entry: registers the case kinds
-
     doc = read_document(EXAMPLE)
     if not data:
         doc.pop("data", None)
@@ -47,8 +47,6 @@ def _fit(h, e) -> float:
 
 
 def rung_hertz(*, levels=(2, 3, 4, 5)) -> list[Check]:
-    from ..config import load_case
-
     out = []
     model = load_case(EXAMPLE).model  # the example as it is, with its default mesh
     r = compare(model, [FB], variants=("classical",))["classical", FB]
@@ -83,9 +81,8 @@ def rung_hertz(*, levels=(2, 3, 4, 5)) -> list[Check]:
 
 def rung_continuum_ddcm(*, points=(9, 17, 33, 65)) -> list[Check]:
     """DDCM error against the classical solution on a 2-D indented block as the data grid refines."""
-    from . import mesh
+    from . import mesh  # scikit-fem (0.4 s) only when a continuum is built, as the package does
     from .model import Contact, Material, Support, continuum_model
-    from .obstacles import Circle
 
     C = isotropic_elasticity(E, NU, 2)[0]
 

@@ -15,13 +15,15 @@ import argparse
 import sys
 import time
 
-from .. import __version__
-from ..cli import EXIT_NOT_CONVERGED, _Parser, run_guarded
+from ..commands import EXIT_NOT_CONVERGED, Parser, run_guarded
 from ..errors import InputError
+from ..version import __version__
+from .runner import run_sweep
+from .spec import load_spec
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="ddcm-sweep", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = Parser(prog="ddcm-sweep", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("spec", metavar="SPEC", help="sweep spec, .toml or .json")
     p.add_argument("--out", metavar="DIR", required=True, help="output folder (cases/, sweep.csv, sweep.json, figures)")
     p.add_argument("--workers", metavar="N", type=int, help="worker processes of the LocalCluster (default: cores)")
@@ -70,8 +72,6 @@ def run(argv: list[str] | None = None) -> int:
         raise InputError(f"--workers must be a positive integer, got {args.workers}")
     if args.workers is not None and args.scheduler:
         raise InputError("--workers sizes the local cluster; it cannot be combined with --scheduler")
-    from .runner import run_sweep
-    from .spec import load_spec
 
     spec = load_spec(args.spec)
     if not args.quiet:

@@ -2,13 +2,15 @@
 
 Every case of a :class:`~ddcm_casadi.sweep.spec.SweepSpec` is one task, :func:`run_case`: a plain
 function of the case's resolved parameters (a small dict) that builds the case exactly as a case
-file (:func:`~ddcm_casadi.sweep.spec.build_case`), runs :func:`~ddcm_casadi.harness.compare` and
-returns small records (summary metrics and the per-step rows of ``results.csv``; never the
-fields). Workers need only the installed package; they write nothing.
+file (:func:`~ddcm_casadi.sweep.spec.build_case`), runs it with the library's entry point
+(:func:`ddcm_casadi.run.run_case`, writing nothing) and returns small records: summary metrics,
+and the rows of ``results.csv`` and the document of ``results.json`` (the one builder,
+:func:`ddcm_casadi.run.results_document`, with the fields the model keeps there). Workers need
+only the installed package; they write nothing.
 
 The client writes each finished case to ``DIR/cases/<id>/`` (``case.json``: parameters, status,
 message and metrics; for a case that ran, ``results.csv`` and ``results.json`` as ``ddcm-compare``
-writes them): the files go to a temporary folder that is then renamed, so a case folder is
+writes them, the swept values and the spec's ``[set]`` recorded as ``parameters.overrides``): the files go to a temporary folder that is then renamed, so a case folder is
 complete or absent. A rerun skips the cases whose folder exists (resumable after a crash, a
 Ctrl-C or a lost worker); ``force`` reruns every case, ``retry_failed`` the failed ones. A case
 that raises is recorded as failed with its message and does not stop the sweep; a task lost by
@@ -32,9 +34,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
+from ..commands import one_line
 from ..errors import DDCMError, InputError
 from ..io import OutputFolder, umask, write_csv_atomic, write_json_atomic
-from .spec import SweepCase, SweepSpec, build_case
+from ..run import RESULTS_CSV, RESULTS_JSON, run_case as run_library_case
+from ..version import versions as package_versions
+from .spec import SweepCase, SweepSpec, build_case, flatten
 from .table import case_rows, fits, summary_rows
 
 CASES = "cases"
@@ -42,9 +47,7 @@ RECORD = "case.json"
 
 
 def _message(exc: BaseException) -> str:
-    from ..cli import _one_line
-
-    text = _one_line(exc)
+    text = one_line(exc)
     return text if isinstance(exc, DDCMError) and text else f"{type(exc).__name__}: {text}"
 
 
@@ -56,27 +59,25 @@ def run_case(task: dict) -> dict:
     task : dict
         ``case`` (the fields of a :class:`SweepCase`), ``base`` (the base case file, against
         whose folder relative paths resolve), ``variants`` and ``formulations`` (lists, or
-        ``None`` for the defaults of ``ddcm-compare``).
+        ``None`` for the defaults of ``ddcm-compare``), and optionally ``overrides`` (what the
+        case changes of the base case, recorded in ``results.json``; default: its parameters).
 
     Returns
     -------
     dict
         ``status`` (``"ok"`` or ``"failed"``), ``error`` (the one-line message of a failed case),
         ``rows`` (:func:`~ddcm_casadi.sweep.table.summary_rows`), ``results_rows`` and ``results``
-        (the content of ``results.csv`` and ``results.json``, without fields), ``seconds`` and
-        ``worker``.
+        (the content of ``results.csv`` and ``results.json``), ``seconds`` and ``worker``.
     """
-    from .. import formulations as registry
-    from ..cli import _variants, compare_case, parameters, versions
-
     t0 = time.perf_counter()
     try:
-        case = build_case(SweepCase(**task["case"]), Path(task["base"]))
-        variants = _variants(",".join(task["variants"]) if task["variants"] else None, case)
-        cmp = compare_case(case, task["formulations"] or registry.available(), variants)
-        summary = cmp.summary()
-        out = dict(status="ok", error=None, rows=summary_rows(cmp, summary), results_rows=cmp.rows(),
-                   results=dict(parameters=parameters(case, cmp), versions=versions(), summary=summary))
+        sweep_case = SweepCase(**task["case"])
+        case = build_case(sweep_case, Path(task["base"]))
+        overrides = task.get("overrides", sweep_case.params)
+        run = run_library_case(case, formulations=task["formulations"], variants=task["variants"],
+                               overrides=overrides)
+        out = dict(status="ok", error=None, rows=summary_rows(run.comparison, run.document["summary"]),
+                   results_rows=run.rows, results=run.document)
     except Exception as exc:  # noqa: BLE001 - any failure of a case is recorded and the sweep goes on
         out = dict(status="failed", error=_message(exc), rows=[], results_rows=None, results=None)
     out["seconds"] = time.perf_counter() - t0
@@ -118,8 +119,8 @@ def write_case(out: Path, case: SweepCase, spec: SweepSpec, result: dict) -> dic
     tmp = Path(tempfile.mkdtemp(dir=cases, prefix=f".{case.id}."))
     try:
         if result["results"] is not None:
-            write_csv_atomic(tmp / "results.csv", result["results_rows"])
-            write_json_atomic(tmp / "results.json", result["results"])
+            write_csv_atomic(tmp / RESULTS_CSV, result["results_rows"])
+            write_json_atomic(tmp / RESULTS_JSON, result["results"])  # its files: these two
         write_json_atomic(tmp / RECORD, record)
         os.chmod(tmp, 0o777 & ~umask())
         final = cases / case.id
@@ -276,9 +277,11 @@ def _run(client, spec: SweepSpec, todo: list[SweepCase], out: Path, report: Swee
     variants = list(spec.variants) if spec.variants else None
     formulations = list(spec.formulations) if spec.formulations else None
     futures = {}
+    fixed = dict(flatten(spec.document.get("set", {})))  # the spec's [set], applied to every case
     for case in todo:
         task = dict(case=dict(id=case.id, index=case.index, params=case.params, doc=case.doc, generate=case.generate),
-                    base=str(spec.base.resolve()), variants=variants, formulations=formulations)
+                    base=str(spec.base.resolve()), variants=variants, formulations=formulations,
+                    overrides={**fixed, **case.params})
         futures[client.submit(run_case, task, pure=False)] = case
     done = 0
     try:
@@ -314,8 +317,6 @@ def finish(spec: SweepSpec, out: Path, report: SweepReport, *, figures: bool = T
 
 def _write_summary(spec: SweepSpec, out: Path, into: Path, report: SweepReport, *, figures: bool,
                    versions: dict | None) -> None:
-    from ..cli import versions as package_versions
-
     records = [(case, read_record(out, case.id)) for case in spec.cases]
     rows = [row for _, rec in records if rec is not None for row in case_rows(rec, spec.columns)]
     report.fits = fits(rows, spec.figures, spec.columns)

@@ -48,10 +48,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .. import formulations as registry
+from ..casefile import read_document
+from ..config import case_from_dict
 from ..errors import InputError
+from ..harness import VARIANTS
 from ..inputs import input_file
 from ..overrides import apply_overrides, split_key
 from .generators import DataGenerator, attach, generator_from_dict
+from .table import METRICS
 
 #: Top-level keys of a spec.
 SPEC_KEYS = ("base", "description", "variants", "formulations", "seeds", "set", "generate", "grid", "figures")
@@ -103,13 +108,13 @@ class SweepSpec:
         return [k for k, _ in self.grid] + ([SEED] if self.seeds is not None else [])
 
 
-def _flatten(table: dict, prefix: str = "") -> list[tuple[str, Any]]:
+def flatten(table: dict, prefix: str = "") -> list[tuple[str, Any]]:
     """``{a: {b: v}}`` as ``[("a.b", v)]``: nested tables (unquoted dotted keys) become dotted keys."""
     out = []
     for key, value in table.items():
         name = f"{prefix}{key}"
         if isinstance(value, dict):
-            out.extend(_flatten(value, name + "."))
+            out.extend(flatten(value, name + "."))
         else:
             out.append((name, value))
     return out
@@ -154,7 +159,7 @@ def _grid(table: Any, has_generate: bool) -> tuple[tuple[str, tuple], ...]:
     if not isinstance(table, dict):
         raise InputError("[grid] must be a table of dotted keys to lists of values")
     grid = []
-    for key, values in _flatten(table):
+    for key, values in flatten(table):
         split_key(key, what="grid key")
         if key == SEED or key == f"generate.{SEED}":
             raise InputError(f"grid key {key!r}: give the seeds with seeds = N or seeds = [...]")
@@ -174,10 +179,6 @@ def _grid(table: Any, has_generate: bool) -> tuple[tuple[str, tuple], ...]:
 
 
 def _figures(value: Any, columns: list[str]) -> tuple[FigureSpec, ...]:
-    # The metrics are the table's columns (imported here: the table module is light, but this
-    # keeps the spec free of the runner's names at import time).
-    from .table import METRICS
-
     if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
         raise InputError("[[figures]] must be an array of tables")
     out = []
@@ -227,8 +228,6 @@ def load_spec(path: str | Path, *, check: bool = True) -> SweepSpec:
         Missing or malformed spec, unknown key, empty grid, missing base case, or a key or value
         that cannot be applied (one line).
     """
-    from ..casefile import read_document
-
     path = input_file(path, "sweep spec")
     spec = read_document(path)
     unknown = sorted(set(spec) - set(SPEC_KEYS))
@@ -241,15 +240,12 @@ def load_spec(path: str | Path, *, check: bool = True) -> SweepSpec:
     base = input_file(path.parent / spec["base"], "base case")
     base_doc = read_document(base)
 
-    from .. import formulations as registry
-    from ..harness import VARIANTS
-
     variants = _names(spec, "variants", VARIANTS)
     formulations = _names(spec, "formulations", registry.available())
     fixed = spec.get("set", {})
     if not isinstance(fixed, dict):
         raise InputError("[set] must be a table of dotted keys to values")
-    base_doc = apply_overrides(base_doc, _flatten(fixed), what="[set]")
+    base_doc = apply_overrides(base_doc, flatten(fixed), what="[set]")
     generate = spec.get("generate")
     if generate is not None and not isinstance(generate, dict):
         raise InputError("[generate] must be a table")
@@ -297,8 +293,6 @@ def _expand(grid, seeds, base_doc, generate, variants, formulations) -> tuple[Sw
 def build_case(case: SweepCase, spec_or_base: SweepSpec | Path):
     """The :class:`~ddcm_casadi.casefile.Case` of a sweep case: generated data written to a
     temporary CSV file, then the document validated and built exactly as a case file."""
-    from ..config import case_from_dict
-
     base = spec_or_base.base if isinstance(spec_or_base, SweepSpec) else Path(spec_or_base)
     doc = case.doc
     with tempfile.TemporaryDirectory(prefix="ddcm-sweep-") as tmp:
