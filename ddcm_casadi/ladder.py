@@ -17,6 +17,9 @@ Rungs
    enumeration of all branches of ``Z_E``, reporting every local minimum.
 9. DDCM search quality on noisy 1-D data: restarts + greedy at the enumerated global optimum at
    >= 95 % of the steps for <= 5x the projections of plain alternating.
+10. Finite kinematics: the von Mises truss pushed through its snap by a rigid plane against its
+    closed form (every formulation's converged steps, contact lost and regained; DDCM's
+    data-spacing rate), :mod:`ddcm_casadi.finite_rungs`.
 """
 
 from __future__ import annotations
@@ -39,7 +42,8 @@ from .truss import Obstacle, bar_chain, truss_model
 from .continuum import validation as continuum_rungs
 from .quality_rungs import rung_search_quality
 from .validate import check_fixed_points
-from .verification import Check, as_records, markdown  # noqa: F401 - as_records, markdown: ddcm-validate's API
+from .finite_rungs import rung_von_mises
+from .verification import Check, as_records, fitted_rate, markdown  # noqa: F401 - as_records, markdown: ddcm-validate's API
 
 EXACT = ("augmented_lagrangian", "fischer_burmeister", "mpcc")
 #: Solver tolerances are 1e-9..1e-11 (scaled); results must agree to 1e-8 relative.
@@ -230,10 +234,7 @@ def rung_data_convergence(*, sizes=(250, 500, 1000, 2000, 4000, 8000, 16000)) ->
     exact_u = compare(warren_truss(n_data=sizes[0], steps=6), [fb], variants=("classical",))["classical", fb].array("u")
     errs = [_rel(compare(warren_truss(n_data=n, steps=6), [fb], variants=("ddcm",))["ddcm", fb].array("u"), exact_u)
             for n in sizes]
-    x, y = np.log(np.asarray(sizes, float)), np.log(np.asarray(errs))
-    slope, icpt = np.polyfit(x, y, 1)
-    resid = y - (slope * x + icpt)
-    se = float(np.sqrt(np.sum(resid**2) / (x.size - 2) / np.sum((x - x.mean()) ** 2)))
+    slope, se = fitted_rate(sizes, errs)
     note = ("errors " + ", ".join(f"N={n}: {e:.2e}" for n, e in zip(sizes, errs))
             + f"; standard error of the slope {se:.2f}. Expected -1: the error is set by the data spacing "
               "(proportional to 1/N); at one N it varies within about 2x with the alignment of the data, "
@@ -311,6 +312,7 @@ RUNGS: dict[str, Callable] = {
     "Hertz contact in plane strain": continuum_rungs.rung_hertz,
     "DDCM on a continuum with data size": continuum_rungs.rung_continuum_ddcm,
     "DDCM search quality on noisy data": rung_search_quality,
+    "von Mises truss snap-through (finite kinematics)": rung_von_mises,
 }
 
 

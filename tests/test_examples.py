@@ -128,3 +128,28 @@ def test_contact_figures_many_pairs_and_failed_steps(tmp_path):
     assert f"{active}/{model.n_contacts} contacts active" in structure.axes[0].get_title()
     paths = [save_figure(history, tmp_path / "history.png"), save_figure(structure, tmp_path / "structure.png")]
     assert all(p.stat().st_size > 10_000 for p in paths)
+
+
+def test_von_mises_snap_example(tmp_path):
+    """Finite kinematics: Fischer-Burmeister (classical) and MPCC (DDCM) cross the snap; every
+    converged step of every run has the closed form's contact status; figures are written."""
+    module = _load("von_mises_snap")
+    cmp = module.main(tmp_path, quick=True)
+    assert len(cmp.results) == 8
+    for key in (("classical", "fischer_burmeister"), ("ddcm", "mpcc")):
+        assert all(s.converged for s in cmp.results[key].steps), key
+    from ddcm_casadi.finite_rungs import contact_status, snap_table
+
+    m = cmp.model
+    p_ref = np.array([m.closed_form(k)[1] for k in range(m.n_steps)])
+    expected = contact_status(m, p_ref)
+    spacing = float(np.max(np.diff(np.sort(m.dataset.stress))))  # the data's stress spacing
+    for (variant, name), r in cmp.results.items():
+        ok = np.array([s.converged for s in r.steps])
+        if variant == "classical":
+            assert np.all(contact_status(m, r.array("p"))[ok] == expected[ok]), name
+        else:  # DDCM: within the data's stress spacing (the pressure is a member stress times 2 (h - w) / L0 < 1)
+            assert np.max(np.abs(r.array("p") - p_ref)[ok]) <= spacing, name
+    assert "travel" in snap_table(cmp)
+    for fig in FIGURES:
+        assert (tmp_path / fig).stat().st_size > 10_000, fig
