@@ -17,8 +17,9 @@ the sections of every kind and dispatches to the one named. The public entry poi
 :mod:`ddcm_casadi.config`, which imports the kinds so that they are registered; the format of each
 kind is documented next to its parser (:mod:`ddcm_casadi.bar`, :mod:`ddcm_casadi.truss`).
 
-This module holds the scalar validators the parsers use (:func:`number`, :func:`positive`,
-:func:`integer`, :func:`nonempty_list`, :func:`vector`, :func:`per_member`), the ``[data]`` specs
+This module holds the validators the parsers use, by section and key (:func:`number`,
+:func:`positive`, :func:`integer`, :func:`nonempty_list`: the :mod:`ddcm_casadi.inputs` toolkit's;
+:func:`vector`, :func:`per_member`), the ``[data]`` specs
 (:func:`data_specs`) and the run options (:func:`run_options`). Every error is an
 :class:`~ddcm_casadi.errors.InputError` with a one-line message naming the key.
 """
@@ -26,7 +27,6 @@ This module holds the scalar validators the parsers use (:func:`number`, :func:`
 from __future__ import annotations
 
 import json
-import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,9 +40,10 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 from . import formulations as registry
-from .data import MAX_DATA_POINTS, MaterialDataset, check_positive
+from .data import MAX_DATA_POINTS, MaterialDataset
 from .errors import InputError
-from .inputs import input_file
+from . import inputs as check
+from .inputs import input_file, show
 from .overrides import apply_overrides
 from .model import ContactModel
 from .solvers.ddcm_options import KEYS as DDCM_OPTION_KEYS
@@ -161,53 +162,27 @@ def _known_sections() -> dict[str, frozenset[str] | None]:
 
 
 # ----------------------------------------------------------------------------------- scalar checks
-def show(value: Any, limit: int = 60) -> str:
-    """``repr(value)`` for a message: at most ``limit`` characters, safe for huge integers."""
-    try:
-        text = repr(value)
-    except ValueError:  # an integer with more digits than Python will print
-        return "<a number too large to print>"
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
 def number(section: str, key: str, value: Any) -> float:
-    """``value`` as a finite float; booleans, strings and non-finite values are refused."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"[{section}] {key} must be a number, got {show(value)}")
-    try:
-        v = float(value)
-    except OverflowError:  # an integer beyond the float range (JSON integers are unbounded)
-        v = math.inf
-    if not math.isfinite(v):
-        raise InputError(f"[{section}] {key} must be finite, got {show(value)}")
-    return v
+    """``value`` as a finite float (:func:`ddcm_casadi.inputs.finite_number` of ``[section] key``)."""
+    return check.finite_number(value, f"[{section}] {key}")
 
 
 def positive(section: str, key: str, value: Any) -> float:
-    """``value`` as a finite positive float."""
-    return check_positive(f"[{section}] {key}", number(section, key, value))
+    """``value`` as a finite positive float (:func:`ddcm_casadi.inputs.positive` of ``[section] key``)."""
+    return check.positive(value, f"[{section}] {key}")
 
 
 def integer(section: str, key: str, value: Any, *, low: int | None = None, high: int | None = None,
             what: str = "an integer") -> int:
-    """``value`` as an int in ``low..high`` (inclusive); booleans and floats are refused."""
-    span = "" if low is None and high is None else f" in {low}..{high}" if high is not None else f" (>= {low})"
-    if isinstance(value, float) and value.is_integer():
-        # TOML and JSON read 1e7 and 100.0 as floats: say how to write the integer.
-        raise InputError(f"[{section}] {key} must be {what}{span}, got the float {show(value)} "
-                         f"(write it without a decimal point or exponent: {int(value)})")
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(f"[{section}] {key} must be {what}{span}, got {show(value)}")
-    if (low is not None and value < low) or (high is not None and value > high):
-        raise InputError(f"[{section}] {key} must be {what}{span}, got {show(value)}")
-    return value
+    """``value`` as an int in ``low..high`` (inclusive); booleans and floats are refused
+    (:func:`ddcm_casadi.inputs.integer` of ``[section] key``)."""
+    return check.integer(value, f"[{section}] {key}", low=low, high=high, what=what)
 
 
 def nonempty_list(section: str, key: str, value: Any, *, nonempty: bool = True) -> list:
-    """``value`` if it is a list (non-empty unless ``nonempty=False``)."""
-    if not isinstance(value, list) or (nonempty and not value):
-        raise InputError(f"[{section}] {key} must be a {'non-empty ' if nonempty else ''}list, got {show(value)}")
-    return value
+    """``value`` if it is a list, non-empty unless ``nonempty=False``
+    (:func:`ddcm_casadi.inputs.nonempty_list` of ``[section] key``)."""
+    return check.nonempty_list(value, f"[{section}] {key}", nonempty=nonempty)
 
 
 def vector(section: str, key: str, value: Any, d: int) -> np.ndarray:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .inputs import input_file
+from .inputs import input_file, positive
 from .metric import Metric
 from .search import KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
 
@@ -25,14 +25,9 @@ _CHUNK = 1 << 16
 
 
 def check_positive(name: str, value: float) -> float:
-    """Return ``value`` as a float, or raise :class:`InputError` unless it is finite and > 0."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0.0:
-        raise InputError(f"{name} must be finite and positive, got {value!r}")
-    return v
+    """Return ``value`` as a float, or raise :class:`InputError` unless it is a finite number > 0
+    (:func:`ddcm_casadi.inputs.positive`; ``name`` says where it came from)."""
+    return positive(value, name)
 
 
 #: Largest scaled coordinate the search accepts: squared distances (sums of squares) stay below

@@ -15,6 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.inputs import check_dataclass, positive
 from ddcm_casadi.problem import ComplementarityProblem
 
 
@@ -76,14 +77,6 @@ class Metrics:
         return residual, comp, pen, obj
 
 
-#: Range of iteration limits (options named ``max_*``): 0 iterations cannot converge, and a limit
-#: beyond a million only hides a solve that does not converge.
-ITERATION_LIMIT = (1, 10**6)
-#: Range of tolerances (options named ``*tol``): relative residuals and complementarity errors are
-#: measured in double precision, whose floor is a few ``eps`` = 2.2e-16.
-TOLERANCE = (1e-15, 1.0)
-
-
 class Formulation(ABC):
     """Base class of the registered contact formulations.
 
@@ -110,34 +103,10 @@ class Formulation(ABC):
         self._validate()
 
     def _validate(self) -> None:
-        for f in dataclasses.fields(self.options):
-            v = getattr(self.options, f.name)
-            kind = str(f.type)
-            where = f"option {f.name!r} of {self.name!r}"
-            if v is None and "None" in kind:
-                continue
-            if kind.startswith("float") or kind.startswith("int"):
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-                    raise InputError(f"{where} must be a finite number, got {v!r}")
-                if kind.startswith("int"):
-                    lo, hi = ITERATION_LIMIT if f.name.startswith("max_") else (0, None)
-                    if v != int(v) or v < lo or (hi is not None and v > hi):
-                        span = f"in {lo}..{hi}" if hi is not None else "(>= 0)"
-                        raise InputError(f"{where} must be an integer {span}, got {v!r}")
-                    object.__setattr__(self.options, f.name, int(v))
-                elif f.name.endswith("tol") and not TOLERANCE[0] <= v < TOLERANCE[1]:
-                    raise InputError(f"{where} must be in [{TOLERANCE[0]:g}, {TOLERANCE[1]:g}) (a relative "
-                                     f"tolerance below a few machine epsilons cannot be met), got {v!r}")
-            elif kind.startswith("tuple"):
-                if not isinstance(v, (tuple, list)) or not all(
-                        isinstance(e, (int, float)) and not isinstance(e, bool) and np.isfinite(e) and e >= 0
-                        for e in v):
-                    raise InputError(f"{where} must be a list of finite non-negative numbers, got {v!r}")
-            elif kind.startswith("bool"):
-                if not isinstance(v, bool):
-                    raise InputError(f"{where} must be true or false, got {v!r}")
-            elif kind.startswith("dict") and not isinstance(v, dict):
-                raise InputError(f"{where} must be a table, got {v!r}")
+        """Check every option by its type and name (:func:`ddcm_casadi.inputs.check_dataclass`:
+        ``max_*`` an iteration limit, ``*tol`` a tolerance, other ints ``>= 0``, integral floats
+        accepted for ints); subclasses add their own rules after this."""
+        check_dataclass(self.options, lambda name: option_label(self.name, name), coerce_floats=True)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.options})"
@@ -193,6 +162,12 @@ class BuiltFormulation(ABC):
                              state=dict(state or {}), message=message)
 
 
+def option_label(formulation: str, name: str) -> str:
+    """How messages name option ``name`` of ``formulation``: ``"option 'tol' of 'penalty'"``."""
+    return f"option {name!r} of {formulation!r}"
+
+
 def positive_option(formulation: str, name: str, value: float | None) -> None:
-    if value is not None and (not np.isfinite(value) or value <= 0):
-        raise InputError(f"option {name!r} of {formulation!r} must be finite and positive, got {value!r}")
+    """Refuse ``value`` unless it is ``None`` or a finite number > 0 (:func:`ddcm_casadi.inputs.positive`)."""
+    if value is not None:
+        positive(value, option_label(formulation, name))

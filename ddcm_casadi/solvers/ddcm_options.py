@@ -8,83 +8,46 @@ dataclass, validated on construction).
 4
 
 The same keys are read from a case file's ``[ddcm]`` section (:meth:`DDCMOptions.from_mapping`);
-every bad value is a one-line :class:`~ddcm_casadi.errors.InputError` naming the key.
+every value is checked by its type and range (:func:`ddcm_casadi.inputs.check_fields`), and a bad
+one is a one-line :class:`~ddcm_casadi.errors.InputError` naming the key.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Literal, Mapping, get_args
 
-import numpy as np
-
+from .. import inputs as check
 from ..errors import InputError
 from ..search import search_name
 
 #: The initial data assignment of a load step (see :class:`DDCMOptions`).
-STARTS = ("origin", "elastic", "random")
+Start = Literal["origin", "elastic", "random"]
 #: What is done after a fixed point.
-IMPROVEMENTS = ("none", "greedy")
+Improvement = Literal["none", "greedy"]
 #: The data-driven scheme: plain distance minimisation, or a noise-robust variant.
-VARIANTS = ("plain", "lcdd", "maxent")
+Variant = Literal["plain", "lcdd", "maxent"]
+STARTS, IMPROVEMENTS, VARIANTS = get_args(Start), get_args(Improvement), get_args(Variant)
 
+#: Integer options: their inclusive ranges (the other fields are checked by their type).
 _INTS = {"seed": (0, 2**63 - 1), "restarts": (0, 10_000), "restart_neighbours": (0, 10**6), "greedy_neighbours": (1, 1000),
          "greedy_points": (0, 10**9), "greedy_budget": (1, 10**6), "exact_max": (0, 10**9),
          "lcdd_neighbours": (2, 64), "maxent_neighbours": (2, 4096), "maxent_steps": (1, 200),
          # One alternating projection cannot confirm a fixed point (an unchanged assignment).
          "max_outer": (2, 10**6)}
-#: Real options: (lower, upper), the lower bound excluded.
-_FLOATS = {"maxent_beta_growth": (1.0, 1e6)}
-_CHOICES = {"start": STARTS, "improve": IMPROVEMENTS, "variant": VARIANTS}
-_BOOLS = ("warm", "greedy_screen")
 #: Alternating projections per step.
 MAX_OUTER_RANGE = _INTS["max_outer"]
 
 
-def _checked(name: str, value: Any, where: str) -> Any:
-    """One option's value, normalised, or a one-line :class:`InputError` (``where`` names it)."""
-    if name in _CHOICES:
-        if not isinstance(value, str) or value not in _CHOICES[name]:
-            raise InputError(f"{where} {name} must be one of {', '.join(map(repr, _CHOICES[name]))}, "
-                             f"got {value!r:.60}")
-        return value
-    if name in _BOOLS:
-        if not isinstance(value, (bool, np.bool_)):
-            raise InputError(f"{where} {name} must be true or false, got {value!r:.60}")
-        return bool(value)
-    if name == "search":
-        return search_name(value)  # a one-line error listing the registered backends
-    if name in _INTS:
-        lo, hi = _INTS[name]
-        if isinstance(value, float) and value.is_integer():
-            # TOML and JSON read 1e7 and 100.0 as floats: say how to write the integer.
-            raise InputError(f"{where} {name} must be an integer in {lo}..{hi}, got the float {value!r} "
-                             f"(write it without a decimal point or exponent: {int(value)})")
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-            raise InputError(f"{where} {name} must be an integer in {lo}..{hi}, got {value!r:.60}")
-        if not lo <= int(value) <= hi:
-            raise InputError(f"{where} {name} must be an integer in {lo}..{hi}, got {value!r:.60}")
-        return int(value)
-    if name in _FLOATS:
-        lo, hi = _FLOATS[name]
-        ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
-        if not ok or not lo < float(value) <= hi:
-            raise InputError(f"{where} {name} must be a number > {lo:g} and <= {hi:g}, got {value!r:.60}")
-        return float(value)
-    if name == "initial":
-        if value is None:
-            return None
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) == 0:
-            raise InputError(f"{where} initial must be a non-empty list of data indices (one per point), "
-                             f"got {value!r:.60}")
-        out = []
-        for v in value:
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not 0 <= int(v) < 2**63:
-                raise InputError(f"{where} initial must hold non-negative integer data indices, got {v!r:.60}")
-            out.append(int(v))
-        return tuple(out)
-    raise InputError(f"{where}: unknown option {name!r}")  # pragma: no cover - fields are listed above
+#: The fields whose type and name say too little (see :func:`ddcm_casadi.inputs.check_fields`).
+_RULES: dict[str, check.Rule] = {
+    **{name: functools.partial(check.integer, low=lo, high=hi) for name, (lo, hi) in _INTS.items()},
+    "maxent_beta_growth": functools.partial(check.in_range, low=1.0, high=1e6, low_open=True),
+    "search": lambda value, where: search_name(value),  # a one-line error listing the registered backends
+    "initial": functools.partial(check.number_list, integers=True, nonempty=True),  # data indices
+}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -172,27 +135,26 @@ class DDCMOptions:
 
     max_outer: int = 100
     search: str = "kdtree"
-    start: str = "origin"
+    start: Start = "origin"
     initial: tuple[int, ...] | None = None
     warm: bool = True
     seed: int = 0
     restarts: int = 0
     restart_neighbours: int = 0
-    improve: str = "none"
+    improve: Improvement = "none"
     greedy_neighbours: int = 3
     greedy_points: int = 8
     greedy_budget: int = 40
     greedy_screen: bool = True
     exact_max: int = 0
-    variant: str = "plain"
+    variant: Variant = "plain"
     lcdd_neighbours: int = 5
     maxent_neighbours: int = 32
     maxent_steps: int = 1
     maxent_beta_growth: float = 2.0
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            object.__setattr__(self, f.name, _checked(f.name, getattr(self, f.name), "ddcm option"))
+        check.check_dataclass(self, "ddcm option", rules=_RULES)
         if self.variant != "plain" and (self.restarts or self.improve != "none"):
             # checked here, before any work: LCDD and max-ent have no data assignment to restart or improve
             raise InputError(f"ddcm variant {self.variant!r} does not combine with restarts or improve "
@@ -202,8 +164,8 @@ class DDCMOptions:
     def from_mapping(cls, table: Mapping[str, Any], *, where: str = "[ddcm]") -> "DDCMOptions":
         """Options from a case file's ``[ddcm]`` table (other keys, such as ``c``, are ignored
         here); every value is checked and a bad one is a one-line error naming ``where key``."""
-        values = {k: _checked(k, v, where) for k, v in table.items() if k in KEYS}
-        return cls(**values)
+        values = {k: v for k, v in table.items() if k in KEYS}
+        return cls(**check.check_fields(cls, values, where, rules=_RULES))
 
     def describe(self) -> dict:
         """The options as plain values, for ``results.json``."""
