@@ -18,6 +18,8 @@ from ddcm_casadi.errors import InputError
 from ddcm_casadi.inputs import check_dataclass, positive
 from ddcm_casadi.problem import ComplementarityProblem
 
+from .pairs import NewtonSystem
+
 
 @dataclass
 class LocalSolution:
@@ -87,6 +89,10 @@ class Formulation(ABC):
     name: ClassVar[str]
     title: ClassVar[str]
     exact: ClassVar[bool] = True
+    #: The contact laws (:mod:`ddcm_casadi.contact_laws`) and model kinematics this formulation
+    #: enforces; :meth:`check_supports` refuses the others.
+    supported_contact_laws: ClassVar[frozenset] = frozenset({"signorini"})
+    supported_kinematics: ClassVar[frozenset] = frozenset({"small", "finite"})
 
     @dataclass(frozen=True)
     class Options:
@@ -121,9 +127,31 @@ class Formulation(ABC):
         """The options with their problem-dependent defaults resolved (for ``results.json``)."""
         return dict(vars(self.options))
 
-    @abstractmethod
+    def refusal(self, problem: ComplementarityProblem) -> str:
+        """Why this formulation cannot enforce ``problem``'s pairs (one line), or ``""``."""
+        if problem.contact_law not in self.supported_contact_laws:
+            return (f"formulation {self.name!r} does not support the contact law {problem.contact_law!r} "
+                    f"(it supports: {', '.join(sorted(self.supported_contact_laws))})")
+        if problem.kinematics not in self.supported_kinematics:
+            return (f"formulation {self.name!r} does not support {problem.kinematics} kinematics "
+                    f"(it supports: {', '.join(sorted(self.supported_kinematics))})")
+        return ""
+
+    def check_supports(self, problem: ComplementarityProblem) -> None:
+        """Raise a one-line :class:`InputError` if :meth:`refusal` has a reason (call it before any work)."""
+        reason = self.refusal(problem)
+        if reason:
+            raise InputError(reason)
+
     def build(self, problem: ComplementarityProblem) -> "BuiltFormulation":
-        """Build the CasADi objects for ``problem`` once; returns an object with ``solve``."""
+        """Build the CasADi objects for ``problem`` once (after :meth:`check_supports`); returns
+        an object with ``solve``."""
+        self.check_supports(problem)
+        return self._build(problem)
+
+    @abstractmethod
+    def _build(self, problem: ComplementarityProblem) -> "BuiltFormulation":
+        """The formulation's own build for a supported ``problem``."""
 
 
 class BuiltFormulation(ABC):
@@ -147,6 +175,19 @@ class BuiltFormulation(ABC):
     def stats(self) -> dict:
         """Solver counters (e.g. ``predicted`` and ``newton`` projections), if the solver keeps any."""
         return {}
+
+    def newton_system(self) -> "NewtonSystem | None":
+        """The Newton system this formulation solves (:class:`~ddcm_casadi.formulations.pairs.NewtonSystem`:
+        matrix, residual, unknowns and parameters by name), or ``None`` where a solver other than
+        Newton drives it (IPOPT)."""
+        return None
+
+    def newton_point(self, params: np.ndarray, x: np.ndarray, p: np.ndarray,
+                     state: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(z, P)`` of :meth:`newton_system` at the problem's parameter values ``params`` and the
+        scaled point ``(x, p)`` (warm multipliers from ``state``), the formulation's own parameters
+        at the values a solve starts from."""
+        raise NotImplementedError(f"{type(self).__name__} publishes no Newton system")
 
     @abstractmethod
     def solve(self, params: np.ndarray, x0: np.ndarray, p0: np.ndarray,
