@@ -26,6 +26,7 @@ This module holds the validators the parsers use, by section and key (:func:`num
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from dataclasses import dataclass, field
@@ -45,11 +46,14 @@ from .errors import InputError
 from . import inputs as check
 from .inputs import input_file, show
 from .overrides import apply_overrides
-from .model import ContactModel
+from .model import KINEMATICS, ContactModel
 from .solvers.ddcm_options import KEYS as DDCM_OPTION_KEYS
 from .solvers.ddcm_options import MAX_OUTER_RANGE, DDCMOptions
 
 #: Keys of the sections every kind shares (``None``: checked elsewhere, here against the registry).
+#: Top-level keys (not sections): ``kinematics = "small" | "finite"`` (default the kind's first).
+TOP_LEVEL_KEYS = ("kinematics",)
+
 COMMON_SECTIONS: dict[str, set[str] | None] = {
     "data": {"path", "hookean", "c"},
     "ddcm": {"c", "max_outer"} | DDCM_OPTION_KEYS,
@@ -87,6 +91,7 @@ class CaseKind:
     uses: str
     default_name: str
     default: bool
+    kinematics: tuple[str, ...] = ("small",)
 
     @property
     def own_sections(self) -> list[str]:
@@ -100,7 +105,7 @@ _KINDS: dict[str, CaseKind] = {}
 def register_case_kind(section: str, *, sections: Mapping[str, set[str]], parse: CaseParser, uses: str,
                        arrays: set[str] | frozenset[str] = frozenset(), tables: set[str] | frozenset[str] = frozenset(),
                        default_name: str | None = None,
-                       default: bool = False) -> None:
+                       default: bool = False, kinematics: tuple[str, ...] = ("small",)) -> None:
     """Register a model kind of case files.
 
     Parameters
@@ -126,6 +131,9 @@ def register_case_kind(section: str, *, sections: Mapping[str, set[str]], parse:
     default : bool
         The kind assumed when a document names none (the paper's bar): it is named in the
         "missing section" message and listed first.
+    kinematics : tuple of str
+        The values of the top-level key ``kinematics`` this kind's models take (the first is the
+        default); the model is built, then given the case's kinematics.
 
     Raises
     ------
@@ -144,7 +152,8 @@ def register_case_kind(section: str, *, sections: Mapping[str, set[str]], parse:
         raise ValueError("a default case kind is registered already")
     _KINDS[section] = CaseKind(section=section, sections={k: frozenset(v) for k, v in sections.items()},
                                arrays=frozenset(arrays), tables=frozenset(tables), parse=parse, uses=uses,
-                               default_name=default_name or section, default=default)
+                               default_name=default_name or section, default=default,
+                               kinematics=tuple(kinematics))
 
 
 def case_kinds() -> list[CaseKind]:
@@ -346,11 +355,19 @@ def case_from_dict(doc: dict, *, base_dir: Path = Path("."), source: str = "<dic
     source : str
         Where the document came from (for messages and the model name).
     """
+    top = {key: doc[key] for key in TOP_LEVEL_KEYS if key in doc}
+    doc = {key: value for key, value in doc.items() if key not in TOP_LEVEL_KEYS}
     _check_sections(doc, source)
     kind = _kind_of(doc, source)
+    kinematics = check.one_of(top.get("kinematics", kind.kinematics[0]), "kinematics", KINEMATICS)
+    if kinematics not in kind.kinematics:
+        raise InputError(f"kinematics = {kinematics!r} is not available for [{kind.section}] cases "
+                         f"(available: {', '.join(map(repr, kind.kinematics))})")
     ddcm = DDCMOptions.from_mapping(doc.get("ddcm", {}))  # checked before any work
     name = Path(source).stem if source != "<dict>" else None
     case = kind.parse(doc, base_dir=base_dir, source=source, name=name or kind.default_name)
+    if kinematics != case.model.kinematics:
+        case.model = dataclasses.replace(case.model, kinematics=kinematics)
     case.ddcm_options = ddcm
     return case
 

@@ -317,6 +317,8 @@ class ContactModel:
         InputError
             An imposed strain of 1 or more (an obstacle pushed past a fixed end, through the
             body): a small-strain model is meaningless there.
+
+        The strain checks apply to small kinematics only.
         """
         out = []
         first = -np.min(self.gap_offsets[0], initial=0.0)
@@ -325,6 +327,8 @@ class ContactModel:
             out.append(f"the obstacles start inside the body: {n} contact pair(s) penetrate by up to {first:.3g} m "
                        f"at the first step ({self.load_parameter_name}={self.load_parameter[0]:.6g}), so there are "
                        f"contact forces before any load")
+        if self.kinematics != "small":  # large strains and rotations are what finite kinematics model
+            return out
         self.scales_for("classical" if self.youngs_modulus is not None else "ddcm")
         imposed = max((v for k, v in self._cache.items() if isinstance(k, tuple) and k[0] == "imposed_strain"),
                       default=0.0)
@@ -430,7 +434,8 @@ class ContactModel:
         return dict(name=self.name, type=type(self).__name__, n_dofs=self.n_dofs, n_points=self.n_points,
                     n_contacts=self.n_contacts, n_steps=self.n_steps,
                     load_parameter_name=self.load_parameter_name,
-                    load_parameter=self.load_parameter.tolist(), youngs_modulus=E)
+                    load_parameter=self.load_parameter.tolist(), youngs_modulus=E, kinematics=self.kinematics,
+                    contact_law=self.contact_law)
 
     @property
     def scalar(self) -> bool:

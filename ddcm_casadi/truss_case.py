@@ -246,4 +246,5 @@ casefile.register_case_kind(
     sections={"structure": {"nodes", "members", "area", "youngs_modulus", "material", "supports", "loads",
                             "distributed_loads"},
               "path": {"load_factors"}, "obstacles": {"normal", "offset", "offsets", "nodes"}},
-    arrays={"obstacles"}, parse=parse_case, uses="[path] and [[obstacles]]", default_name="truss")
+    arrays={"obstacles"}, parse=parse_case, uses="[path] and [[obstacles]]", default_name="truss",
+    kinematics=("small", "finite"))

@@ -7,6 +7,9 @@ to the data spacing.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -18,6 +21,9 @@ from ddcm_casadi.finite_rungs import contact_status, rung_von_mises, snap_table
 from ddcm_casadi.harness import compare
 from ddcm_casadi.problem import build_problems
 from ddcm_casadi.von_mises import descent, green_lagrange, plane_force, von_mises_truss
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "cases"
+EXAMPLE_CASE = EXAMPLES / "von_mises.toml"
 
 
 @pytest.fixture(scope="module")
@@ -102,3 +108,42 @@ def test_rung_passes():
     checks = rung_von_mises(sizes=(101, 201, 401, 801))
     failed = [c for c in checks if not c.passed]
     assert not failed, failed
+
+
+def test_case_file_kinematics_key(tmp_path):
+    """``kinematics = "finite"`` from a case file gives the von Mises truss of the module."""
+    from ddcm_casadi.config import load_case
+    from ddcm_casadi.run import run_case
+
+    case = load_case(EXAMPLE_CASE)
+    assert case.model.kinematics == "finite"
+    reference = von_mises_truss()
+    np.testing.assert_allclose(case.model.gap_offsets, reference.gap_offsets, atol=1e-6)
+    run = run_case(case, tmp_path / "out", formulations=["fischer_burmeister"], variants=["classical"], figures=False)
+    u = run.comparison["classical", "fischer_burmeister"].array("u")
+    np.testing.assert_allclose(-u[:, 1], descent(reference.load_parameter, 0.1), rtol=1e-5, atol=1e-7)
+    document = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert document["parameters"]["kinematics"] == "finite" and document["parameters"]["contact_law"] == "signorini"
+
+
+@pytest.mark.parametrize("value, message", [
+    ('"large"', "kinematics must be one of 'small', 'finite', got 'large'"),
+    ("1", "kinematics must be one of 'small', 'finite', got 1"),
+])
+def test_bad_kinematics_is_refused(tmp_path, value, message):
+    from ddcm_casadi.config import load_case
+
+    path = tmp_path / "case.toml"
+    path.write_text(EXAMPLE_CASE.read_text().replace('kinematics = "finite"', f"kinematics = {value}"))
+    with pytest.raises(InputError) as err:
+        load_case(path)
+    assert str(err.value) == message
+
+
+def test_finite_kinematics_refused_where_unavailable(tmp_path):
+    from ddcm_casadi.config import load_case
+
+    path = tmp_path / "bar.toml"
+    path.write_text('kinematics = "finite"\n' + (EXAMPLES / "bar_stops.toml").read_text())
+    with pytest.raises(InputError, match=r"kinematics = 'finite' is not available for \[bar\] cases"):
+        load_case(path)
