@@ -15,8 +15,8 @@ import argparse
 import time
 
 from ddcm_casadi import formulations as registry
-from ddcm_casadi.continuum.validation import hertz_block
-from ddcm_casadi.harness import compare
+from ddcm_casadi.validation.continuum import hertz_block
+from ddcm_casadi.drivers.harness import compare
 
 
 def main(argv=None) -> list[dict]:

@@ -8,7 +8,7 @@ Usage::
 ``--seeds 0`` skips table 1, ``--truss-seeds 0`` table 2.
 
 Table 1, noisy paper bar (one element: the global optimum of every step is enumerated): for each
-noise level and search (:data:`ddcm_casadi.quality_rungs.CONFIGURATIONS` and the max-ent
+noise level and search (:data:`ddcm_casadi.validation.quality_rungs.CONFIGURATIONS` and the max-ent
 settings of :data:`MAXENT`; each ``--only NAME`` keeps one of them, plain always), the share of steps at
 the global optimum, the mean over data sets of the max relative error of ``p`` and ``u`` against
 the noise-free classical closed form, the cost as ``Z_E`` projections relative to plain
@@ -25,9 +25,9 @@ projections relative to plain alternating, the steps converged and the wall time
 plain: the greedy screen costs time that no projection count shows). Where the time
 goes (cProfile, one data set at 2 %, ``R = 20``, one BLAS thread: 9 s): 70 % in the ``Z_E``
 projections, nearly all of it the exact branch enumeration that checks each one
-(:meth:`~ddcm_casadi.exact.ExactEnumerator.solve`, 27 partitions of 3 pairs; the FB Newton
+(:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.solve`, 27 partitions of 3 pairs; the FB Newton
 solves take 7 %), 28 % in the greedy screen's closed forms
-(:meth:`~ddcm_casadi.exact.AffineFamily.best`, 8 points x 2001 data per sweep); the restarts
+(:meth:`~ddcm_casadi.problems.exact.AffineFamily.best`, 8 points x 2001 data per sweep); the restarts
 cost linearly in ``R``. A threaded BLAS made the screen 2-10x slower on a loaded 2-core machine,
 hence one thread by default (below).
 """
@@ -45,11 +45,12 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np
 
-from ddcm_casadi import compare, truss
-from ddcm_casadi.harness import _relative_error  # the error measure of Comparison.errors
-from ddcm_casadi.quality_rungs import (CONFIGURATIONS, MAXENT_CONFIGURATION, MAXENT_OPTIONS, NOISE_LEVELS, measure,
+from ddcm_casadi import compare
+from ddcm_casadi.models import truss
+from ddcm_casadi.drivers.harness import _relative_error  # the error measure of Comparison.errors
+from ddcm_casadi.validation.quality_rungs import (CONFIGURATIONS, MAXENT_CONFIGURATION, MAXENT_OPTIONS, NOISE_LEVELS, measure,
                                        noisy_dataset)
-from ddcm_casadi.solvers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 
 FB = "fischer_burmeister"
 
@@ -85,7 +86,7 @@ def noisy_truss(noise: float, seed: int):
     data = noisy_dataset(noise, seed, n_data=2001, c=200e9)
     # The ladder's truss data cover [-0.004, 0.004]: rescale the paper's strains onto that range.
     scale = 0.004 / 0.05
-    from ddcm_casadi.data import MaterialDataset
+    from ddcm_casadi.data.dataset import MaterialDataset
     data = MaterialDataset(data.strain * scale, data.stress * scale, 200e9)
     return truss.warren_truss(panels=4, gap=0.002, contact_nodes=range(1, 4), load_factors=np.linspace(0.5, 3.0, 7),
                               dataset=data, name="noisy Warren truss")

@@ -62,7 +62,7 @@ def first_run(repeats: int = 5) -> dict:
         floor_cmd, bare_cmd = [sys.executable, "-c", FLOOR], [sys.executable, "-c", BARE]
 
         def run_cmd(out: str) -> list[str]:
-            return [sys.executable, "-m", "ddcm_casadi.cli", "--out", os.path.join(tmp, out), "-q"]
+            return [sys.executable, "-m", "ddcm_casadi.commands.compare", "--out", os.path.join(tmp, out), "-q"]
 
         for argv in (floor_cmd, bare_cmd, run_cmd("warm-up")):  # untimed: fills the bytecode cache
             _wall(argv, cached, tmp)

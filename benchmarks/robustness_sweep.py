@@ -4,7 +4,7 @@
 
 Per case x variant x formulation it records the share of converged steps, iteration statistics,
 the worst error against the closed form (classical) and whether every DDCM step is a valid fixed
-point (ddcm_casadi.validate), and wall time. Writes DIR/sweep.json and DIR/sweep.md (atomically).
+point (ddcm_casadi.validation.fixed_points), and wall time. Writes DIR/sweep.json and DIR/sweep.md (atomically).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 from ddcm_casadi import MaterialDataset, bar_model, compare
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
-from ddcm_casadi.validate import check_fixed_points
+from ddcm_casadi.validation.fixed_points import check_fixed_points
 
 
 def cases(steps: int, rng: np.random.Generator) -> dict:

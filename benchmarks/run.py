@@ -44,10 +44,10 @@ from ddcm_casadi import formulations as registry
 from ddcm_casadi import linalg
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.linalg import factorize, solver_name
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.reference import ContactQP
-from ddcm_casadi.solvers.path import DDCMSolver, solve_classical
-from ddcm_casadi.truss import bar_chain, warren_truss
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.validation.reference import ContactQP
+from ddcm_casadi.drivers.path import DDCMSolver, solve_classical
+from ddcm_casadi.models.truss import bar_chain, warren_truss
 
 
 def median_time(fn, repeats: int, budget: float = 20.0) -> float:
@@ -167,9 +167,9 @@ def continuum_block(divisions: int):
     """The body of the Hertz example (``examples/cases/hertz2d.toml``: plane strain, P2 triangles,
     a 20 mm square indented by a cylinder, with its 21^3 Hookean data) on a uniform
     ``divisions x divisions`` mesh without the contact grading, for sizes set by one number."""
-    from ddcm_casadi.casefile import read_document
-    from ddcm_casadi.config import case_from_dict
-    from ddcm_casadi.continuum.validation import EXAMPLE
+    from ddcm_casadi.casefiles.base import read_document
+    from ddcm_casadi.casefiles.config import case_from_dict
+    from ddcm_casadi.validation.continuum import EXAMPLE
 
     doc = read_document(EXAMPLE)
     doc["mesh"]["divisions"] = [divisions, divisions]
@@ -197,7 +197,7 @@ def build_record(family: str, unknowns: int, repeats: int) -> dict:
     the floor of one DDCM iteration (:func:`iteration_floor`, at the zero start with a random
     data assignment, whose states are queried). ``peak_memory_bytes``: the peak resident set
     (Linux ``VmHWM``) of the process, imports and model included."""
-    from ddcm_casadi.solvers.ddcm_search import random_assignment
+    from ddcm_casadi.drivers.ddcm_search import random_assignment
 
     model = BUILD_MODELS[family](unknowns)
     t0 = time.perf_counter()
@@ -326,7 +326,7 @@ def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]
 
 def stiffness_solvers(unknowns: int, repeats: int) -> list[dict]:
     """A definite block like the 2-D continuum projection's: one solve with the classical elastic
-    stiffness ``K = B^T W D B`` (:meth:`~ddcm_casadi.model.ContactModel.stiffness`, free dofs) by
+    stiffness ``K = B^T W D B`` (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness`, free dofs) by
     the package's default (SuperLU, ordered by the pattern: ``floor_seconds``) against an algebraic
     multigrid preconditioned conjugate gradient (``pyamg``'s smoothed aggregation with the
     rigid-body modes as near-null space, relative residual 1e-10; setup and solve timed together,
@@ -416,7 +416,7 @@ DATA_SIZE = """
 import json, sys, time
 import numpy as np
 from ddcm_casadi import MaterialDataset
-from ddcm_casadi.metric import Metric
+from ddcm_casadi.data.metric import Metric
 
 def status(key):
     with open("/proc/self/status") as fh:
@@ -543,7 +543,7 @@ def paper_shares(repeats: int) -> list[dict]:
         runs.append((time.perf_counter() - t0, cmp))
     total, cmp = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-c", "import sys; from ddcm_casadi.cli import main; sys.exit(main(sys.argv[1:]))",
+        cmd = [sys.executable, "-c", "import sys; from ddcm_casadi.commands.compare import main; sys.exit(main(sys.argv[1:]))",
                "--out", tmp]
         command = median_time(lambda: subprocess.run(cmd, check=True, capture_output=True), repeats)
     out = [dict(name="paper example: the whole `ddcm-compare --out DIR` command", unknowns=model.n_dofs,

@@ -30,4 +30,4 @@ class ConvergenceError(DDCMError):
 
 class PhysicsWarning(UserWarning):
     """Input that runs but is physically odd: an obstacle that starts inside the body, strains far
-    beyond the small-strain model (:meth:`~ddcm_casadi.model.ContactModel.path_warnings`)."""
+    beyond the small-strain model (:meth:`~ddcm_casadi.models.base.ContactModel.path_warnings`)."""

@@ -34,7 +34,7 @@ from typing import Any, Literal, Union
 
 import numpy as np
 
-from .errors import InputError
+from ddcm_casadi.errors import InputError
 
 
 def input_file(path: str | os.PathLike, what: str) -> Path:

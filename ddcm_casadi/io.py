@@ -21,7 +21,7 @@ from contextlib import contextmanager, suppress
 from pathlib import Path, PurePosixPath
 from typing import Any, Iterable, Iterator
 
-from .errors import DDCMError, InputError
+from ddcm_casadi.errors import DDCMError, InputError
 
 #: The lock file of an output folder (the same for every tool: one run per folder at a time).
 LOCK_FILE = ".ddcm-casadi.lock"

@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import InputError
+from ddcm_casadi.errors import InputError
 
 
 def to_casadi(A: sp.spmatrix) -> ca.DM:

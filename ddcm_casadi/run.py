@@ -1,18 +1,18 @@
 """The library entry point: run a case and write its results.
 
-:func:`run_case` is what ``ddcm-compare`` (:mod:`ddcm_casadi.cli`), ``ddcm-sweep``
+:func:`run_case` is what ``ddcm-compare`` (:mod:`ddcm_casadi.commands.compare`), ``ddcm-sweep``
 (:mod:`ddcm_casadi.sweep.runner`, on each worker) and the Python API run::
 
     from ddcm_casadi import run_case
-    from ddcm_casadi.config import load_case
+    from ddcm_casadi.casefiles.config import load_case
 
     run = run_case(load_case("examples/cases/truss2d.toml"), "results", formulations=["fischer_burmeister"])
     run.comparison.table(), run.document["summary"], run.files
 
 It checks the selection, locks the output folder, runs every formulation in every variant
-(:func:`~ddcm_casadi.harness.compare`) and writes, all or nothing (:class:`~ddcm_casadi.io.OutputFolder`):
-``results.csv`` (:meth:`~ddcm_casadi.harness.Comparison.rows`), the model's field files and figures
-(:func:`~ddcm_casadi.outputs.save_outputs`) and ``results.json``, whose one builder is
+(:func:`~ddcm_casadi.drivers.harness.compare`) and writes, all or nothing (:class:`~ddcm_casadi.io.OutputFolder`):
+``results.csv`` (:meth:`~ddcm_casadi.drivers.harness.Comparison.rows`), the model's field files and figures
+(:func:`~ddcm_casadi.outputs.save.save_outputs`) and ``results.json``, whose one builder is
 :func:`results_document`.
 """
 
@@ -24,17 +24,17 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from . import formulations as registry
-from .casefile import Case
-from .errors import InputError
-from .harness import VARIANTS, Comparison, compare
-from .io import OutputFolder, write_csv_atomic, write_json_atomic
-from .outputs import require_matplotlib, save_outputs
-from .parallel import resolve_jobs
-from .version import versions
+from ddcm_casadi import formulations as registry
+from ddcm_casadi.casefiles.base import Case
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.drivers.harness import VARIANTS, Comparison, compare
+from ddcm_casadi.io import OutputFolder, write_csv_atomic, write_json_atomic
+from ddcm_casadi.outputs.save import require_matplotlib, save_outputs
+from ddcm_casadi.parallel import resolve_jobs
+from ddcm_casadi.version import versions
 
 if TYPE_CHECKING:
-    from .harness import StepResult
+    from ddcm_casadi.drivers.harness import StepResult
 
 RESULTS_CSV = "results.csv"
 RESULTS_JSON = "results.json"
@@ -129,12 +129,12 @@ def parameters(case: Case, cmp: Comparison) -> dict:
     Returns
     -------
     dict
-        ``case``, then the model's own record (:meth:`~ddcm_casadi.model.ContactModel.describe`:
+        ``case``, then the model's own record (:meth:`~ddcm_casadi.models.base.ContactModel.describe`:
         for the paper's bar ``length``, ``area``, ``youngs_modulus``, ``positions``; for any other
         model its ``name``, sizes, ``load_parameter_name`` and values, and the moduli, for trusses
         also ``dimension``, ``n_nodes``, ``n_members``), ``data`` (:func:`describe_dataset`),
         ``ddcm_max_outer``, ``ddcm`` (the search options,
-        :meth:`~ddcm_casadi.solvers.ddcm_options.DDCMOptions.describe`) and ``formulations``
+        :meth:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions.describe`) and ``formulations``
         (options with their problem-dependent defaults resolved, e.g. ``gamma_used``).
     """
     m = case.model
@@ -147,11 +147,11 @@ def parameters(case: Case, cmp: Comparison) -> dict:
 def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
     """Per-step fields of every run, keyed ``"variant/formulation"`` (``None`` for the paper's bar).
 
-    Each run maps the names of :meth:`~ddcm_casadi.harness.Comparison.fields` (``u``,
+    Each run maps the names of :meth:`~ddcm_casadi.drivers.harness.Comparison.fields` (``u``,
     ``contact_pressure``, ``contact_force``, ``strain``, ``stress``, for trusses
     ``nodal_displacement`` and ``member_force``, for DDCM the assigned data) to arrays, steps
     first (written as nested lists, non-finite values as null), as much of them as the model keeps
-    (:meth:`~ddcm_casadi.model.ContactModel.results_fields`). The one-unknown bar has none: its CSV
+    (:meth:`~ddcm_casadi.models.base.ContactModel.results_fields`). The one-unknown bar has none: its CSV
     rows already hold ``u`` and ``p``.
     """
     model = cmp.model
@@ -181,7 +181,7 @@ def results_document(case: Case, cmp: Comparison, *, files: Sequence[str],
     -------
     dict
         ``parameters`` (:func:`parameters`), ``versions``, ``summary``
-        (:meth:`~ddcm_casadi.harness.Comparison.summary`), ``warnings`` (physically odd input),
+        (:meth:`~ddcm_casadi.drivers.harness.Comparison.summary`), ``warnings`` (physically odd input),
         ``fields`` (:func:`fields`; not for the one-unknown bar) and ``files``.
     """
     params = parameters(case, cmp)
@@ -209,7 +209,7 @@ def write_results(case: Case, cmp: Comparison, out_dir: str | Path, *, rows: lis
                   figures: bool = True, jobs: int = 1, overrides: Mapping[str, Any] | None = None
                   ) -> tuple[dict, list[str]]:
     """Write a run's results into ``out_dir``, each file atomically: ``results.csv``, the model's
-    field files and figures (:func:`~ddcm_casadi.outputs.save_outputs`), then ``results.json``.
+    field files and figures (:func:`~ddcm_casadi.outputs.save.save_outputs`), then ``results.json``.
 
     Parameters
     ----------
@@ -251,7 +251,7 @@ def run_case(case: Case, out_dir: str | Path | None = None, *, formulations: Seq
     Parameters
     ----------
     case : Case
-        The case (:func:`ddcm_casadi.config.load_case`, :func:`~ddcm_casadi.config.default_case`,
+        The case (:func:`ddcm_casadi.casefiles.config.load_case`, :func:`~ddcm_casadi.casefiles.config.default_case`,
         or ``Case(model=...)``).
     out_dir : str or Path, optional
         Where to write ``results.csv``, ``results.json``, the field files (VTU) and the figures. The

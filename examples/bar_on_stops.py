@@ -10,7 +10,7 @@ shortening, so the stops close one after another (the nearest to the tip relativ
 clearance first) and the tip pressure rises in steps of stiffness.
 
 The classical solution is known in closed form (the upper concave envelope of the stop positions;
-see :meth:`ddcm_casadi.truss.StoppedBarModel.closed_form`), so the table reports the error of
+see :meth:`ddcm_casadi.models.truss.StoppedBarModel.closed_form`), so the table reports the error of
 every formulation. The DDCM variant uses Hookean data with the paper's spacing (strain step
 ``1.2e-5``) and metric ``c = 300 GPa``. Its range reaches ``-0.08`` rather than the paper's
 ``-0.05``: after all three stops close, the last quarter of the bar carries the remaining tip
@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from ddcm_casadi import MaterialDataset
-from ddcm_casadi.harness import Comparison
-from ddcm_casadi.outputs import compare_and_plot
-from ddcm_casadi.truss import StoppedBarModel, bar_chain
+from ddcm_casadi.drivers.harness import Comparison
+from ddcm_casadi.outputs.save import compare_and_plot
+from ddcm_casadi.models.truss import StoppedBarModel, bar_chain
 
 NAME = "bar_on_stops"
 STRAIN_RANGE = (-0.08, 0.01)

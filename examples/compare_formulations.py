@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 
 from ddcm_casadi import MaterialDataset, bar_model, compare
-from ddcm_casadi.outputs import save_figures
+from ddcm_casadi.outputs.save import save_figures
 
 
 def main(out_dir: str | None = None, *, n_data: int = 500):

@@ -35,10 +35,10 @@ from pathlib import Path
 import numpy as np
 
 from ddcm_casadi import MaterialDataset
-from ddcm_casadi.continuum import Contact, FlatPunch, Material, Support, continuum_model, mesh
-from ddcm_casadi.harness import Comparison, compare
-from ddcm_casadi.metric import Metric, isotropic_elasticity
-from ddcm_casadi.outputs import save_outputs
+from ddcm_casadi.models.continuum import Contact, FlatPunch, Material, Support, continuum_model, mesh
+from ddcm_casadi.drivers.harness import Comparison, compare
+from ddcm_casadi.data.metric import Metric, isotropic_elasticity
+from ddcm_casadi.outputs.save import save_outputs
 
 NAME = "softening_punch"
 E, NU = 50e6, 0.3            # Pa, initial (small-strain) stiffness
@@ -135,7 +135,7 @@ def figure_force(result: PunchResult, path: Path) -> Path:
     """Punch force against indentation: classical (linear) and DDCM (softening data)."""
     import matplotlib.pyplot as plt
 
-    from ddcm_casadi.plots import save_figure
+    from ddcm_casadi.outputs.plots import save_figure
 
     fig, ax = plt.subplots(figsize=(6.0, 4.2))
     s = result.travel * 1e3

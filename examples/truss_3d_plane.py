@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from ddcm_casadi import MaterialDataset
-from ddcm_casadi.harness import Comparison
-from ddcm_casadi.outputs import compare_and_plot
-from ddcm_casadi.truss import Obstacle, TrussModel, truss_model
+from ddcm_casadi.drivers.harness import Comparison
+from ddcm_casadi.outputs.save import compare_and_plot
+from ddcm_casadi.models.truss import Obstacle, TrussModel, truss_model
 
 NAME = "truss_3d_plane"
 NX, NY = 6, 3  # modules along x and y

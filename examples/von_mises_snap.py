@@ -7,7 +7,7 @@ Saint Venant-Kirchhoff stress ``S = E_mod E``) the force the plane must exert,
 ``F(w) = -2 A E_mod E(w) (h - w) / L0``, first grows, then falls to zero when the members are
 horizontal (``w = h``). The plane can only push: past that point the apex snaps through, leaves
 the plane and rests inverted at ``w = 2 h``, until the plane reaches it again and contact resumes
-with the members in tension (:mod:`ddcm_casadi.von_mises`).
+with the members in tension (:mod:`ddcm_casadi.models.von_mises`).
 
 Every formulation runs, classical and DDCM (Hookean ``(E, S)`` data, 1 601 points); the table
 gives each one's error against the closed form, and the step table shows where each one found
@@ -25,10 +25,10 @@ import time
 from pathlib import Path
 
 from ddcm_casadi import MaterialDataset
-from ddcm_casadi.finite_rungs import snap_table
-from ddcm_casadi.harness import Comparison
-from ddcm_casadi.outputs import compare_and_plot
-from ddcm_casadi.von_mises import VonMisesTrussModel, von_mises_truss
+from ddcm_casadi.validation.finite_rungs import snap_table
+from ddcm_casadi.drivers.harness import Comparison
+from ddcm_casadi.outputs.save import compare_and_plot
+from ddcm_casadi.models.von_mises import VonMisesTrussModel, von_mises_truss
 
 NAME = "von_mises_snap"
 #: Green-Lagrange strains of the path lie in [-0.0050, 0.0062] for the default geometry.

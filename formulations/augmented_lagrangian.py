@@ -23,7 +23,7 @@ DDCM (mpcc)
     problems target the level sets ``c = s`` with ``s -> 0``; those of the min-function have a
     corner, where semismooth Newton cycles, those of ``Phi`` are smooth.
 
-The classical positive part uses :func:`~ddcm_casadi.solvers.newton.plus`; an inner Newton that
+The classical positive part uses :func:`~ddcm_casadi.loops.newton.plus`; an inner Newton that
 cycles at a kink is completed by a smoothing continuation ``mu -> 0``.
 
 DDCM branch finish. Near a pair on one branch with a small partner, e.g. ``a = 0`` and
@@ -36,7 +36,7 @@ cannot be evaluated below ``|Hessian| * eps * |x|`` (3e-10 with ``|x| = 1``), ab
 the iterate lies on (``a_i = 0`` where ``a_i <= b_i``, else ``b_i = 0``): Newton on that smooth
 system (same tolerances), with pairs whose sign fails switching branch, accepted only if strictly
 complementary (``b_i > 0``, resp. ``a_i > 0``) or a B-stationary corner
-(:meth:`ddcm_casadi.solvers.active_set.ActiveSetSolver.branch_finish`, the last stage of every inner
+(:meth:`ddcm_casadi.loops.active_set.ActiveSetSolver.branch_finish`, the last stage of every inner
 solve). There ``Phi`` is smooth, ``Phi = 0`` and its gradient is ``-grad a_i`` (resp.
 ``-grad b_i``), so the branch KKT point with its multiplier ``theta`` solves the ``Phi``-KKT
 system exactly, and ``lam = theta`` is a fixed point of the multiplier update (``c = 0``): the
@@ -53,10 +53,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ddcm_casadi.problem import ComplementarityProblem, Parameters
-from ddcm_casadi.solvers.active_set import ActiveSetSolver
-from ddcm_casadi.solvers.newton import SMOOTHING, plus, smoothed_newton_solve
-from ddcm_casadi.solvers.uzawa import method_of_multipliers, uzawa
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.parameters import Parameters
+from ddcm_casadi.loops.active_set import ActiveSetSolver
+from ddcm_casadi.loops.newton import SMOOTHING, plus, smoothed_newton_solve
+from ddcm_casadi.loops.uzawa import method_of_multipliers, uzawa
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
@@ -128,8 +129,8 @@ class AugmentedLagrangian(Formulation):
 
 
 class _BuiltAL(BuiltFormulation):
-    """The inner systems; the loops are :func:`ddcm_casadi.solvers.uzawa.uzawa` (classical) and
-    :func:`ddcm_casadi.solvers.uzawa.method_of_multipliers` (DDCM)."""
+    """The inner systems; the loops are :func:`ddcm_casadi.loops.uzawa.uzawa` (classical) and
+    :func:`ddcm_casadi.loops.uzawa.method_of_multipliers` (DDCM)."""
 
     def __init__(self, problem: ComplementarityProblem, opts: AugmentedLagrangian.Options, gamma: float) -> None:
         super().__init__(problem)

@@ -1,7 +1,7 @@
 """What every contact formulation shares: options, the local-solution record and the metrics.
 
 A formulation is a named transformation of the complementarity pairs ``g(x) >= 0, p >= 0, g p = 0``
-of a :class:`~ddcm_casadi.problem.ComplementarityProblem` into something a solver can take. It is
+of a :class:`~ddcm_casadi.problems.contract.ComplementarityProblem` into something a solver can take. It is
 built once per problem (:meth:`Formulation.build`) and then solved many times with new parameters.
 """
 
@@ -16,7 +16,7 @@ import numpy as np
 
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.inputs import check_dataclass, positive
-from ddcm_casadi.problem import ComplementarityProblem
+from ddcm_casadi.problems.contract import ComplementarityProblem
 
 from .pairs import NewtonSystem
 
@@ -61,10 +61,10 @@ class LocalSolution:
 
 class Metrics:
     """Residual, gap and objective evaluation for one problem
-    (:meth:`~ddcm_casadi.problem.ComplementarityProblem.evaluate`: sparse products, nothing built).
+    (:meth:`~ddcm_casadi.problems.contract.ComplementarityProblem.evaluate`: sparse products, nothing built).
 
     The residual is relative to the terms that cancel in it
-    (:meth:`~ddcm_casadi.problem.ComplementarityProblem.relative_residual`).
+    (:meth:`~ddcm_casadi.problems.contract.ComplementarityProblem.relative_residual`).
     """
 
     def __init__(self, problem: ComplementarityProblem) -> None:
@@ -89,7 +89,7 @@ class Formulation(ABC):
     name: ClassVar[str]
     title: ClassVar[str]
     exact: ClassVar[bool] = True
-    #: The contact laws (:mod:`ddcm_casadi.contact_laws`) and model kinematics this formulation
+    #: The contact laws (:mod:`ddcm_casadi.models.contact_laws`) and model kinematics this formulation
     #: enforces; :meth:`check_supports` refuses the others.
     supported_contact_laws: ClassVar[frozenset] = frozenset({"signorini"})
     supported_kinematics: ClassVar[frozenset] = frozenset({"small", "finite"})

@@ -17,8 +17,8 @@ instead: at ``a^2 + b^2 + 2 mu^2 = 0`` the square root is evaluated as
 ``sqrt(s + 1) - 1`` (same value, 0), whose derivatives are ``dPhi/da = dPhi/db = -1`` and whose
 second derivatives are finite (Facchinei & Pang, the element with ``(xi, zeta) = (0, 0)``). If
 Newton with ``mu = 0`` fails, a smoothing continuation ``mu -> 0`` is run from the last iterate
-(:func:`ddcm_casadi.solvers.newton.smoothed_newton_solve`; the loops are in
-:mod:`ddcm_casadi.solvers.active_set`). A projection that lands on the corner
+(:func:`ddcm_casadi.loops.newton.smoothed_newton_solve`; the loops are in
+:mod:`ddcm_casadi.loops.active_set`). A projection that lands on the corner
 ``g = p = 0`` of ``Z_E`` is finished on the biactive branch and accepted only if B-stationary
 (see :class:`ddcm_casadi.formulations.ncp.FBSystem`).
 Newton is globalised by an Armijo line search on ``0.5 ||r||^2``.
@@ -37,9 +37,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ddcm_casadi.problem import ComplementarityProblem
-from ddcm_casadi.solvers.active_set import ActiveSetSolver
-from ddcm_casadi.solvers.newton import SMOOTHING
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.loops.active_set import ActiveSetSolver
+from ddcm_casadi.loops.newton import SMOOTHING
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem, fischer_burmeister  # noqa: F401  (re-exported)

@@ -31,11 +31,11 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ddcm_casadi.complementarity import BIACTIVE, b_stationarity, identify, imposes_gap, imposes_pressure, signs_hold
-from ddcm_casadi.problem import ComplementarityProblem
-from ddcm_casadi.solvers.evaluate import NumericFunction
-from ddcm_casadi.solvers.homotopy import scholtes_homotopy
-from ddcm_casadi.solvers.ipopt_options import check_ipopt_options, iteration_count
+from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, identify, imposes_gap, imposes_pressure, signs_hold
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.loops.homotopy import scholtes_homotopy
+from ddcm_casadi.loops.ipopt_options import check_ipopt_options, iteration_count
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .registry import register

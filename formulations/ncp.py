@@ -4,7 +4,7 @@
 This module only *builds* the systems (CasADi Functions with named parameters, from the problem's
 sparse matrices and one pair's expressions: :class:`~ddcm_casadi.formulations.pairs.PairSystem`);
 the loops that solve them (predictor, semismooth Newton, corner polish, smoothing, branch finish)
-are in :mod:`ddcm_casadi.solvers.active_set`.
+are in :mod:`ddcm_casadi.loops.active_set`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ddcm_casadi.problem import Affine, ComplementarityProblem, Parameters
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.maps import Affine
+from ddcm_casadi.problems.parameters import Parameters
 
 from .pairs import NewtonSystem
 from .systems import pair_system

@@ -5,7 +5,7 @@ Every system the formulations solve has the form
 .. math::  r(z; P) = A z + A_P P + L\, \psi(y), \qquad y = Y z + Y_P P,
 
 with constant sparse ``A``, ``A_P``, ``L``, ``Y``, ``Y_P`` (from the problem's matrices,
-:class:`~ddcm_casadi.problem.Affine`) and a function ``psi`` that acts on each pair separately:
+:class:`~ddcm_casadi.problems.maps.Affine`) and a function ``psi`` that acts on each pair separately:
 ``y`` holds, per pair, a few *local variables* (the scaled gap ``a``, the scaled pressure ``b``, the
 pair's multipliers, the smoothing ``mu``, ...) and ``psi`` gives, per pair, a few outputs (``Phi``,
 ``d l / d a``, ...) that ``L`` scatters into the rows. Its Jacobian is
@@ -35,9 +35,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.linalg import to_casadi
-from ddcm_casadi.problem import Affine, ComplementarityProblem, Parameters, sparse_matrix
-from ddcm_casadi.solvers.evaluate import NumericFunction
-from ddcm_casadi.solvers.newton import SparseJacobian
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.maps import Affine, sparse_matrix
+from ddcm_casadi.problems.parameters import Parameters
+from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.loops.newton import SparseJacobian
 
 
 def _triplets(A, n: int, what: str):
@@ -113,7 +115,7 @@ class NewtonSystem:
     """The Newton system a built formulation solves, published by name
     (:meth:`~ddcm_casadi.formulations.base.BuiltFormulation.newton_system`): ``r(z; P) = 0`` with
     the sparse Jacobian ``J = dr/dz``. The unknowns ``z`` and the parameters ``P`` are named blocks
-    (:class:`~ddcm_casadi.problem.Parameters`): nothing outside the formulation slices them by
+    (:class:`~ddcm_casadi.problems.parameters.Parameters`): nothing outside the formulation slices them by
     position.
 
     Attributes
@@ -180,7 +182,7 @@ class PairSystem:
                          _triplets(params, self.parameters.size, f"local {name!r}"))
 
     def affine(self, name: str, value: Affine) -> ca.SX:
-        """A local variable from a problem's :class:`~ddcm_casadi.problem.Affine` (one row per pair)."""
+        """A local variable from a problem's :class:`~ddcm_casadi.problems.maps.Affine` (one row per pair)."""
         return self.local(name, value.z, value.params)
 
     def unknowns(self, name: str, start: int) -> ca.SX:

@@ -27,9 +27,10 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ddcm_casadi.problem import ComplementarityProblem, Parameters
-from ddcm_casadi.solvers.active_set import ActiveSetSolver
-from ddcm_casadi.solvers.newton import SMOOTHING, plus, smoothed_newton_solve
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.parameters import Parameters
+from ddcm_casadi.loops.active_set import ActiveSetSolver
+from ddcm_casadi.loops.newton import SMOOTHING, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
@@ -55,7 +56,7 @@ class Penalty(Formulation):
         tol, residual_tol, max_iter :
             Newton tolerances (relative increment, scaled residual) and iteration limit.
         smoothing : tuple of float
-            Fallback smoothing continuation ``mu -> 0`` (see :mod:`ddcm_casadi.solvers.newton`).
+            Fallback smoothing continuation ``mu -> 0`` (see :mod:`ddcm_casadi.loops.newton`).
         comp_tol : float
             DDCM: the compliant pairs must satisfy ``max |min(g + p/gamma, p)| <= comp_tol`` (scaled).
         active_set_predictor : bool

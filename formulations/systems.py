@@ -1,9 +1,9 @@
 r"""Newton systems of nonlinear problems, built symbolically, and the choice of builder.
 
-A problem in the affine form (:attr:`~ddcm_casadi.problem.ComplementarityProblem.affine`) is built
+A problem in the affine form (:attr:`~ddcm_casadi.problems.contract.ComplementarityProblem.affine`) is built
 from its sparse matrices (:class:`~ddcm_casadi.formulations.pairs.PairSystem`: sparse products,
 no symbolic expression per nonzero). A nonlinear problem (finite-strain kinematics: its residual,
-gaps or objective are CasADi expressions, :class:`~ddcm_casadi.problem.NonlinearMap`) is built by
+gaps or objective are CasADi expressions, :class:`~ddcm_casadi.problems.maps.NonlinearMap`) is built by
 :class:`ExpressionPairSystem`, which has the same interface: the formulations write one pair's
 expressions (``psi``, ``l``) once and do not know which builder they use. Here the system
 
@@ -20,9 +20,10 @@ import casadi as ca
 import scipy.sparse as sp
 
 from ddcm_casadi.linalg import to_casadi
-from ddcm_casadi.problem import ComplementarityProblem, Parameters
-from ddcm_casadi.solvers.evaluate import NumericFunction
-from ddcm_casadi.solvers.newton import SparseJacobian
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.parameters import Parameters
+from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.loops.newton import SparseJacobian
 
 from .pairs import PairSystem, SystemFunctions
 

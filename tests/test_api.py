@@ -7,7 +7,7 @@ import pytest
 
 from ddcm_casadi import formulations
 from ddcm_casadi import ConvergenceError, InputError, MaterialDataset, bar_model, compare
-from ddcm_casadi.problem import build_problems
+from ddcm_casadi.problems.build import build_problems
 
 from .conftest import ALL
 
@@ -87,7 +87,7 @@ def test_model_rejects_bad_values():
 def test_rows_of_a_truss_whose_load_parameter_is_the_step():
     """A moving obstacle without load factors: the load parameter is the step number, and the
     rows must carry it next to ``step`` (a ``step`` keyword twice used to crash ``rows()``)."""
-    from ddcm_casadi.truss import Obstacle, truss_model
+    from ddcm_casadi.models.truss import Obstacle, truss_model
 
     model = truss_model(nodes=[[0.0], [1.0], [2.0]], members=[[0, 1], [1, 2]], area=1e-4, youngs_modulus=200e9,
                         supports=[(0, "x")], obstacles=[Obstacle([-1.0], [-2.001, -1.999], [2])])

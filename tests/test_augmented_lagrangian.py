@@ -5,8 +5,8 @@ import pytest
 
 from ddcm_casadi import formulations
 from ddcm_casadi import compare
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.validate import check_fixed_points
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.validation.fixed_points import check_fixed_points
 
 FACTORS = [1e-3, 1e-1, 1e1, 1e3, 1e6]
 

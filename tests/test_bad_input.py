@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from ddcm_casadi.cli import EXIT_INPUT, main
+from ddcm_casadi.commands.compare import EXIT_INPUT, main
 
 PREFIX = "ddcm-compare: error: "
 HOOKEAN = "hookean = { strain_min = -0.05, strain_max = 0.01, points = 50 }"
@@ -251,7 +251,7 @@ def test_out_not_writable(tmp_path: Path, capsys, sub: str, expected: str) -> No
 
 # ------------------------------------------------------------------------------------- real process
 def _subprocess(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "ddcm_casadi.cli", *argv], cwd=cwd, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "ddcm_casadi.commands.compare", *argv], cwd=cwd, capture_output=True,
                           text=True, timeout=120)
 
 
@@ -320,7 +320,7 @@ def test_data_file_accepted(tmp_path: Path, capsys, content: str) -> None:
 
 def test_huge_data_file_is_rejected_before_reading(tmp_path, capsys, monkeypatch):
     """A file over the size cap is refused with one line, without reading it."""
-    import ddcm_casadi.data as data_module
+    import ddcm_casadi.data.dataset as data_module
 
     data = tmp_path / "big.csv"
     data.write_text("strain,stress\n" + "0.0,0.0\n" * 1000)

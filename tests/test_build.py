@@ -1,4 +1,4 @@
-"""The sparse build of problems and Newton systems (``ddcm_casadi.problem``,
+"""The sparse build of problems and Newton systems (``ddcm_casadi.problems.contract``,
 ``formulations/pairs.py``) against CasADi's own symbolic derivatives of the same expressions."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import formulations, paper_bar
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.truss import warren_truss
-from ddcm_casadi.data import MaterialDataset
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.models.truss import warren_truss
+from ddcm_casadi.data.dataset import MaterialDataset
 
 #: Agreement of two evaluations of the same sums in another order: a few ulps of the largest term.
 ROUNDOFF = 1e-12

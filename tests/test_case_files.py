@@ -19,13 +19,13 @@ import pytest
 import scipy.sparse as sp
 
 from ddcm_casadi import formulations
-from ddcm_casadi.bar import BarModel
-from ddcm_casadi.cli import EXIT_INPUT
-from ddcm_casadi.config import load_case
-from ddcm_casadi.data import MaterialDataset, PointData
+from ddcm_casadi.models.bar import BarModel
+from ddcm_casadi.commands.compare import EXIT_INPUT
+from ddcm_casadi.casefiles.config import load_case
+from ddcm_casadi.data.dataset import MaterialDataset, PointData
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.model import ContactModel
-from ddcm_casadi.truss import StoppedBarModel, TrussModel
+from ddcm_casadi.models.base import ContactModel
+from ddcm_casadi.models.truss import StoppedBarModel, TrussModel
 
 from .test_bad_input import assert_input_error, case_toml, run_cli
 
@@ -365,7 +365,7 @@ def test_triangle_is_valid(tmp_path: Path, fmt: str) -> None:
 def test_case_kinds_register_their_own_sections():
     """Each model kind declares its section and the sections only it accepts; the paper's bar is
     the default, listed first (the order of the 'known:' list in messages)."""
-    from ddcm_casadi.config import case_from_dict, case_kinds
+    from ddcm_casadi.casefiles.config import case_from_dict, case_kinds
 
     kinds = {k.section: k for k in case_kinds()}
     assert [k.section for k in case_kinds()] == ["bar", "structure", "mesh"]

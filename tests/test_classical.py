@@ -5,8 +5,8 @@ import pytest
 
 from ddcm_casadi import formulations
 from ddcm_casadi import bar_model, compare
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.solvers.path import solve_classical
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.drivers.path import solve_classical
 
 from .conftest import ALL, EXACT
 

@@ -9,15 +9,15 @@ import pytest
 
 from ddcm_casadi import compare
 from ddcm_casadi import formulations
-from ddcm_casadi.continuum import (Ball, Circle, Contact, Material, Plane, Sphere, Support,
+from ddcm_casadi.models.continuum import (Ball, Circle, Contact, Material, Plane, Sphere, Support,
                                    continuum_model, mesh)
-from ddcm_casadi.continuum import fem
-from ddcm_casadi.data import MaterialDataset
+from ddcm_casadi.models.continuum import fem
+from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.ladder import EXACT_TOL  # solver tolerances 1e-9..1e-11 scaled: results agree to 1e-8
-from ddcm_casadi.metric import Metric, isotropic_elasticity
-from ddcm_casadi.outputs import save_outputs
-from ddcm_casadi.reference import ContactQP
+from ddcm_casadi.validation.ladder import EXACT_TOL  # solver tolerances 1e-9..1e-11 scaled: results agree to 1e-8
+from ddcm_casadi.data.metric import Metric, isotropic_elasticity
+from ddcm_casadi.outputs.save import save_outputs
+from ddcm_casadi.validation.reference import ContactQP
 
 ALL = formulations.available()
 EXACT = [n for n in ALL if formulations.get(n).exact]
@@ -173,7 +173,7 @@ def test_every_formulation_and_variant_on_a_small_body(dim, tmp_path):
 def test_hertz_2d_on_the_example_mesh():
     """The example's default mesh (P2): ``p0`` within 2 % (the issue's target) and ``a`` within
     one element of the contact zone (the accuracy a nodal contact can resolve)."""
-    from ddcm_casadi.config import load_case
+    from ddcm_casadi.casefiles.config import load_case
 
     case = load_case(Path(__file__).resolve().parent.parent / "examples" / "cases" / "hertz2d.toml")
     model = case.model
@@ -189,7 +189,7 @@ def test_hertz_2d_on_the_example_mesh():
 def test_hertz_formulas():
     """The closed forms against each other: p0 = sqrt(P E*/(pi R)) (2-D), delta = a^2/R and
     F = 4/3 E* sqrt(R) delta^(3/2) (3-D)."""
-    from ddcm_casadi.continuum.hertz import hertz_2d, hertz_3d
+    from ddcm_casadi.models.continuum.hertz import hertz_2d, hertz_3d
 
     a, p0 = hertz_2d(1e6, 0.05, 2e11)
     assert math.isclose(p0, math.sqrt(1e6 * 2e11 / (math.pi * 0.05)), rel_tol=1e-14)
@@ -205,7 +205,7 @@ def test_hertz_formulas():
 def test_hertz_measure_of_a_step_without_contact():
     """Roundoff pressures of either sign (a penalty's -1e-20 Pa) are no load, not a crash (it
     once ended a 22-minute run while writing its results)."""
-    from ddcm_casadi.continuum.hertz import HertzReference
+    from ddcm_casadi.models.continuum.hertz import HertzReference
 
     model = _indented(2)
     ref = HertzReference(E, NU, obstacle=0)
@@ -278,7 +278,7 @@ travel = [0.0, 1e-6]
     (("divisions = [2, 2]", "divisions = [2, 0]"), "divisions"),
 ])
 def test_bad_case_files_give_one_line_and_write_nothing(tmp_path, change, message):
-    from ddcm_casadi.cli import main
+    from ddcm_casadi.commands.compare import main
 
     path = _write_case(tmp_path, _CASE.replace(*change))
     out = tmp_path / "out"
@@ -295,7 +295,7 @@ def test_bad_case_files_give_one_line_and_write_nothing(tmp_path, change, messag
 
 
 def test_data_with_the_wrong_number_of_columns(tmp_path):
-    from ddcm_casadi.config import load_case
+    from ddcm_casadi.casefiles.config import load_case
 
     (tmp_path / "d.csv").write_text("strain,stress\n0,0\n1e-3,2e8\n")
     path = _write_case(tmp_path, _CASE + '[data]\npath = "d.csv"\nc = "isotropic"\n')
@@ -307,7 +307,7 @@ def test_the_case_file_runs_every_variant(tmp_path):
     """The small case end to end through the CLI: VTU series, figures, small JSON."""
     import json
 
-    from ddcm_casadi.cli import main
+    from ddcm_casadi.commands.compare import main
 
     path = _write_case(tmp_path, _CASE + '[data]\nhookean = { strain_min = -1e-3, strain_max = 1e-3, points = 5 }\n'
                                          'c = "isotropic"\n')

@@ -8,7 +8,7 @@ import meshio
 import numpy as np
 import pytest
 
-from ddcm_casadi.continuum.output import (
+from ddcm_casadi.outputs.continuum import (
     figure_convergence,
     figure_deformed_body,
     figure_pressure_profile,
@@ -18,7 +18,7 @@ from ddcm_casadi.continuum.output import (
     write_vtu_series,
 )
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.plots import save_figure
+from ddcm_casadi.outputs.plots import save_figure
 
 R2 = np.sqrt(2.0)
 

@@ -8,10 +8,10 @@ import tracemalloc
 import numpy as np
 import pytest
 
-import ddcm_casadi.data as data_module
-from ddcm_casadi.data import MaterialDataset
+import ddcm_casadi.data.dataset as data_module
+from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.metric import Metric, isotropic_elasticity
+from ddcm_casadi.data.metric import Metric, isotropic_elasticity
 
 RNG = np.random.default_rng(11)
 D3 = isotropic_elasticity(200e9, 0.3, 3)[0]

@@ -5,12 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ddcm_casadi.casefile import load_case
-from ddcm_casadi.data import MaterialDataset, PointData
+from ddcm_casadi.casefiles.base import load_case
+from ddcm_casadi.data.dataset import MaterialDataset, PointData
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.metric import isotropic_elasticity
-from ddcm_casadi.search import SEARCHES
-from ddcm_casadi.solvers.ddcm_options import DDCMOptions
+from ddcm_casadi.data.metric import isotropic_elasticity
+from ddcm_casadi.data.search import SEARCHES
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 
 CASES = Path(__file__).resolve().parent.parent / "examples" / "cases"
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import formulations
-from ddcm_casadi.solvers.path import DDCMSolver
-from ddcm_casadi.problem import build_problems
+from ddcm_casadi.drivers.path import DDCMSolver
+from ddcm_casadi.problems.build import build_problems
 
 from .conftest import ALL
 

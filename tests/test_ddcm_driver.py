@@ -9,14 +9,15 @@ import pytest
 
 from ddcm_casadi import compare, formulations, paper_bar
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.problem import ComplementarityProblem, build_problems
-from ddcm_casadi.quality_rungs import noisy_dataset
-from ddcm_casadi.solvers.ddcm import DDCMSolver
-from ddcm_casadi.solvers.ddcm_options import DDCMOptions
-from ddcm_casadi.solvers.records import MaterialStates
-from ddcm_casadi.solvers.scheme import MaterialScheme, Update
-from ddcm_casadi.solvers.schemes import SCHEMES
-from ddcm_casadi.truss import bar_chain
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.validation.quality_rungs import noisy_dataset
+from ddcm_casadi.drivers.ddcm import DDCMSolver
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.records import MaterialStates
+from ddcm_casadi.drivers.scheme import MaterialScheme, Update
+from ddcm_casadi.drivers.schemes import SCHEMES
+from ddcm_casadi.models.truss import bar_chain
 
 FB = "fischer_burmeister"
 

@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import compare, formulations, paper_bar
-from ddcm_casadi.cli import main
-from ddcm_casadi.config import load_case
+from ddcm_casadi.commands.compare import main
+from ddcm_casadi.casefiles.config import load_case
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.exact import ExactEnumerator
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.quality_rungs import noisy_dataset, noisy_paper_bar
-from ddcm_casadi.solvers.ddcm_options import DDCMOptions
-from ddcm_casadi.solvers.ddcm_search import elastic_state
-from ddcm_casadi.solvers.path import DDCMSolver
-from ddcm_casadi.truss import bar_chain
+from ddcm_casadi.problems.exact import ExactEnumerator
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.validation.quality_rungs import noisy_dataset, noisy_paper_bar
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.ddcm_search import elastic_state
+from ddcm_casadi.drivers.path import DDCMSolver
+from ddcm_casadi.models.truss import bar_chain
 
 FB = "fischer_burmeister"
 #: Roundoff of a distance: the enumerator expands quadratics whose terms are O(1) in scaled units.
@@ -199,7 +199,7 @@ def _brute_force(problems, step, m, n):
 def test_single_moves_are_the_exact_projections_of_the_moved_assignments():
     """The screen's closed forms (only the moving points' directions) against the exact projection
     of each moved assignment solved directly; both are the same branch QPs, so they agree to roundoff."""
-    from ddcm_casadi.solvers.ddcm_search import single_moves
+    from ddcm_casadi.drivers.ddcm_search import single_moves
 
     model = _chain(0.02, 3, elements=3, n_data=12)
     problems = build_problems(model)

@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from ddcm_casadi import formulations  # noqa: E402
-from ddcm_casadi.data import PointData  # noqa: E402
+from ddcm_casadi.data.dataset import PointData  # noqa: E402
 
 CONTACT_EXAMPLES = ("bar_on_stops", "truss_bridge", "truss_3d_plane")
 FIGURES = ("structure_classical.png", "structure_ddcm.png", "contact_history.png")
@@ -109,8 +109,8 @@ def test_truss_ddcm_error_within_its_constitutive_residual(name, formulation, tm
 def test_contact_figures_many_pairs_and_failed_steps(tmp_path):
     """More than 8 pairs: totals and active-contact counts; a failed step is flagged, not hidden."""
     from ddcm_casadi import compare
-    from ddcm_casadi.plots import figure_contact_history, figure_structure, save_figure
-    from ddcm_casadi.truss import bar_chain
+    from ddcm_casadi.outputs.plots import figure_contact_history, figure_structure, save_figure
+    from ddcm_casadi.models.truss import bar_chain
 
     model = bar_chain(length=1.0, elements=12, youngs_modulus=200e9, tip_positions=np.linspace(1.0, 0.99, 5),
                       stops={k: 0.001 * k for k in range(1, 12)})
@@ -138,7 +138,7 @@ def test_von_mises_snap_example(tmp_path):
     assert len(cmp.results) == 8
     for key in (("classical", "fischer_burmeister"), ("ddcm", "mpcc")):
         assert all(s.converged for s in cmp.results[key].steps), key
-    from ddcm_casadi.finite_rungs import contact_status, snap_table
+    from ddcm_casadi.validation.finite_rungs import contact_status, snap_table
 
     m = cmp.model
     p_ref = np.array([m.closed_form(k)[1] for k in range(m.n_steps)])

@@ -18,10 +18,10 @@ import pytest
 from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.solvers.evaluate import NumericFunction
-from ddcm_casadi.solvers.path import DDCMSolver
-from ddcm_casadi.truss import bar_chain, warren_truss
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.drivers.path import DDCMSolver
+from ddcm_casadi.models.truss import bar_chain, warren_truss
 
 WITH_PREDICTOR = ["fischer_burmeister", "penalty"]
 

@@ -1,7 +1,7 @@
 """Finite kinematics through the nonlinear seam: the von Mises truss against its closed form.
 
 Tolerances: exact formulations to 1e-8 relative (their solver tolerances are 1e-9..1e-11 scaled);
-the penalty to its penetration ``p / gamma`` (derived in :mod:`ddcm_casadi.finite_rungs`); DDCM
+the penalty to its penetration ``p / gamma`` (derived in :mod:`ddcm_casadi.validation.finite_rungs`); DDCM
 to the data spacing.
 """
 
@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import formulations
-from ddcm_casadi.data import MaterialDataset
+from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.finite_rungs import contact_status, rung_von_mises, snap_table
-from ddcm_casadi.harness import compare
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.von_mises import descent, green_lagrange, plane_force, von_mises_truss
+from ddcm_casadi.validation.finite_rungs import contact_status, rung_von_mises, snap_table
+from ddcm_casadi.drivers.harness import compare
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.models.von_mises import descent, green_lagrange, plane_force, von_mises_truss
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "cases"
 EXAMPLE_CASE = EXAMPLES / "von_mises.toml"
@@ -112,7 +112,7 @@ def test_rung_passes():
 
 def test_case_file_kinematics_key(tmp_path):
     """``kinematics = "finite"`` from a case file gives the von Mises truss of the module."""
-    from ddcm_casadi.config import load_case
+    from ddcm_casadi.casefiles.config import load_case
     from ddcm_casadi.run import run_case
 
     case = load_case(EXAMPLE_CASE)
@@ -131,7 +131,7 @@ def test_case_file_kinematics_key(tmp_path):
     ("1", "kinematics must be one of 'small', 'finite', got 1"),
 ])
 def test_bad_kinematics_is_refused(tmp_path, value, message):
-    from ddcm_casadi.config import load_case
+    from ddcm_casadi.casefiles.config import load_case
 
     path = tmp_path / "case.toml"
     path.write_text(EXAMPLE_CASE.read_text().replace('kinematics = "finite"', f"kinematics = {value}"))
@@ -141,7 +141,7 @@ def test_bad_kinematics_is_refused(tmp_path, value, message):
 
 
 def test_finite_kinematics_refused_where_unavailable(tmp_path):
-    from ddcm_casadi.config import load_case
+    from ddcm_casadi.casefiles.config import load_case
 
     path = tmp_path / "bar.toml"
     path.write_text('kinematics = "finite"\n' + (EXAMPLES / "bar_stops.toml").read_text())

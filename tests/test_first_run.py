@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import bar_model, compare, formulations
-from ddcm_casadi.data import MaterialDataset
-from ddcm_casadi.extrapolation import DataCoverage
-from ddcm_casadi import extrapolation
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.solvers.path import DDCMSolver
+from ddcm_casadi.data.dataset import MaterialDataset
+from ddcm_casadi.data.extrapolation import DataCoverage
+from ddcm_casadi.data import extrapolation
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.drivers.path import DDCMSolver
 
 FIELDS = ("u", "p", "data_index", "distance", "projection_error", "projection_global", "global_optimum",
           "global_distance", "extrapolated", "data_spacings", "iterations", "outer_iterations", "converged")
@@ -100,7 +100,7 @@ def _texts_inside(fig) -> None:
 
 
 def test_fig2_layout_keeps_texts_inside(paper_comparison):
-    from ddcm_casadi import plots
+    from ddcm_casadi.outputs import plots
 
     for draw in (plots.figure_displacement, plots.figure_pressure):
         _texts_inside(draw(paper_comparison))
@@ -108,7 +108,7 @@ def test_fig2_layout_keeps_texts_inside(paper_comparison):
 
 def test_fig2_layout_widens_for_long_tick_labels():
     """A path of micrometres: tick labels of several digits (and a minus sign) still fit."""
-    from ddcm_casadi import plots
+    from ddcm_casadi.outputs import plots
 
     model = bar_model(length=1.0, youngs_modulus=200e9, positions=np.linspace(1.0 + 3e-7, 1.0 - 1.23e-6, 6))
     cmp = compare(model, ["fischer_burmeister"], variants=["classical"])
@@ -118,7 +118,7 @@ def test_fig2_layout_widens_for_long_tick_labels():
 
 
 def test_default_run_does_not_import_scipy_optimize(tmp_path):
-    code = ("import sys; from ddcm_casadi.cli import main; main(['--out', sys.argv[1], '-q']); "
+    code = ("import sys; from ddcm_casadi.commands.compare import main; main(['--out', sys.argv[1], '-q']); "
             "print(sorted(m for m in sys.modules if m.startswith('scipy.optimize')))")
     proc = subprocess.run([sys.executable, "-c", code, str(tmp_path / "out")], capture_output=True, text=True,
                           timeout=600)

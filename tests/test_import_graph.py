@@ -119,7 +119,7 @@ def test_graph_sees_the_package():
     graph = import_graph()
     assert "ddcm_casadi.formulations.penalty" in graph
     assert "ddcm_casadi.formulations.base" in graph["ddcm_casadi.formulations.penalty"]
-    assert "ddcm_casadi.problem" in graph["ddcm_casadi.formulations.penalty"]
+    assert "ddcm_casadi.problems.contract" in graph["ddcm_casadi.formulations.penalty"]
 
 
 def test_find_cycle_names_a_cycle():

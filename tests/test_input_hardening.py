@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import PhysicsWarning, compare
-from ddcm_casadi.config import load_case
-from ddcm_casadi.data import METRIC_RATIO_LIMIT, MaterialDataset
+from ddcm_casadi.casefiles.config import load_case
+from ddcm_casadi.data.dataset import METRIC_RATIO_LIMIT, MaterialDataset
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.solvers.ipopt_options import FAILED_TO_START, check_ipopt_options, iteration_count
+from ddcm_casadi.loops.ipopt_options import FAILED_TO_START, check_ipopt_options, iteration_count
 
 from .test_bad_input import FAST, assert_input_error, assert_no_results, case_toml, run_cli
 
@@ -227,7 +227,7 @@ def test_large_imposed_strain_warns(tmp_path: Path) -> None:
 
 def test_validate_refuses_an_empty_out(capsys) -> None:
     """``ddcm-validate --out ""`` ran the whole ladder and wrote nothing, silently."""
-    from ddcm_casadi.validate_cli import main as validate
+    from ddcm_casadi.commands.validate import main as validate
 
     assert validate(["--out", "", "-q"]) == 2
     err = capsys.readouterr().err

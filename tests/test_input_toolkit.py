@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import bar_model, formulations
-from ddcm_casadi.casefile import load_case
-from ddcm_casadi.config import load_case_with_overrides
+from ddcm_casadi.casefiles.base import load_case
+from ddcm_casadi.casefiles.config import load_case_with_overrides
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.inputs import (
     ITERATION_LIMIT,
@@ -37,7 +37,7 @@ from ddcm_casadi.inputs import (
     table,
     tolerance,
 )
-from ddcm_casadi.solvers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 
 from .test_bad_input import assert_input_error, case_toml, run_cli
 

@@ -14,8 +14,8 @@ import scipy.sparse as sp
 
 from ddcm_casadi import formulations as registry
 from ddcm_casadi import InputError, linalg, paper_bar
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.ladder import warren_truss
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.validation.ladder import warren_truss
 
 EPS = np.finfo(float).eps
 
@@ -170,8 +170,8 @@ def test_low_rank_updates_give_the_factorised_path(monkeypatch):
     solved with a factorisation per active set. Both solve every piece system to the Newton
     tolerances (relative increment 1e-9 of the scaled unknowns), so they agree to 1e-7 of each
     field's maximum (a margin of 100 for the conditioning of the projection)."""
-    from ddcm_casadi.continuum.validation import hertz_block
-    from ddcm_casadi.harness import compare
+    from ddcm_casadi.validation.continuum import hertz_block
+    from ddcm_casadi.drivers.harness import compare
 
     model = hertz_block(2, degree=2, data=True)
     update, used = linalg.ReferenceFactor.update, []
@@ -198,7 +198,7 @@ def test_piece_factor_cache_keeps_few_full_factorisations():
     used going first."""
     from collections import OrderedDict
 
-    from ddcm_casadi.solvers.active_set import ActiveSetSolver
+    from ddcm_casadi.loops.active_set import ActiveSetSolver
 
     assert ActiveSetSolver.FACTORS_KEPT == 2
     solver = ActiveSetSolver.__new__(ActiveSetSolver)  # the cache alone, without a system

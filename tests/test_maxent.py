@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import compare, formulations
-from ddcm_casadi.cli import main
-from ddcm_casadi.config import load_case
-from ddcm_casadi.data import MaterialDataset
-from ddcm_casadi.metric import Metric, isotropic_elasticity
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.quality_rungs import noisy_dataset, noisy_paper_bar
-from ddcm_casadi.solvers.ddcm_options import DDCMOptions
-from ddcm_casadi.solvers.noise_robust import TOL, boltzmann_weights, data_spread, neighbourhoods
-from ddcm_casadi.solvers.path import DDCMSolver
-from ddcm_casadi.truss import bar_chain
+from ddcm_casadi.commands.compare import main
+from ddcm_casadi.casefiles.config import load_case
+from ddcm_casadi.data.dataset import MaterialDataset
+from ddcm_casadi.data.metric import Metric, isotropic_elasticity
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.validation.quality_rungs import noisy_dataset, noisy_paper_bar
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.noise_robust import TOL, boltzmann_weights, data_spread, neighbourhoods
+from ddcm_casadi.drivers.path import DDCMSolver
+from ddcm_casadi.models.truss import bar_chain
 
 from .test_continuum import E, NU, _indented
 from .test_ddcm import EXACT_PROJECTION_RTOL  # the exact formulations' projections: 1e-9..1e-11 scaled

@@ -10,7 +10,7 @@ import pytest
 import skfem
 from skfem.io.meshio import to_meshio
 
-from ddcm_casadi.continuum import mesh as M
+from ddcm_casadi.models.continuum import mesh as M
 from ddcm_casadi.errors import InputError
 
 

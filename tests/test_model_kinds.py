@@ -18,9 +18,9 @@ import scipy.sparse as sp
 
 from ddcm_casadi import MaterialDataset, compare
 from ddcm_casadi import run
-from ddcm_casadi.config import Case
+from ddcm_casadi.casefiles.config import Case
 from ddcm_casadi.io import write_json_atomic
-from ddcm_casadi.model import ContactModel
+from ddcm_casadi.models.base import ContactModel
 
 E, A, L = 200e9, 1e-4, 1.0
 POSITIONS = np.array([1.004, 1.0, 0.998, 0.995, 0.99])  # tip obstacle x = h, one per step
@@ -122,8 +122,8 @@ def test_new_kind_runs_through_the_cli_records(cmp, tmp_path):
 def test_new_kind_without_figures_of_its_own(cmp, tmp_path):
     """The figures are the kind's choice: the base draws the contact-force history (it works for
     any kind), and outputs.save_figures draws what the model declares."""
-    from ddcm_casadi.outputs import save_figures
-    from ddcm_casadi.plots import figure_contact_history
+    from ddcm_casadi.outputs.save import save_figures
+    from ddcm_casadi.outputs.plots import figure_contact_history
 
     assert [p.name for p in save_figures(cmp, tmp_path)] == ["contact_history.png"]
     assert (tmp_path / "contact_history.png").stat().st_size > 0
@@ -133,7 +133,8 @@ def test_new_kind_without_figures_of_its_own(cmp, tmp_path):
 
 
 # --------------------------------------------------------------------- front ends carry no type checks
-FRONT_ENDS = ("harness.py", "cli.py", "plots.py", "config.py", "run.py", "outputs.py")
+FRONT_ENDS = ("drivers/harness.py", "commands/compare.py", "outputs/plots.py", "casefiles/config.py", "run.py",
+              "outputs/save.py")
 MODEL_CLASSES = {"BarModel", "TrussModel", "StoppedBarModel"}
 PACKAGE = Path(__file__).resolve().parent.parent / "ddcm_casadi"
 

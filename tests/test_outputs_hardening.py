@@ -23,8 +23,8 @@ from pathlib import Path
 
 import pytest
 
-from ddcm_casadi import cli
-from ddcm_casadi.cli import EXIT_INPUT, main
+from ddcm_casadi.commands import compare as cli
+from ddcm_casadi.commands.compare import EXIT_INPUT, main
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.io import LOCK_FILE, PREVIOUS_PREFIX, STAGING_PREFIX, FolderLock, OutputFolder
 
@@ -107,7 +107,7 @@ def test_a_second_lock_in_the_same_process_is_refused_and_released_on_exit(tmp_p
 
 def test_ddcm_sweep_refuses_a_folder_in_use(tmp_path, capsys):
     pytest.importorskip("distributed")
-    from ddcm_casadi.sweep.cli import main as sweep_main
+    from ddcm_casadi.commands.sweep import main as sweep_main
 
     from .test_sweep import write_spec
 
@@ -179,7 +179,7 @@ def _enospc(*args, **kwargs):
 @pytest.mark.parametrize("fresh", [False, True], ids=["previous-results", "fresh-folder"])
 def test_a_full_disk_is_one_line_and_keeps_the_previous_results(tmp_path, capsys, monkeypatch, where, fresh):
     import ddcm_casadi.io as io_module
-    import ddcm_casadi.plots as plots
+    import ddcm_casadi.outputs.plots as plots
 
     out = tmp_path / "out"
     if not fresh:
@@ -206,7 +206,7 @@ def test_a_full_disk_is_one_line_and_keeps_the_previous_results(tmp_path, capsys
 
 
 def test_ctrl_c_while_writing_keeps_the_previous_results(tmp_path, capsys, monkeypatch):
-    import ddcm_casadi.plots as plots
+    import ddcm_casadi.outputs.plots as plots
 
     out = tmp_path / "out"
     assert run_cli(["-q", "--out", str(out), *FB], capsys)[0] == 0
@@ -257,7 +257,7 @@ def test_ipopt_reporting_a_user_stop_is_an_interrupt():
 def test_ctrl_c_during_an_ipopt_solve_stops_the_run(tmp_path):
     """A real SIGINT while IPOPT solves the second step of a coarse Hertz case (each step is about
     a second of IPOPT iterations): ``interrupted``, exit 130, nothing in ``--out``."""
-    argv = [sys.executable, "-m", "ddcm_casadi.cli", "--config", str(CASES / "hertz2d.toml"),
+    argv = [sys.executable, "-m", "ddcm_casadi.commands.compare", "--config", str(CASES / "hertz2d.toml"),
             "--set", "mesh.refine_near.levels=1", "--set", "mesh.divisions=[6,6]",
             "--formulations", "mpcc", "--variants", "classical", "--no-plots", "--out", "out"]
     # the progress line of the first step (stderr is a pipe): IPOPT is at work

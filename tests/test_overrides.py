@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.config import load_case_with_overrides
-from ddcm_casadi.overrides import apply_overrides, parse_item, parse_value
+from ddcm_casadi.casefiles.config import load_case_with_overrides
+from ddcm_casadi.casefiles.overrides import apply_overrides, parse_item, parse_value
 
 from .test_bad_input import assert_input_error, case_toml, run_cli
 

@@ -33,7 +33,7 @@ def test_example_cases_are_installed_as_package_data():
     from fnmatch import fnmatch
 
     from ddcm_casadi import cases
-    from ddcm_casadi.continuum.validation import EXAMPLE
+    from ddcm_casadi.validation.continuum import EXAMPLE
 
     config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
     assert "ddcm_casadi.cases" in config["packages"]

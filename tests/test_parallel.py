@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import ConvergenceError, InputError, compare
-from ddcm_casadi.cli import main
-from ddcm_casadi.outputs import save_figures
+from ddcm_casadi.commands.compare import main
+from ddcm_casadi.outputs.save import save_figures
 from ddcm_casadi.parallel import map_forked, resolve_jobs
 
 from .interrupt import interrupt_at
@@ -149,7 +149,7 @@ def test_ctrl_c_stops_every_process(tmp_path):
     """A real SIGINT to ``ddcm-compare --jobs 2`` while two Hertz runs go on side by side:
     ``interrupted``, exit 130, nothing in ``--out``, and no worker left (:func:`interrupt_at`
     reads stderr to its end, which a live worker would hold open)."""
-    argv = [sys.executable, "-m", "ddcm_casadi.cli", "--config", str(CASES / "hertz2d.toml"),
+    argv = [sys.executable, "-m", "ddcm_casadi.commands.compare", "--config", str(CASES / "hertz2d.toml"),
             "--set", "mesh.refine_near.levels=1", "--set", "mesh.divisions=[6,6]",
             "--formulations", "mpcc,fischer_burmeister", "--variants", "classical", "--jobs", "2",
             "--no-plots", "--out", "out"]

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, bar_model
-from ddcm_casadi.problem import build_problems
+from ddcm_casadi.problems.build import build_problems
 
 from .conftest import EXACT
 
@@ -73,7 +73,7 @@ def test_any_units_classical_exact_and_ddcm_fixed_points(name, log_E, log_L, tra
     """Moduli 1e6..1e12 Pa, lengths 1e-3..1e2 m: classical matches the closed form to 1e-8 and every
     DDCM step is a converged, valid fixed point (KKT within the reported tolerance)."""
     from ddcm_casadi import compare
-    from ddcm_casadi.validate import check_fixed_points
+    from ddcm_casadi.validation.fixed_points import check_fixed_points
 
     E, L = 10.0**log_E, 10.0**log_L
     h = L * (1.0 + travel * np.array([1.0, 0.5, 0.0, -0.5, -1.0, 0.0]))

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from ddcm_casadi.continuum import FlatPunch
+from ddcm_casadi.models.continuum import FlatPunch
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.ladder import EXACT_TOL
-from ddcm_casadi.metric import isotropic_elasticity
+from ddcm_casadi.validation.ladder import EXACT_TOL
+from ddcm_casadi.data.metric import isotropic_elasticity
 
 from .test_examples import _load
 
@@ -102,7 +102,7 @@ travel = [0.0, 1e-5]
 
 def test_a_punch_from_a_case_file(tmp_path):
     from ddcm_casadi import compare
-    from ddcm_casadi.config import load_case
+    from ddcm_casadi.casefiles.config import load_case
 
     (tmp_path / "punch.toml").write_text(_CASE)
     model = load_case(tmp_path / "punch.toml").model

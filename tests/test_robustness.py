@@ -1,7 +1,7 @@
 """Hard load paths, extreme units and awkward data: every formulation, both variants.
 
 Exact formulations must reproduce the closed form to 1e-8 (their solver tolerances are 1e-9 and
-below); DDCM steps must be converged, true fixed points (see ddcm_casadi.validate).
+below); DDCM steps must be converged, true fixed points (see ddcm_casadi.validation.fixed_points).
 """
 
 import numpy as np
@@ -9,9 +9,9 @@ import pytest
 
 from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, bar_model, compare
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.truss import bar_chain
-from ddcm_casadi.validate import nearest_by_brute_force, check_fixed_points
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.models.truss import bar_chain
+from ddcm_casadi.validation.fixed_points import nearest_by_brute_force, check_fixed_points
 
 from .conftest import ALL
 from .test_examples import _load

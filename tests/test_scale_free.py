@@ -61,7 +61,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ddcm_casadi import MaterialDataset, bar_model, compare, formulations
-from ddcm_casadi.truss import warren_truss
+from ddcm_casadi.models.truss import warren_truss
 
 ALL = formulations.available()
 E = 200e9

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import formulations
-from ddcm_casadi.bar import paper_bar
-from ddcm_casadi.contact_laws import ContactLaw, contact_laws, get_contact_law, register_contact_law
+from ddcm_casadi.models.bar import paper_bar
+from ddcm_casadi.models.contact_laws import ContactLaw, contact_laws, get_contact_law, register_contact_law
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.formulations.fischer_burmeister import FischerBurmeister
-from ddcm_casadi.harness import compare
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.von_mises import von_mises_truss
+from ddcm_casadi.drivers.harness import compare
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.models.von_mises import von_mises_truss
 
 NEWTON = ("penalty", "augmented_lagrangian", "fischer_burmeister")
 

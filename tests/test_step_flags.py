@@ -5,7 +5,7 @@ roundoff of the reported fields, and table notes that stay short.
   (``extrapolated``), per run (``extrapolated_steps``), in the table, the CSV, the figures and a
   final warning of ``ddcm-compare``; a flag, not a convergence failure.
 - Physical checks: a step is never converged with a penetration, an equilibrium residual or a
-  negative contact pressure beyond the tolerances of :func:`~ddcm_casadi.solvers.path.physical_check`.
+  negative contact pressure beyond the tolerances of :func:`~ddcm_casadi.drivers.path.physical_check`.
 - Roundoff: pressures of the wrong sign within roundoff of the step's scale, and displacements
   within roundoff of it, are zero; a pressure negative beyond roundoff is kept.
 - Notes: a long list of steps is summarised as a count and the first values, with enough digits.
@@ -22,14 +22,14 @@ import numpy as np
 import pytest
 
 from ddcm_casadi import bar_model, compare, formulations
-from ddcm_casadi.data import MaterialDataset, PointData
-from ddcm_casadi.extrapolation import FAR_SPACINGS, DataCoverage, neighbourhood
+from ddcm_casadi.data.dataset import MaterialDataset, PointData
+from ddcm_casadi.data.extrapolation import FAR_SPACINGS, DataCoverage, neighbourhood
 from ddcm_casadi.formulations.base import LocalSolution, Metrics
-from ddcm_casadi.harness import NOTE_VALUES, Comparison
-from ddcm_casadi.metric import isotropic_elasticity
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.solvers.ddcm_options import DDCMOptions
-from ddcm_casadi.solvers.path import (PENALTY_PRESSURE_BOUND, PHYSICAL_TOL, ROUNDOFF, PathResult, StepResult,
+from ddcm_casadi.drivers.harness import NOTE_VALUES, Comparison
+from ddcm_casadi.data.metric import isotropic_elasticity
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.path import (PENALTY_PRESSURE_BOUND, PHYSICAL_TOL, ROUNDOFF, PathResult, StepResult,
                                       clip_roundoff, solve_classical)
 
 from .test_bad_input import run_cli
@@ -86,7 +86,7 @@ def test_bar_beyond_the_data_is_flagged_at_every_step_past_its_range():
 
 
 def _truss(points: int, strain_max: float):
-    from ddcm_casadi.config import load_case_with_overrides
+    from ddcm_casadi.casefiles.config import load_case_with_overrides
 
     case, _ = load_case_with_overrides(CASES / "truss2d.toml", [
         f"data.hookean.strain_min={-strain_max}", f"data.hookean.strain_max={strain_max}",
@@ -188,7 +188,7 @@ def test_cli_reports_states_beyond_the_data(tmp_path, capsys):
 
 
 def test_figures_mark_steps_beyond_the_data():
-    from ddcm_casadi.plots import figure_contact_history, figure_displacement
+    from ddcm_casadi.outputs.plots import figure_contact_history, figure_displacement
 
     _, cmp = _beyond_bar()
     for fig in (figure_displacement(cmp), figure_contact_history(cmp)):

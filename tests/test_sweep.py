@@ -18,11 +18,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ddcm_casadi.data import MaterialDataset
+from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.sweep import generator_from_dict, load_spec, run_case, run_sweep
-from ddcm_casadi.cli import main as cli_main
-from ddcm_casadi.sweep.cli import main as sweep_main
+from ddcm_casadi.commands.compare import main as cli_main
+from ddcm_casadi.commands.sweep import main as sweep_main
 from ddcm_casadi.sweep.runner import CASES, read_record
 from ddcm_casadi.sweep.table import TIMINGS, fit_loglog
 

@@ -5,10 +5,11 @@ import json
 import numpy as np
 import pytest
 
-from ddcm_casadi import ladder, paper_bar
-from ddcm_casadi.exact import CONTACT, ExactEnumerator
-from ddcm_casadi.problem import build_problems
-from ddcm_casadi.validate_cli import main
+from ddcm_casadi.validation import ladder
+from ddcm_casadi import paper_bar
+from ddcm_casadi.problems.exact import CONTACT, ExactEnumerator
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.commands.validate import main
 
 FIELDS = {"name", "quantity", "value", "reference", "tolerance", "passed", "note"}
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..plots import save_figure
-from .table import fit_loglog, series
+from ddcm_casadi.outputs.plots import save_figure
+from ddcm_casadi.sweep.table import fit_loglog, series
 
 _MARKERS = ("o", "s", "^", "D", "v", "x")
 

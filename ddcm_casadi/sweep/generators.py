@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from ..casefile import _HOOKEAN, integer, number, positive
-from ..data import MAX_DATA_POINTS
-from ..errors import InputError
+from ddcm_casadi.casefiles.base import _HOOKEAN, integer, number, positive
+from ddcm_casadi.data.dataset import MAX_DATA_POINTS
+from ddcm_casadi.errors import InputError
 
 LAWS = ("hookean", "tanh", "cubic")
 SAMPLINGS = ("grid", "random")

@@ -34,13 +34,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
-from ..commands import one_line
-from ..errors import DDCMError, InputError
-from ..io import OutputFolder, umask, write_csv_atomic, write_json_atomic
-from ..run import RESULTS_CSV, RESULTS_JSON, run_case as run_library_case
-from ..version import versions as package_versions
-from .spec import SweepCase, SweepSpec, build_case, flatten
-from .table import case_rows, fits, summary_rows
+from ddcm_casadi.commands.base import one_line
+from ddcm_casadi.errors import DDCMError, InputError
+from ddcm_casadi.io import OutputFolder, umask, write_csv_atomic, write_json_atomic
+from ddcm_casadi.run import RESULTS_CSV, RESULTS_JSON, run_case as run_library_case
+from ddcm_casadi.version import versions as package_versions
+from ddcm_casadi.sweep.spec import SweepCase, SweepSpec, build_case, flatten
+from ddcm_casadi.sweep.table import case_rows, fits, summary_rows
 
 CASES = "cases"
 RECORD = "case.json"
@@ -251,7 +251,7 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, workers: int | None = None, s
     todo = pending(spec, out, force=force, retry_failed=retry_failed) if out.is_dir() else list(spec.cases)
     report = SweepReport(out=out, total=len(spec.cases), skipped=len(spec.cases) - len(todo))
     if figures and spec.figures:
-        from . import figures as _figures  # noqa: F401 - a missing matplotlib fails before any work
+        from ddcm_casadi.sweep import figures as _figures  # noqa: F401 - a missing matplotlib fails before any work
     folder = None  # locked from its creation to the end: one sweep (or ddcm-compare) per folder
     try:
         if todo:
@@ -321,7 +321,7 @@ def _write_summary(spec: SweepSpec, out: Path, into: Path, report: SweepReport, 
     rows = [row for _, rec in records if rec is not None for row in case_rows(rec, spec.columns)]
     report.fits = fits(rows, spec.figures, spec.columns)
     if figures and spec.figures and rows:
-        from .figures import save_figures
+        from ddcm_casadi.sweep.figures import save_figures
 
         report.figures = [p.name for p in save_figures(spec, rows, into)]
     status = {case.id: (rec or {}).get("status", "missing") for case, rec in records}

@@ -26,7 +26,7 @@ A spec is a TOML (or JSON) file::
     y = "max_error_p"
 
 Grid keys are dotted keys into the case document, exactly as ``ddcm-compare --set`` takes them
-(:mod:`ddcm_casadi.overrides`), or ``generate.KEY`` for the data generator; unquoted dotted keys
+(:mod:`ddcm_casadi.casefiles.overrides`), or ``generate.KEY`` for the data generator; unquoted dotted keys
 (``generate.noise = [...]``) are the same key. Each combination of grid values and seeds is one
 case, identified by a hash of its resolved parameters: the case document after the overrides,
 the generator's resolved fields, the variants and the formulations.
@@ -48,15 +48,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .. import formulations as registry
-from ..casefile import read_document
-from ..config import case_from_dict
-from ..errors import InputError
-from ..harness import VARIANTS
-from ..inputs import input_file
-from ..overrides import apply_overrides, split_key
-from .generators import DataGenerator, attach, generator_from_dict
-from .table import METRICS
+from ddcm_casadi import formulations as registry
+from ddcm_casadi.casefiles.base import read_document
+from ddcm_casadi.casefiles.config import case_from_dict
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.drivers.harness import VARIANTS
+from ddcm_casadi.inputs import input_file
+from ddcm_casadi.casefiles.overrides import apply_overrides, split_key
+from ddcm_casadi.sweep.generators import DataGenerator, attach, generator_from_dict
+from ddcm_casadi.sweep.table import METRICS
 
 #: Top-level keys of a spec.
 SPEC_KEYS = ("base", "description", "variants", "formulations", "seeds", "set", "generate", "grid", "figures")
@@ -291,7 +291,7 @@ def _expand(grid, seeds, base_doc, generate, variants, formulations) -> tuple[Sw
 
 
 def build_case(case: SweepCase, spec_or_base: SweepSpec | Path):
-    """The :class:`~ddcm_casadi.casefile.Case` of a sweep case: generated data written to a
+    """The :class:`~ddcm_casadi.casefiles.base.Case` of a sweep case: generated data written to a
     temporary CSV file, then the document validated and built exactly as a case file."""
     base = spec_or_base.base if isinstance(spec_or_base, SweepSpec) else Path(spec_or_base)
     doc = case.doc

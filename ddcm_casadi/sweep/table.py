@@ -1,6 +1,6 @@
 """The rows of ``sweep.csv``: one per case x variant x formulation, summary metrics only.
 
-The metrics of a run (:func:`summary_rows`) come from :meth:`~ddcm_casadi.harness.Comparison.summary`
+The metrics of a run (:func:`summary_rows`) come from :meth:`~ddcm_casadi.drivers.harness.Comparison.summary`
 plus what a study plots:
 
 - ``max_error_u``, ``max_error_p``: max over steps of ``|value - reference| / max |reference|``
@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from ..harness import _relative_error
+from ddcm_casadi.drivers.harness import _relative_error
 
 METRICS = ("steps", "converged_steps", "max_error_u", "max_error_p", "max_error_u_vs_exact", "max_error_p_vs_exact",
            "error_u_vs_classical", "error_p_vs_classical", "distance_mean", "distance_max", "local_minimum_steps",
@@ -42,8 +42,8 @@ def _finite_stat(values: np.ndarray, stat) -> float | None:
 
 
 def summary_rows(cmp, summary: list[dict]) -> list[dict]:
-    """The metrics of every variant x formulation of a :class:`~ddcm_casadi.harness.Comparison`
-    (``summary``: its :meth:`~ddcm_casadi.harness.Comparison.summary`, computed once)."""
+    """The metrics of every variant x formulation of a :class:`~ddcm_casadi.drivers.harness.Comparison`
+    (``summary``: its :meth:`~ddcm_casadi.drivers.harness.Comparison.summary`, computed once)."""
     dataset = cmp.model.dataset
     rows = []
     for rec in summary:

@@ -1,0 +1,120 @@
+"""The ``[bar]`` case files: the paper's bar and N-element bars with stops (a registered case kind).
+
+The case layer of :mod:`ddcm_casadi.models.bar`: this module reads the sections of a bar case and builds
+the model with :func:`~ddcm_casadi.models.bar.bar_model` or :func:`~ddcm_casadi.models.truss.bar_chain`; the model
+modules know nothing of case files. Registered with :func:`ddcm_casadi.casefiles.base.register_case_kind`
+when imported (by :mod:`ddcm_casadi.casefiles.config`); it is the default kind.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ddcm_casadi.casefiles import base as casefile
+from ddcm_casadi.casefiles.base import Case
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.models.bar import bar_model
+from ddcm_casadi.models.truss import bar_chain
+
+#: The ``[bar]`` case-file format (also part of :mod:`ddcm_casadi.casefiles.config`'s documentation).
+CASE_FORMAT = """
+The paper's bar
+---------------
+::
+
+    [bar]
+    length = 1.0            # m
+    area = 1.0              # m^2 (default 1)
+    youngs_modulus = 200e9  # Pa
+    # elements = 10         # optional: an N-element bar (ddcm_casadi.models.truss.bar_chain)
+
+    [obstacle]
+    positions = [1.01, 1.0, 0.99]   # m, tip obstacle position, one per load step
+
+    # [[stops]]             # optional, with elements >= 2: a rigid stop behind an interior node,
+    # node = 3              # u_node >= -clearance
+    # clearance = 0.004     # m
+
+    [data]                  # either a CSV file with header strain,stress ...
+    path = "data.csv"       # relative to this file
+    # ... or generated Hookean data, as in the paper:
+    # hookean = { strain_min = -0.05, strain_max = 0.01, points = 500 }   # E defaults to [bar]
+
+    [ddcm]
+    c = 300e9               # Pa
+    max_outer = 100
+
+    [formulations.penalty]  # optional per-formulation options
+    gamma = 2e15            # Pa/m
+
+Without ``elements`` and ``[[stops]]`` this is the one-unknown bar of the paper
+(:func:`~ddcm_casadi.models.bar.bar_model`); with either it is
+:func:`~ddcm_casadi.models.truss.bar_chain` (``elements`` defaults to 1).
+"""
+
+
+# ------------------------------------------------------------------------------------- case files
+def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
+    """Build the :class:`~ddcm_casadi.casefiles.base.Case` of a ``[bar]`` document (see
+    :data:`CASE_FORMAT`); section names and keys are checked already.
+
+    Raises
+    ------
+    InputError
+        A missing or invalid value (one line, naming the key).
+    """
+    if "obstacle" not in doc:
+        raise InputError(f"missing section [obstacle] in {source}")
+    bar = doc["bar"]
+    for key in ("length", "youngs_modulus"):
+        if key not in bar:
+            raise InputError(f"missing key {key!r} in [bar]")
+    length = casefile.positive("bar", "length", bar["length"])
+    area = casefile.positive("bar", "area", bar.get("area", 1.0))
+    E = casefile.positive("bar", "youngs_modulus", bar["youngs_modulus"])
+    chain = "elements" in bar or "stops" in doc
+    elements = casefile.integer("bar", "elements", bar.get("elements", 1), low=1, what="a positive integer")
+
+    positions = doc["obstacle"].get("positions")
+    if not isinstance(positions, list) or not positions:
+        raise InputError("[obstacle] positions must be a non-empty list of numbers")
+    h = np.array([casefile.number("obstacle", "positions", v) for v in positions])
+
+    stops: dict[int, float] = {}
+    for k, stop in enumerate(doc.get("stops", [])):
+        label = f"stops {k}"
+        for key in ("node", "clearance"):
+            if key not in stop:
+                raise InputError(f"missing key {key!r} in [{label}]")
+        if elements < 2:
+            raise InputError("[[stops]] tables need [bar] elements >= 2 (stops act on interior nodes)")
+        node = casefile.integer(label, "node", stop["node"], low=1, high=elements - 1,
+                                what="an interior node index")
+        if node in stops:
+            raise InputError(f"[{label}] node {node} has two stops")
+        clearance = casefile.number(label, "clearance", stop["clearance"])
+        if clearance < 0:
+            raise InputError(f"[{label}] clearance must be >= 0, got {casefile.show(stop['clearance'])}")
+        stops[node] = clearance
+
+    if casefile.data_set_count(doc) > 1:
+        raise InputError("[bar] cases take one [data] table (several data sets need a [structure])")
+    specs = casefile.data_specs(doc, base_dir=base_dir, default_modulus=lambda k: E)
+    max_outer, options = casefile.run_options(doc)
+
+    dataset = specs[0].build() if specs else None
+    if chain:
+        model = bar_chain(length=length, elements=elements, area=area, youngs_modulus=E, tip_positions=h,
+                          stops=stops, dataset=dataset, name=name)
+    else:
+        model = bar_model(length=length, area=area, youngs_modulus=E, positions=h, dataset=dataset, name=name)
+    return Case(model=model, formulation_options=options, ddcm_max_outer=max_outer, source=source)
+
+
+casefile.register_case_kind(
+    "bar",
+    sections={"bar": {"length", "area", "youngs_modulus", "elements"}, "obstacle": {"positions"},
+              "stops": {"node", "clearance"}},
+    arrays={"stops"}, parse=parse_case, uses="[obstacle] positions", default=True)

@@ -1,0 +1,343 @@
+"""The ``[mesh]`` case files: continua pressed against rigid obstacles (registered case kind)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ddcm_casadi.casefiles import base as casefile
+from ddcm_casadi.casefiles.base import Case, integer, nonempty_list, number, positive, show, vector
+from ddcm_casadi.data.dataset import MaterialDataset
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.data.metric import COMPONENTS, Metric, isotropic_elasticity
+from ddcm_casadi.models.continuum.hertz import HertzReference
+from ddcm_casadi.models.continuum.obstacles import Ball, Cylinder, FlatPunch, Plane
+
+# scikit-fem and meshio are imported when a [mesh] case is parsed, not when the kind registers:
+# the paper's example does not pay for them.
+
+#: The ``[mesh]`` case-file format (also part of :mod:`ddcm_casadi.casefiles.config`'s documentation).
+CASE_FORMAT = """
+Continua
+--------
+::
+
+    [mesh]                       # a generated shape, or path = "body.msh" (.msh, .vtu, .xdmf)
+    shape = "rectangle"          # rectangle, box, disc, half_disc, ball
+    size = [0.02, 0.01]          # rectangle/box: the edge lengths (m)
+    divisions = [8, 4]           # rectangle/box: elements per edge
+    origin = [0.0, -0.01]        # rectangle/box: the lower corner (default 0)
+    # radius = 0.01, center = [0, 0], refine = 3          (disc, half_disc, ball)
+    refine_near = { point = [0.0, 0.0], radius = 0.004, levels = 4 }   # optional grading: the
+                                 # radius shrinks by shrink (0.5) per level, plus buffer elements
+    degree = 1                   # Lagrange elements: 1 (P1) or 2 (P2; no contact on P2 tetrahedra)
+
+    [material]                   # or [[material]] tables with region = "<subdomain name>"
+    youngs_modulus = 200e9       # Pa; with poisson_ratio the classical law (optional if DDCM only)
+    poisson_ratio = 0.3
+    data = 0                     # optional: the [[data]] set of this material (default 0 if data)
+
+    [[supports]]                 # fixed displacement components on a named boundary
+    boundary = "ymin"            # generated shapes: xmin, xmax, ymin, ymax (zmin, zmax); arc, flat; surface
+    fix = "xy"
+
+    [[loads]]                    # optional, scaled by [loading] load_factors
+    boundary = "ymax"            # a traction (Pa) on a boundary, or
+    traction = [0.0, -1e6]       # body_force = [0, -8e4] (N/m^3) with optional region = "..."
+
+    [[contact]]                  # a rigid obstacle and the boundary that may touch it
+    boundary = "ymax"
+    obstacle = "circle"          # plane, circle (2-D), sphere (3-D), cylinder (3-D), punch
+    radius = 0.05                # circle/sphere/cylinder; center = [..] (circle/sphere)
+    center = [0.0, 0.05]         # plane: point, normal; cylinder: point, axis;
+                                 # punch: center (of its face), normal, half_width, edge_radius
+    direction = [0.0, -1.0]      # direction of travel
+    travel = [0.0, 1e-5, 2e-5]   # m, one value per step (or one number: standing still)
+
+    [loading]
+    load_factors = [0.0, 1.0]    # optional: one per step (default: loads in full)
+
+    [hertz]                      # optional: validate against Hertz (one isotropic material)
+    obstacle = 0                 # the [[contact]] table of the indenter
+    force_factor = 2             # the body's force over the modelled part's (symmetry: 2, 4)
+
+    [data]                       # strain_1..k,stress_1..k CSV (Mandel: k = 3 in 2-D, 6 in 3-D),
+    hookean = { strain_min = -0.01, strain_max = 0.01, points = 21 }    # or a linear law on a
+    c = "isotropic"              # grid of points^k states; c: "isotropic" (from the material),
+                                 # "estimated" (from the data), a number (c I) or a k x k matrix
+
+Strains and stresses are in Mandel notation: 2-D ``[e11, e22, sqrt(2) e12]``, 3-D ``[e11, e22,
+e33, sqrt(2) e23, sqrt(2) e13, sqrt(2) e12]``. The result is
+:func:`~ddcm_casadi.models.continuum.model.continuum_model`.
+"""
+
+_MESH = {"shape", "size", "divisions", "origin", "radius", "center", "refine", "path", "degree", "refine_near"}
+_HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus", "poisson_ratio"}
+_SHAPES = ("rectangle", "box", "disc", "half_disc", "ball")
+_OBSTACLES = ("plane", "circle", "sphere", "cylinder", "punch")
+
+
+def _keys(label: str, table: dict, known: set) -> None:
+    unknown = sorted(set(table) - known)
+    if unknown:
+        raise InputError(f"unknown key {unknown[0]!r} in [{label}]; known: {', '.join(sorted(known))}")
+
+
+def _shape_mesh(doc: dict, base_dir: Path):
+    from ddcm_casadi.models.continuum import mesh as meshes
+
+    m = doc["mesh"]
+    if ("path" in m) == ("shape" in m):
+        raise InputError("[mesh] needs exactly one of 'shape' or 'path'")
+    if "path" in m:
+        if not isinstance(m["path"], str):
+            raise InputError(f"[mesh] path must be a string, got {show(m['path'])}")
+        mesh = meshes.read_mesh(base_dir / m["path"])
+    else:
+        shape = m["shape"]
+        if shape not in _SHAPES:
+            raise InputError(f"[mesh] shape must be one of {', '.join(_SHAPES)}, got {show(shape)}")
+        if shape in ("rectangle", "box"):
+            d = 2 if shape == "rectangle" else 3
+            for key in ("size", "divisions"):
+                if key not in m:
+                    raise InputError(f"[mesh] a {shape} needs {key!r}")
+            size = [positive("mesh", "size", v) for v in vector("mesh", "size", m["size"], d)]
+            div = nonempty_list("mesh", "divisions", m["divisions"])
+            if len(div) != d:
+                raise InputError(f"[mesh] divisions must be a list of {d} integers, got {show(div)}")
+            div = [integer("mesh", "divisions", v, low=1, high=10**4, what="a positive integer") for v in div]
+            origin = vector("mesh", "origin", m.get("origin", [0.0] * d), d)
+            if d == 2:
+                mesh = meshes.rectangle(*size, nx=div[0], ny=div[1], origin=tuple(origin))
+            else:
+                mesh = meshes.box(*size, nx=div[0], ny=div[1], nz=div[2], origin=tuple(origin))
+        else:
+            d = 3 if shape == "ball" else 2
+            if "radius" not in m:
+                raise InputError(f"[mesh] a {shape} needs 'radius'")
+            radius = positive("mesh", "radius", m["radius"])
+            center = vector("mesh", "center", m.get("center", [0.0] * d), d)
+            refine = integer("mesh", "refine", m.get("refine", 3 if d == 2 else 2), low=0, high=8,
+                             what="an integer")
+            build = dict(disc=meshes.disc, half_disc=meshes.half_disc, ball=meshes.ball)[shape]
+            mesh = build(radius, center=tuple(center), refine=refine)
+    if "refine_near" in m:
+        r = m["refine_near"]
+        if not isinstance(r, dict):
+            raise InputError("[mesh] refine_near must be a table {point, radius, levels}")
+        _keys("mesh.refine_near", r, {"point", "radius", "levels", "shrink", "buffer"})
+        d = mesh.p.shape[0]
+        if "point" not in r or "radius" not in r:
+            raise InputError("[mesh] refine_near needs 'point' and 'radius'")
+        mesh = meshes.refine_near(mesh, vector("mesh", "refine_near.point", r["point"], d),
+                                  positive("mesh", "refine_near.radius", r["radius"]),
+                                  levels=integer("mesh", "refine_near.levels", r.get("levels", 1), low=1, high=12,
+                                                 what="an integer"),
+                                  shrink=number("mesh", "refine_near.shrink", r.get("shrink", 0.5)),
+                                  buffer=number("mesh", "refine_near.buffer", r.get("buffer", 0.0)))
+    degree = integer("mesh", "degree", m.get("degree", 1), low=1, high=2, what="1 or 2")
+    return mesh, degree
+
+
+def _tables(doc: dict, name: str) -> list[dict]:
+    value = doc.get(name, [])
+    return value if isinstance(value, list) else [value]
+
+
+def _boundary(label: str, table: dict) -> str:
+    if "boundary" not in table:
+        raise InputError(f"[{label}] needs 'boundary' (a boundary name of the mesh)")
+    if not isinstance(table["boundary"], str):
+        raise InputError(f"[{label}] boundary must be a name, got {show(table['boundary'])}")
+    return table["boundary"]
+
+
+def _obstacle(label: str, t: dict, d: int):
+    kind = t.get("obstacle")
+    if kind not in _OBSTACLES:
+        raise InputError(f"[{label}] obstacle must be one of {', '.join(_OBSTACLES)}, got {show(kind)}")
+    need = {"plane": ("point", "normal"), "circle": ("center", "radius"), "sphere": ("center", "radius"),
+            "cylinder": ("point", "axis", "radius"), "punch": ("center", "normal", "half_width")}[kind]
+    for key in need:
+        if key not in t:
+            raise InputError(f"[{label}] a {kind} needs {key!r}")
+    allowed = set(need) | {"boundary", "obstacle", "direction", "travel", "name"} | (
+        {"edge_radius"} if kind == "punch" else set())
+    extra = sorted(set(t) - allowed)
+    if extra:
+        raise InputError(f"[{label}] a {kind} takes no {extra[0]!r}")
+    if kind in ("circle", "sphere") and d != (2 if kind == "circle" else 3):
+        raise InputError(f"[{label}] a {kind} needs a {2 if kind == 'circle' else 3}-D mesh, this one is {d}-D")
+    if kind == "cylinder" and d != 3:
+        raise InputError(f"[{label}] a cylinder obstacle needs a 3-D mesh (in 2-D use a circle)")
+    direction = vector(label, "direction", t.get("direction", [0.0] * (d - 1) + [-1.0]), d)
+    if not np.any(direction):
+        raise InputError(f"[{label}] direction must be a non-zero vector")
+    travel = t.get("travel", 0.0)
+    if isinstance(travel, list):  # its length against the load path: Obstacle.travels
+        nonempty_list(label, "travel", travel)
+        travel = np.array([number(label, "travel", v) for v in travel])
+    else:
+        travel = number(label, "travel", travel)
+    common = dict(direction=tuple(direction), travel=travel, name=str(t.get("name", f"{kind} {label.split()[-1]}")))
+    if kind == "plane":
+        return Plane(point=vector(label, "point", t["point"], d), normal=vector(label, "normal", t["normal"], d),
+                     **common)
+    if kind == "punch":
+        return FlatPunch(center=vector(label, "center", t["center"], d), normal=vector(label, "normal", t["normal"], d),
+                         half_width=positive(label, "half_width", t["half_width"]),
+                         edge_radius=number(label, "edge_radius", t.get("edge_radius", 0.0)), **common)
+    if kind == "cylinder":
+        return Cylinder(point=vector(label, "point", t["point"], 3), axis=vector(label, "axis", t["axis"], 3),
+                        radius=positive(label, "radius", t["radius"]), **common)
+    return Ball(center=vector(label, "center", t["center"], d), radius=positive(label, "radius", t["radius"]),
+                **common)
+
+
+def _metric(label: str, value: Any, k: int, material) -> Metric | str:
+    if isinstance(value, str):
+        if value == "isotropic":
+            if material is None or material.youngs_modulus is None:
+                raise InputError(f"[{label}] c = \"isotropic\" needs youngs_modulus and poisson_ratio in [material]")
+            return Metric(isotropic_elasticity(material.youngs_modulus, material.poisson_ratio,
+                                               {3: 2, 6: 3}[k])[0])
+        if value == "estimated":
+            return "estimated"
+        raise InputError(f"[{label}] c must be \"isotropic\", \"estimated\", a number or a matrix, got {show(value)}")
+    if isinstance(value, list):
+        if len(value) != k or not all(isinstance(r, list) and len(r) == k for r in value):
+            raise InputError(f"[{label}] c must be a {k} x {k} matrix (list of {k} rows), got {show(value)}")
+        return Metric([[number(label, "c", v) for v in row] for row in value])
+    return Metric(positive(label, "c", value) * np.eye(k))
+
+
+def _datasets(doc: dict, base_dir: Path, k: int, materials: list) -> list[MaterialDataset]:
+    tables = _tables(doc, "data")
+    ddcm_c = doc.get("ddcm", {}).get("c")
+    out = []
+    for i, table in enumerate(tables):
+        label = "data" if len(tables) == 1 else f"data {i}"
+        users = [m for m in materials if m.data == i] or [None]
+        if "c" not in table and ddcm_c is None:
+            raise InputError(f"[{label}] needs the metric c (\"isotropic\", \"estimated\", a number or a matrix)")
+        c = _metric(label, table.get("c", ddcm_c), k, users[0])
+        if ("path" in table) == ("hookean" in table):
+            raise InputError(f"[{label}] needs exactly one of 'path' or 'hookean'")
+        # "estimated" needs the data first: read them with a unit metric, then estimate
+        probe = c if isinstance(c, Metric) else Metric(np.eye(k))
+        if "path" in table:
+            if not isinstance(table["path"], str):
+                raise InputError(f"[{label}] path must be a string")
+            ds = MaterialDataset.from_file(base_dir / table["path"], c=probe)
+        else:
+            hk = casefile.hookean_table(label, table["hookean"], _HOOKEAN)
+            mat = users[0]
+            E = hk.get("youngs_modulus", None if mat is None else mat.youngs_modulus)
+            nu = hk.get("poisson_ratio", None if mat is None else mat.poisson_ratio)
+            if E is None or nu is None:
+                raise InputError(f"[{label}] hookean needs youngs_modulus and poisson_ratio "
+                                 "(here or in the [material] that uses it)")
+            D = isotropic_elasticity(positive(label, "hookean.youngs_modulus", E),
+                                     number(label, "hookean.poisson_ratio", nu), {3: 2, 6: 3}[k])[0]
+            points = integer(label, "hookean.points", hk["points"], low=1, what="a positive integer (per axis)")
+            lo = number(label, "hookean.strain_min", hk["strain_min"])
+            hi = number(label, "hookean.strain_max", hk["strain_max"])
+            ds = MaterialDataset.hookean_grid(D, lo, hi, points, c=probe)
+        if c == "estimated":
+            ds = MaterialDataset(ds.strain, ds.stress, Metric.estimated(ds.strain, ds.stress))
+        out.append(ds)
+    return out
+
+
+def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
+    """Validate a ``[mesh]`` document and build its :class:`Case`."""
+    from ddcm_casadi.models.continuum.model import BodyForce, Contact, Material, Support, Traction, continuum_model
+
+    mesh, degree = _shape_mesh(doc, base_dir)
+    d = mesh.p.shape[0]
+    k = COMPONENTS[d]
+    n_data = len(_tables(doc, "data"))
+
+    materials = []
+    mats = _tables(doc, "material")
+    if not mats:
+        raise InputError("missing section [material] (youngs_modulus, poisson_ratio, and/or data)")
+    for i, t in enumerate(mats):
+        label = "material" if len(mats) == 1 else f"material {i}"
+        region = t.get("region")
+        if region is not None and not isinstance(region, str):
+            raise InputError(f"[{label}] region must be a subdomain name, got {show(region)}")
+        E = positive(label, "youngs_modulus", t["youngs_modulus"]) if "youngs_modulus" in t else None
+        nu = number(label, "poisson_ratio", t["poisson_ratio"]) if "poisson_ratio" in t else None
+        if (E is None) != (nu is None):
+            raise InputError(f"[{label}] give youngs_modulus and poisson_ratio together")
+        data = t.get("data", 0 if n_data else None)
+        if data is not None:
+            data = integer(label, "data", data, low=0, high=max(n_data - 1, 0), what="a data-set index")
+            if not n_data:
+                raise InputError(f"[{label}] data = {data} but the case has no [data]")
+        materials.append(Material(region=region, youngs_modulus=E, poisson_ratio=nu, data=data))
+
+    supports = []
+    for i, t in enumerate(_tables(doc, "supports")):
+        label = f"supports {i}"
+        if "fix" not in t:
+            raise InputError(f"[{label}] needs 'fix' (components, e.g. \"xy\")")
+        supports.append(Support(_boundary(label, t), t["fix"]))
+    if not supports:
+        raise InputError("missing [[supports]]: a continuum must be held")
+
+    tractions, body_forces = [], []
+    for i, t in enumerate(_tables(doc, "loads")):
+        label = f"loads {i}"
+        if ("traction" in t) == ("body_force" in t):
+            raise InputError(f"[{label}] needs exactly one of 'traction' or 'body_force'")
+        if "traction" in t:
+            tractions.append(Traction(_boundary(label, t), tuple(vector(label, "traction", t["traction"], d))))
+        else:
+            region = t.get("region")
+            if "boundary" in t:
+                raise InputError(f"[{label}] a body force acts on a region, not a boundary")
+            body_forces.append(BodyForce(tuple(vector(label, "body_force", t["body_force"], d)), region))
+
+    load_factors = None
+    if "loading" in doc and "load_factors" in doc["loading"]:
+        lf = nonempty_list("loading", "load_factors", doc["loading"]["load_factors"])
+        load_factors = [number("loading", "load_factors", v) for v in lf]
+    contacts = []
+    for i, t in enumerate(_tables(doc, "contact")):
+        label = f"contact {i}"
+        contacts.append(Contact(_obstacle(label, t, d), _boundary(label, t)))
+
+    reference = None
+    if "hertz" in doc:
+        h = doc["hertz"]
+        if len(materials) != 1 or materials[0].youngs_modulus is None:
+            raise InputError("[hertz] needs one material with youngs_modulus and poisson_ratio")
+        ob = integer("hertz", "obstacle", h.get("obstacle", 0), low=0, high=max(len(contacts) - 1, 0),
+                     what="a [[contact]] index")
+        if not contacts or contacts[ob].obstacle.kind != "ball":
+            raise InputError("[hertz] needs a circle (2-D) or sphere (3-D) obstacle")
+        reference = HertzReference(materials[0].youngs_modulus, materials[0].poisson_ratio, obstacle=ob,
+                                   force_factor=number("hertz", "force_factor", h.get("force_factor", 1.0)))
+
+    datasets = _datasets(doc, base_dir, k, materials) if n_data else []
+    max_outer, options = casefile.run_options(doc)
+    model = continuum_model(mesh, materials=materials, supports=supports, contacts=contacts, degree=degree,
+                            tractions=tractions, body_forces=body_forces, load_factors=load_factors,
+                            datasets=datasets, name=name, reference=reference)
+    return Case(model=model, formulation_options=options, ddcm_max_outer=max_outer, source=source)
+
+
+casefile.register_case_kind(
+    "mesh",
+    sections={"mesh": _MESH, "material": {"region", "youngs_modulus", "poisson_ratio", "data"},
+              "supports": {"boundary", "fix"}, "loads": {"boundary", "traction", "body_force", "region"},
+              "contact": {"boundary", "obstacle", "radius", "center", "point", "normal", "axis", "half_width",
+                          "edge_radius", "direction", "travel", "name"},
+              "loading": {"load_factors"}, "hertz": {"obstacle", "force_factor"}},
+    arrays={"supports", "loads", "contact"}, tables={"material"}, parse=parse_case,
+    uses="[material], [[supports]] and [[contact]]", default_name="continuum")

@@ -1,0 +1,68 @@
+"""What every command-line tool shares (``ddcm-compare``, ``ddcm-sweep``, ``ddcm-validate``):
+one-line usage errors, exit statuses, and errors and Ctrl-C turned into one line and a status."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Callable, NoReturn
+
+from ddcm_casadi.errors import DDCMError
+
+#: Exit status of bad input (usage errors included): one line ``prog: error: ...`` on stderr.
+EXIT_INPUT = 2
+#: Exit status of ``--strict`` when a step did not converge (or a sweep case failed).
+EXIT_NOT_CONVERGED = 3
+#: Exit status after Ctrl-C (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
+
+
+def one_line(message: object) -> str:
+    """``message`` as a single line (an error message must not spill over several lines).
+
+    Parameters
+    ----------
+    message : object
+        An exception or any text.
+    """
+    return " ".join(line.strip() for line in str(message).splitlines() if line.strip())
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, like every other input error."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``prog: error: message`` on one line and exit with :data:`EXIT_INPUT`.
+
+        Parameters
+        ----------
+        message : str
+            The problem found by :mod:`argparse`.
+        """
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {one_line(message)} (see --help)\n")
+
+
+def run_guarded(prog: str, run_command: Callable[[list[str] | None], int], argv: list[str] | None, *,
+                interrupted: str = "interrupted") -> int:
+    """``run_command(argv)``, with an input error as one line ``prog: error: ...`` and exit status
+    :data:`EXIT_INPUT`, and Ctrl-C as ``prog: interrupted`` and status 130 (every command's ``main``).
+
+    Parameters
+    ----------
+    prog : str
+        The command's name, the first word of its messages.
+    run_command : callable
+        The command: parses ``argv`` and returns its exit status.
+    argv : list of str, optional
+        The arguments (default: ``sys.argv[1:]``, as :mod:`argparse` takes them).
+    interrupted : str
+        What to say after Ctrl-C.
+    """
+    try:
+        return run_command(argv)
+    except DDCMError as exc:
+        print(f"{prog}: error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print(f"{prog}: {interrupted}", file=sys.stderr)
+        return EXIT_INTERRUPTED

@@ -1,0 +1,498 @@
+"""Material data sets and the projection onto them (nearest neighbour under the DDCM metric)."""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+import os
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.inputs import input_file, positive
+from ddcm_casadi.data.metric import Metric
+from ddcm_casadi.data.search import KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
+
+#: Data files larger than this are rejected before reading (bytes).
+MAX_DATA_FILE_BYTES = 2 * 1024**3
+#: Generated (Hookean) data sets larger than this are rejected before allocating them.
+MAX_DATA_POINTS = 10**8
+#: Rows per block where a pass over the data would otherwise allocate a full-size temporary.
+_CHUNK = 1 << 16
+
+
+def check_positive(name: str, value: float) -> float:
+    """Return ``value`` as a float, or raise :class:`InputError` unless it is a finite number > 0
+    (:func:`ddcm_casadi.inputs.positive`; ``name`` says where it came from)."""
+    return positive(value, name)
+
+
+#: Largest scaled coordinate the search accepts: squared distances (sums of squares) stay below
+#: the largest double, 1.8e308, with room for a sum over 12 components.
+MAX_COORDINATE = 1e150
+#: The metric must balance strain and stress: ``d^2 = c de^2 + ds^2 / c`` keeps both terms only while
+#: their ratio ``(E / c)^2`` (``E`` the data's own modulus) is within ``[eps, 1 / eps]``, i.e. ``c / E``
+#: within ``[sqrt(eps), 1 / sqrt(eps)]`` = ``[1.5e-8, 6.7e7]``; beyond, one term is below the other's
+#: roundoff and the search ignores stress (or strain) altogether.
+METRIC_RATIO_LIMIT = 1.0 / math.sqrt(np.finfo(float).eps)
+
+
+def _searchable_coordinates(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> np.ndarray:
+    """The data's scaled coordinates (:meth:`Metric.coordinates`), refused where the search would
+    overflow or where the metric drowns stress in strain (or the reverse).
+
+    Raises
+    ------
+    InputError
+        A coordinate beyond :data:`MAX_COORDINATE` (e.g. a stress of 1e300 Pa in a CSV file, or a
+        metric ``c`` of 1e300), or a metric out of balance with the data (:data:`METRIC_RATIO_LIMIT`).
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        X = metric.coordinates(strain, stress)
+    k = metric.k
+    label = f"c = {metric.c:.3g} Pa" if k == 1 else f"C (norm {np.linalg.norm(metric.matrix, 2):.3g} Pa)"
+    # Column ranges by reductions (NaN propagates): no temporary the size of the data.
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    if not np.all(np.maximum(-lo, hi) <= MAX_COORDINATE):
+        big = ~(np.abs(X) <= MAX_COORDINATE)
+        row = int(np.argmax(big.any(axis=1)))
+        which, value = ("strain", strain) if big[row, :k].any() else ("stress", stress)
+        raise InputError(f"material data set: {which} {np.ravel(value[row])[0]:.3g} of data point {row} is out of "
+                         f"range for the metric {label} (the scaled coordinates must stay below "
+                         f"{MAX_COORDINATE:.0e} so that squared distances do not overflow)")
+    # Ranges, not variances: squares of tiny spreads would underflow to zero.
+    spread_e = float(np.max(hi[:k] - lo[:k]))
+    spread_s = float(np.max(hi[k:] - lo[k:]))
+    if spread_e > 0 and spread_s > 0:
+        ratio = spread_s / spread_e  # E / c for one component
+        if not 1.0 / METRIC_RATIO_LIMIT <= ratio <= METRIC_RATIO_LIMIT:
+            times = f"about 1e{math.log10(spread_e) - math.log10(spread_s):+.0f}"  # may overflow as a ratio
+            raise InputError(f"material data set: the metric {label} is {times} times the data's "
+                             f"own modulus; it must be within {1 / METRIC_RATIO_LIMIT:.1e} to "
+                             f"{METRIC_RATIO_LIMIT:.1e} times it, else one term of the distance is below "
+                             f"the other's roundoff")
+    return X
+
+
+@dataclass(frozen=True, eq=False)
+class MaterialDataset:
+    """A material data set ``Z_D = {(strain*_j, stress*_j)}`` with its metric.
+
+    The DDCM distance is ``d^2 = de . C de + ds . C^-1 ds`` (:class:`~ddcm_casadi.data.metric.Metric`;
+    for one component ``c (e - e*)^2 + (s - s*)^2 / c``).
+
+    Parameters
+    ----------
+    strain, stress : array_like
+        The data points: ``(N,)`` for one component per point (bars, trusses), ``(N, k)`` for
+        ``k`` Mandel components. Duplicates and any ordering are accepted.
+    c : float, (k, k) array_like or Metric
+        The metric (Pa): a number for one component, an SPD matrix for ``k``.
+
+    Notes
+    -----
+    Storage per point: the data as given (float64 arrays are not copied; a memory-mapped
+    ``.npy`` file, :meth:`from_npy`, stays in the page cache), one float64 array of the search's
+    coordinates (``16 k`` bytes) that the KD-tree keeps without a copy, and the tree (about 15
+    bytes); the warm search's graph adds 36 bytes when first used. The coordinates stay float64:
+    near the ends of a principal axis a float32 step is ``2^-24`` of the data's extent along it,
+    as wide as the spacing of ``2^24 = 1.7e7`` points equally spaced along it (at 1e8 points some
+    6 data share each step, so a float32 search would return ties to be re-ranked in float64),
+    and scipy's tree is float64 only.
+    """
+
+    strain: np.ndarray
+    stress: np.ndarray
+    c: float | np.ndarray | Metric
+    metric: Metric = field(init=False, repr=False)
+    _searches: dict = field(init=False, repr=False, default_factory=dict)
+    _frame: tuple = field(init=False, repr=False, default=())
+
+    def __post_init__(self) -> None:
+        if isinstance(self.c, Metric):
+            metric = self.c
+        elif np.ndim(self.c) == 0:
+            metric = Metric(check_positive("metric c", self.c))
+        else:
+            metric = Metric(self.c)
+        k = metric.k
+        # No copies: float64 arrays (memory-mapped files included) are kept as given.
+        strain = np.asarray(self.strain, dtype=float)
+        stress = np.asarray(self.stress, dtype=float)
+        if k == 1:  # a view where ravel() would copy a strided column
+            strain, stress = (a if a.ndim == 1 else a.reshape(-1) for a in (strain, stress))
+        if strain.size == 0:
+            raise InputError("material data set is empty")
+        if strain.shape != stress.shape:
+            raise InputError("material data set: strain and stress have different lengths")
+        if k > 1 and (strain.ndim != 2 or strain.shape[1] != k):
+            raise InputError(f"material data set: a {k} x {k} metric needs {k} strain and {k} stress "
+                             f"components per point, got shape {strain.shape}")
+        if not all(np.isfinite(a.min()) and np.isfinite(a.max()) for a in (strain, stress)):  # NaN propagates
+            raise InputError("material data set contains NaN or infinite values")
+        object.__setattr__(self, "metric", metric)
+        object.__setattr__(self, "c", metric.c if k == 1 else metric.matrix)
+        object.__setattr__(self, "strain", strain)
+        object.__setattr__(self, "stress", stress)
+        # The tree works in the principal axes of the scaled data (a rotation: distances are
+        # unchanged). Data along a line (a Hookean set) then fill thin slabs instead of fat
+        # diagonal boxes, and a state far from the data no longer visits every box its search
+        # ball crosses: measured at 1e6 points, 1.9 s -> 6 ms for 9 000 states 1e4 spacings away.
+        # The one array of coordinates is centred and rotated in place, and the tree keeps it
+        # (no copy): at 1e8 points each float64 temporary would be another 1.6 GB.
+        X = _searchable_coordinates(metric, strain, stress)
+        mean = X.mean(axis=0)
+        X -= mean
+        _, axes = np.linalg.eigh(X.T @ X)
+        for a in range(0, X.shape[0], _CHUNK):
+            X[a:a + _CHUNK] = X[a:a + _CHUNK] @ axes
+        object.__setattr__(self, "_frame", (mean, axes))
+        # The exact KD-tree is always built (the other backends and k_nearest use it); the
+        # others on first use (:meth:`search`).
+        self._searches["kdtree"] = KDTreeSearch(kd_tree(X))
+
+    @property
+    def k(self) -> int:
+        """Strain (and stress) components per material point."""
+        return self.metric.k
+
+    def __len__(self) -> int:
+        return self.strain.shape[0]
+
+    def coordinates(self, strain, stress) -> np.ndarray:
+        """The search's coordinates of states ``(strain, stress)``: scaled (Euclidean distance is
+        the metric's), centred and rotated to the data's principal axes (:mod:`ddcm_casadi.data.search`)."""
+        mean, axes = self._frame
+        return np.ascontiguousarray((self.metric.coordinates(strain, stress) - mean) @ axes)
+
+    def distance2(self, strain, stress, index) -> np.ndarray:
+        """Squared DDCM distance ``d^2`` between states and the data points ``index``."""
+        shape = (-1,) if self.k == 1 else (-1, self.k)
+        de = np.asarray(strain, dtype=float).reshape(shape) - self.strain[index]
+        ds = np.asarray(stress, dtype=float).reshape(shape) - self.stress[index]
+        return self.metric.distance2(de, ds)
+
+    def search(self, name: str = "kdtree") -> NeighbourSearch:
+        """The search backend ``name`` over this data set (:data:`ddcm_casadi.data.search.SEARCHES`),
+        built on first use and kept (the KD-tree is built with the data set)."""
+        name = search_name(name)
+        backend = self._searches.get(name)
+        if backend is None:
+            tree = self._searches["kdtree"]
+            backend = self._searches[name] = search_class(name).build(tree.points, base=tree)
+        return backend
+
+    def nearest(self, strain, stress, *, search: str = "kdtree", previous=None, stats: dict | None = None) -> np.ndarray:
+        """Indices of the data points nearest to each state ``(strain, stress)`` (vectorised), by
+        the backend ``search``, warm-started from the assignment ``previous`` if given; ``stats``
+        accumulates ``queries`` and ``fallbacks`` (:meth:`NeighbourSearch.nearest`)."""
+        return self.search(search).nearest(self.coordinates(strain, stress), previous=previous, stats=stats)
+
+    def k_nearest(self, strain, stress, k: int) -> np.ndarray:
+        """Indices of the ``k`` data points nearest to each state, nearest first: ``(n, k)``
+        (``k`` is capped at the data set's size)."""
+        return self._searches["kdtree"].k_nearest(self.coordinates(strain, stress), k)
+
+    def describe(self) -> dict:
+        """Size, metric and strain range, for results files."""
+        return dict(points=len(self), c=self.metric.describe(), components=self.k,
+                    strain_min=float(self.strain.min()), strain_max=float(self.strain.max()))
+
+    def nearest_warm(self, strain, stress, previous, *, stats: dict | None = None) -> np.ndarray:
+        """:meth:`nearest` by the warm-started graph search from the assignment ``previous``
+        (exact; :class:`~ddcm_casadi.data.search.GraphSearch`)."""
+        return self.nearest(strain, stress, search="graph", previous=previous, stats=stats)
+
+    @property
+    def datasets(self) -> tuple["MaterialDataset"]:
+        """The data sets of the materials: this one (as :attr:`PointData.datasets`)."""
+        return (self,)
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """Where each material's data start in the global data index (as :attr:`PointData.offsets`)."""
+        return np.zeros(1, dtype=np.intp)
+
+    @property
+    def secant_modulus(self) -> float:
+        """``std(stress) / std(strain)`` (exactly ``E`` for Hookean data): the stiffness the data
+        follow, whatever the metric; the metric's own modulus for a set with no spread."""
+        se, ss = float(np.std(self.strain)), float(np.std(self.stress))
+        return ss / se if se > 0 and ss > 0 else self.metric.modulus
+
+    def point_materials(self, n_points: int) -> tuple[list[Metric], np.ndarray]:
+        """The metrics of the materials and the material of each of ``n_points`` points (one here)."""
+        return [self.metric], np.zeros(n_points, dtype=np.intp)
+
+    def point_metric(self, n_points: int) -> np.ndarray:
+        """Scalar metric ``c`` of each of ``n_points`` one-component material points."""
+        return np.full(n_points, self.metric.c)
+
+    @classmethod
+    def hookean(cls, youngs_modulus: float, strain_min: float, strain_max: float,
+                n_points: int, *, c: float) -> "MaterialDataset":
+        """Equally spaced points on ``stress = E strain``, as in the paper."""
+        e = check_positive("youngs_modulus", youngs_modulus)
+        n = int(n_points)
+        if n < 1 or n > MAX_DATA_POINTS:
+            raise InputError(f"number of data points must be between 1 and {MAX_DATA_POINTS}, got {n_points!r}")
+        if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
+            raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
+        strain = np.linspace(strain_min, strain_max, n)
+        return cls(strain, e * strain, c)
+
+    @classmethod
+    def hookean_grid(cls, stiffness, strain_min: float, strain_max: float, points_per_axis: int, *,
+                     c) -> "MaterialDataset":
+        """A linear law ``stress = D strain`` sampled on a regular grid of ``points_per_axis^k``
+        strain states in ``[strain_min, strain_max]^k`` (Mandel components; ``D`` a ``k x k``
+        matrix, e.g. :func:`~ddcm_casadi.data.metric.isotropic_elasticity`). The data spacing is
+        ``(strain_max - strain_min) / (points_per_axis - 1)`` in every component."""
+        D = np.atleast_2d(np.asarray(stiffness, dtype=float))
+        k = D.shape[0]
+        if D.shape != (k, k) or not np.all(np.isfinite(D)):
+            raise InputError(f"a Hookean data set needs a finite square stiffness, got shape {D.shape}")
+        return cls.from_law(lambda strain: strain @ D.T, k, strain_min, strain_max, points_per_axis, c=c)
+
+    @classmethod
+    def from_law(cls, law, components: int, strain_min: float, strain_max: float, points_per_axis: int, *,
+                 c) -> "MaterialDataset":
+        """Any law ``stress = law(strain)`` (``(n, k) -> (n, k)``, Mandel components) sampled on a
+        regular grid of ``points_per_axis^k`` strain states in ``[strain_min, strain_max]^k``."""
+        k, n = int(components), int(points_per_axis)
+        if n < 1 or float(n) ** k > MAX_DATA_POINTS:
+            raise InputError(f"points per axis must be between 1 and {int(MAX_DATA_POINTS ** (1 / k))} "
+                             f"for {k} components (at most {MAX_DATA_POINTS} points), got {points_per_axis!r}")
+        if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
+            raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
+        axis = np.linspace(strain_min, strain_max, n)
+        strain = np.stack(np.meshgrid(*([axis] * k), indexing="ij"), axis=-1).reshape(-1, k)
+        return cls(strain, law(strain), c)
+
+    @classmethod
+    def from_csv(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
+        """Read a CSV file with the header ``strain,stress`` (one component per point) or
+        ``strain_1,...,strain_k,stress_1,...,stress_k`` (``k`` Mandel components; ``c`` then a
+        ``k x k`` SPD matrix). Other columns are ignored.
+
+        A UTF-8 byte-order mark (as written by spreadsheets) is accepted.
+
+        Raises
+        ------
+        InputError
+            Missing, unreadable, empty, huge, non-UTF-8, one-column or non-numeric file.
+        """
+        path = input_file(path, "data file")
+        size = path.stat().st_size
+        if size == 0:
+            raise InputError(f"data file is empty: {path}")
+        if size > MAX_DATA_FILE_BYTES:
+            raise InputError(f"data file is too large ({size} bytes > {MAX_DATA_FILE_BYTES}): {path}")
+        try:
+            with path.open(newline="", encoding="utf-8-sig") as fh:
+                header = next(csv.reader(fh), None)
+        except UnicodeDecodeError:
+            raise InputError(f"data file is not UTF-8 text: {path}") from None
+        except (OSError, csv.Error) as exc:
+            raise InputError(f"cannot read data file {path}: {getattr(exc, 'strerror', None) or exc}") from None
+        if header is None or not any(h.strip() for h in header):
+            raise InputError(f"data file is empty: {path}")
+        names = [h.strip().lower() for h in header]
+        k = _components(c)
+        wanted = (["strain"], ["stress"]) if k == 1 else ([f"strain_{i}" for i in range(1, k + 1)],
+                                                         [f"stress_{i}" for i in range(1, k + 1)])
+        missing = [w for w in wanted[0] + wanted[1] if w not in names]
+        if missing and k == 1:
+            raise InputError(f"data file {path} needs a header with columns 'strain' and 'stress', got {header!r}")
+        if missing:
+            cols = ",".join(wanted[0] + wanted[1])
+            raise InputError(f"data file {path} needs a header with columns {cols!r} ({k} strain and {k} stress "
+                             f"components for this metric), got {header!r}")
+        usecols = tuple(names.index(w) for w in wanted[0] + wanted[1])
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+                table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=usecols, encoding="utf-8")
+        except UnicodeDecodeError:
+            raise InputError(f"data file is not UTF-8 text: {path}") from None
+        except ValueError as exc:
+            raise InputError(f"data file {path} is not numeric: {_csv_position(str(exc), header)}") from None
+        except OSError as exc:
+            raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
+        if table.size == 0:
+            raise InputError(f"data file has a header but no data rows: {path}")
+        if k == 1:
+            return cls(table[:, 0], table[:, 1], c)
+        return cls(table[:, :k], table[:, k:], c)
+
+    @classmethod
+    def from_npy(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
+        """Read a numpy ``.npy`` file holding one ``(N, 2k)`` array, the columns of
+        :meth:`from_csv` in order: ``strain, stress`` (``k = 1``) or ``strain_1..k, stress_1..k``
+        (as ``numpy.save(path, numpy.column_stack([strain, stress]))`` writes it).
+
+        A float64 file is memory-mapped read-only, not read: its data stay in the operating
+        system's page cache (shared between processes, dropped and re-read under memory pressure
+        instead of swapped) and are never copied; the process itself holds only the search's
+        coordinates and tree (``16 k + 16`` bytes per point). Other real and integer types are
+        converted (a copy). The file must not change while the data set is in use.
+
+        Raises
+        ------
+        InputError
+            Missing, unreadable, empty, not ``.npy``, truncated, not real-valued, of another
+            shape, or with more than :data:`MAX_DATA_POINTS` points.
+        """
+        path = input_file(path, "data file")
+        k = _components(c)
+        try:
+            with path.open("rb") as fh:
+                magic = fh.read(len(_NPY_MAGIC))
+        except OSError as exc:
+            raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
+        if not magic:
+            raise InputError(f"data file is empty: {path}")
+        if magic != _NPY_MAGIC:
+            raise InputError(f"data file {path} is not a .npy file (numpy.save format)")
+        try:
+            table = np.load(path, mmap_mode="r", allow_pickle=False)
+        except (ValueError, EOFError, SyntaxError) as exc:  # a damaged header, truncated data, objects
+            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise InputError(f"data file {path} is a damaged or unsupported .npy file: {first}") from None
+        except OSError as exc:
+            raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
+        if table.dtype.kind not in "fiu":
+            raise InputError(f"data file {path} holds {table.dtype} values; the data must be real numbers")
+        if table.ndim != 2 or table.shape[1] != 2 * k or table.shape[0] == 0:
+            cols = "strain, stress" if k == 1 else f"strain_1..{k}, stress_1..{k}"
+            raise InputError(f"data file {path} holds an array of shape {table.shape}; it needs (N, {2 * k}) "
+                             f"with N >= 1 and the columns {cols}")
+        if table.shape[0] > MAX_DATA_POINTS:
+            raise InputError(f"data file {path} holds {table.shape[0]} points, more than {MAX_DATA_POINTS}")
+        return cls(table[:, :k], table[:, k:], c)
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
+        """Read a data file by its suffix: ``.npy`` with :meth:`from_npy`, any other as CSV
+        (:meth:`from_csv`)."""
+        reader = cls.from_npy if str(path).lower().endswith(".npy") else cls.from_csv
+        return reader(path, c=c)
+
+
+#: The first bytes of every ``.npy`` file.
+_NPY_MAGIC = b"\x93NUMPY"
+
+
+def _components(c) -> int:
+    """Strain components per point of a metric given as a number (1), a matrix or a Metric."""
+    return 1 if np.ndim(c) == 0 and not isinstance(c, Metric) else Metric(c).k
+
+
+def _csv_position(message: str, header: list[str]) -> str:
+    """numpy's parse error with its position in the file's own terms: numpy counts data rows from
+    0 after the header and columns from 1; a user's editor counts lines from 1, header included."""
+    first = message.splitlines()[0] if message else "parse error"
+    m = re.search(r"(.*?) at row (\d+), column (\d+)\.?$", first)
+    if not m:
+        return first
+    line, col = int(m.group(2)) + 2, int(m.group(3))
+    name = f" ({header[col - 1].strip()!r})" if 0 < col <= len(header) else ""
+    return f"{m.group(1)} on line {line}, column {col}{name}"
+
+
+class PointData:
+    """Per-point material data: each material point draws from one of several data sets.
+
+    The data sets are concatenated, so a data assignment is one global index per point, exactly
+    as with a single :class:`MaterialDataset`; the search is one vectorised KD-tree query per
+    data set (never a loop over points).
+
+    Parameters
+    ----------
+    datasets : sequence of MaterialDataset
+        One data set per material, each with its own metric ``c``.
+    material : array_like of int, shape (m,)
+        The data set of each material point.
+    """
+
+    def __init__(self, datasets, material) -> None:
+        self.datasets = tuple(datasets)
+        if not self.datasets or not all(isinstance(d, MaterialDataset) for d in self.datasets):
+            raise InputError("per-point data needs at least one MaterialDataset")
+        material = np.asarray(material)
+        if material.ndim != 1 or material.size == 0 or not np.issubdtype(material.dtype, np.integer):
+            raise InputError("material must be a non-empty list of integer data-set indices, one per point")
+        if material.min() < 0 or material.max() >= len(self.datasets):
+            raise InputError(f"material index out of range: data sets are numbered 0..{len(self.datasets) - 1}")
+        self.material = material.astype(np.intp)
+        sizes = np.array([len(d) for d in self.datasets])
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+        if len({d.k for d in self.datasets}) != 1:
+            raise InputError("the data sets of one model must have the same number of strain components")
+        self.k = self.datasets[0].k
+        self.strain = np.concatenate([d.strain for d in self.datasets])
+        self.stress = np.concatenate([d.stress for d in self.datasets])
+        self._groups = [np.flatnonzero(self.material == k) for k in range(len(self.datasets))]
+
+    def __len__(self) -> int:
+        return self.strain.shape[0]
+
+    def point_materials(self, n_points: int) -> tuple[list[Metric], np.ndarray]:
+        """The metrics of the materials and the material of each point."""
+        if n_points != self.material.size:
+            raise InputError(f"material list has {self.material.size} entries, the model has {n_points} points")
+        return [d.metric for d in self.datasets], self.material
+
+    def point_metric(self, n_points: int) -> np.ndarray:
+        """Scalar metric ``c`` of each one-component material point."""
+        metrics, material = self.point_materials(n_points)
+        return np.array([m.c for m in metrics])[material]
+
+
+    def describe(self) -> dict:
+        """Sizes, metrics and strain ranges of the sets, and the material of each point."""
+        return dict(points=len(self), sets=[d.describe() for d in self.datasets], material=self.material.tolist())
+
+    def _per_point(self, a) -> np.ndarray:
+        return np.asarray(a, dtype=float).reshape((-1,) if self.k == 1 else (-1, self.k))
+
+    def nearest(self, strain, stress, *, search: str = "kdtree", previous=None, stats: dict | None = None) -> np.ndarray:
+        """The nearest datum of each point in its own set (global indices), by the backend
+        ``search`` (:meth:`MaterialDataset.nearest`), warm-started from ``previous`` if given."""
+        strain, stress = self._per_point(strain), self._per_point(stress)
+        prev = None if previous is None else np.asarray(previous, dtype=np.intp)
+        out = np.empty(strain.shape[0], dtype=np.intp)
+        for k, pts in enumerate(self._groups):
+            if pts.size:
+                local = None if prev is None else prev[pts] - self.offsets[k]
+                out[pts] = self.datasets[k].nearest(strain[pts], stress[pts], search=search, previous=local,
+                                                    stats=stats) + self.offsets[k]
+        return out
+
+    def k_nearest(self, strain, stress, k: int) -> np.ndarray:
+        """The ``k`` nearest data of each point in its own set (global indices, nearest first;
+        ``k`` capped at the smallest set's size)."""
+        strain, stress = self._per_point(strain), self._per_point(stress)
+        k = min(int(k), min(len(d) for d in self.datasets))
+        out = np.empty((strain.shape[0], k), dtype=np.intp)
+        for j, pts in enumerate(self._groups):
+            if pts.size:
+                out[pts] = self.datasets[j].k_nearest(strain[pts], stress[pts], k) + self.offsets[j]
+        return out
+
+    def nearest_warm(self, strain, stress, previous, *, stats: dict | None = None) -> np.ndarray:
+        """:meth:`nearest` by the warm-started graph search from ``previous``."""
+        return self.nearest(strain, stress, search="graph", previous=previous, stats=stats)
+
+    def distance2(self, strain, stress, index) -> np.ndarray:
+        """Squared DDCM distance of each point's state to its datum ``index``, under its metric."""
+        de = self._per_point(strain) - self.strain[index]
+        ds = self._per_point(stress) - self.stress[index]
+        out = np.empty(de.shape[0])
+        for k, pts in enumerate(self._groups):
+            if pts.size:
+                out[pts] = self.datasets[k].metric.distance2(de[pts], ds[pts])
+        return out

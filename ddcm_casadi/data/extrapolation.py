@@ -1,0 +1,187 @@
+r"""Material states the data cannot support: a per-step flag for DDCM results.
+
+Where the states of a load step leave the range of the data, DDCM still finds a fixed point: the
+assigned data stop at the last datum and the fixed point is a fixed point, but its stresses are
+those of the data's edge, not of the material. This module counts such states, so that a step can
+be flagged (it is a flag, not a convergence failure).
+
+Everything is measured in the metric's scaled coordinates
+``X = [L^T e, L^{-1} s]`` (:meth:`~ddcm_casadi.data.metric.Metric.coordinates`, ``C = L L^T``), where the
+DDCM distance is Euclidean. A material point with state ``X`` and nearest datum ``X*_j`` is
+*beyond the data* when either holds:
+
+1. **Past the data's range.** The data's range is their bounding box in scaled coordinates
+   (``lo_c <= X_c <= hi_c`` for each of the ``2k`` coordinates; for one component: the smallest
+   and largest ``sqrt(c) strain`` and ``stress / sqrt(c)``, the data with the smallest or largest
+   strain or stress). The state is flagged when it is past a face of the box by more than half
+   the local spacing at its nearest datum, ``X_c - hi_c > h_j / 2`` or ``lo_c - X_c > h_j / 2``:
+   a strain or a stress that no datum reaches. Its nearest datum then usually lies on that face
+   (the data's extreme in the direction the state went), but not always: in a truss whose
+   members saturate at the data's edge, equilibrium pushes other members to stresses beyond the
+   data's range at strains inside it, and their nearest datum is an interior one. Half a spacing
+   is the margin because a state inside the range is also within about ``h / 2`` of a datum along
+   the data: closer than that, the edge costs no more than the data's resolution. The box, not
+   the convex hull: for one component it is exactly the range of strains and stresses; for the
+   grids of Mandel strains the case files generate, with a matrix metric, it is the bounding box
+   of the grid's image under ``L^T`` (a state past the grid escapes it only near the grid's
+   corners, where the second test still sees it); and it costs ``2k`` comparisons per state.
+2. **Far along the data.** The state's offset from its datum *along the data*, ``t`` (its
+   component in the data's local tangent space, :func:`neighbourhood`), exceeds
+   :data:`FAR_SPACINGS` local spacings ``h_j``: a state in a hole of the data, or beyond the
+   range of data whose box the first test does not see (a curved law).
+
+Along, not across: at a fixed point every state's datum is its nearest one, so along data that
+sample a law at spacing ``h`` an interior state is within about ``h / 2`` of its datum, whatever
+the problem; across the law its distance is the mismatch between ``Z_E`` and the data, the DDCM
+error, which says nothing about the data's range. For one element in contact the full distance is
+at most ``h / 2`` (the admissible set is a line crossing the data), but on continua the mismatch
+converges more slowly than the spacing: on the Hertz example (grids of 11, 21, 31 points per axis)
+the full distance reaches 3.1, 5.0, 6.3 spacings, of which about 1.0 along the data. Measured
+along the data (``data_spacings`` of a step), interior states stay below 1.1 spacings on the
+examples (bars, trusses, Hertz, and the softening punch until its strains pass the edge of its
+data grid; local minima included) and below 2.4 on
+random, noisy samples of a Hookean line (LCDD and max-ent included). :data:`FAR_SPACINGS` = 10
+is above all of these with a margin of two, and an order of magnitude beyond the data's own
+resolution: there the data no longer describe the state, whatever the fixed point says.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Offset from the nearest datum along the data, in local data spacings, beyond which a state is
+#: not described by the data (see the module docstring for the derivation).
+FAR_SPACINGS = 10.0
+#: Extra neighbours searched for a datum's spacing, for the datum itself and its duplicates.
+_DUPLICATES = 8
+#: The neighbourhoods of few data (at most this many points checked at once) are remembered, at
+#: most :data:`_REMEMBERED` sets of them: a small model's steps (and the DDCM runs of every
+#: formulation) come back to the same data.
+_FEW = 64
+_REMEMBERED = 4096
+
+
+class DataCoverage:
+    """The range of a model's material data, built once, and the check of states against it.
+
+    Parameters
+    ----------
+    dataset : MaterialDataset or PointData
+        The model's data (one set shared by every point, or one set per material).
+    n_points : int
+        Material points of the model.
+    """
+
+    def __init__(self, dataset, n_points: int) -> None:
+        self.dataset = dataset
+        self.n_points = int(n_points)
+        _, self.material = dataset.point_materials(self.n_points)
+        self.k = dataset.datasets[0].k
+        # Per data set: its bounding box in scaled coordinates.
+        self._boxes = []
+        for d in dataset.datasets:
+            X = d.metric.coordinates(d.strain, d.stress)
+            self._boxes.append((X.min(axis=0), X.max(axis=0)))
+        self._neighbourhoods: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+
+    def _per_point(self, a) -> np.ndarray:
+        return np.asarray(a, dtype=float).reshape((-1,) if self.k == 1 else (-1, self.k))
+
+    def check(self, strain, stress) -> tuple[np.ndarray, np.ndarray]:
+        """Which material points are beyond the data, and how far each is from it.
+
+        Parameters
+        ----------
+        strain, stress : array_like
+            The states of every material point (flat and point-major, ``m k`` values, as
+            :meth:`~ddcm_casadi.problems.build.ProblemPair.fields` gives them).
+
+        Returns
+        -------
+        beyond : (m,) bool
+            Past the data's range or farther than :data:`FAR_SPACINGS` spacings (module docstring).
+        spacings : (m,) float
+            Offset from the nearest datum along the data, in local data spacings (0 where the
+            set has too few data for a spacing, ``nan`` for non-finite states).
+        """
+        strain, stress = self._per_point(strain), self._per_point(stress)
+        beyond = np.zeros(self.n_points, dtype=bool)
+        spacings = np.full(self.n_points, np.nan)
+        for s, d in enumerate(self.dataset.datasets):
+            pts = np.flatnonzero(self.material == s)
+            pts = pts[np.all(np.isfinite(strain[pts]).reshape(pts.size, -1), axis=1)
+                      & np.all(np.isfinite(stress[pts]).reshape(pts.size, -1), axis=1)]
+            if not pts.size:
+                continue
+            beyond[pts], spacings[pts] = self._check_set(s, d, strain[pts], stress[pts])
+        return beyond, spacings
+
+    def _check_set(self, s: int, d, strain: np.ndarray, stress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = self._boxes[s]
+        j = d.nearest(strain, stress)
+        X = d.metric.coordinates(strain, stress)
+        h, tangent = self._neighbourhood(s, d, j)
+        along = np.linalg.norm(np.einsum("mij,mj->mi", tangent, X - d.metric.coordinates(d.strain[j], d.stress[j])),
+                               axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.where(along > 0, along / h, 0.0)
+        half = 0.5 * np.where(np.isfinite(h), h, 0.0)[:, None]
+        past = ((X - hi > half) | (lo - X > half)).any(axis=1)
+        return past | (ratio > FAR_SPACINGS), ratio
+
+    def _neighbourhood(self, s: int, d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`neighbourhood` of the data ``index`` of set ``s``, remembered for few data."""
+        if index.size > _FEW:
+            # many points share their nearest datum (on a continuum, most do): each datum once
+            unique, inverse = np.unique(index, return_inverse=True)
+            h, tangent = neighbourhood(d, unique)
+            return h[inverse], tangent[inverse]
+        key = (s, index.tobytes())
+        hit = self._neighbourhoods.get(key)
+        if hit is None:
+            hit = neighbourhood(d, index)
+            if len(self._neighbourhoods) < _REMEMBERED:
+                self._neighbourhoods[key] = hit
+        return hit
+
+
+def neighbourhood(d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The local spacing and the tangent space of the data set ``d`` at each datum ``index``.
+
+    From the ``K = 4k`` nearest distinct data of the datum (``k`` strain components; the datum
+    itself and its duplicates are left out), in scaled coordinates:
+
+    - the spacing ``h``: half the distance to the ``K``-th of them. For data equally spaced at
+      ``h`` along a curve (``k = 1``) that is ``h`` exactly (two neighbours on each side, the
+      farther at ``2h``); for a grid of ``k`` Mandel strains it is within a factor ``sqrt 2`` of
+      the grid spacing. Not the nearest neighbour alone: random samples have pairs of data much
+      closer than their spacing (the nearest-neighbour distance is exponentially distributed),
+      and a distance in units of it is meaningless (states up to 200 nearest-neighbour distances
+      from their datum on random samples of a Hookean line are within 2.4 of these spacings
+      along the data);
+    - the tangent space: the ``k`` leading principal directions of the ``K`` offsets (a material
+      law is a ``k``-dimensional manifold of the ``2k``-dimensional state space).
+
+    Returns
+    -------
+    h : (n,) float
+        ``inf`` where fewer than ``K`` distinct data are found (a set of a few points).
+    tangent : (n, k, 2k) float
+        Orthonormal rows spanning the tangent space.
+    """
+    index = np.asarray(index, dtype=np.intp)
+    k = d.k
+    K = 4 * k
+    n = index.size
+    if len(d) <= K:
+        return np.full(n, np.inf), np.zeros((n, k, 2 * k))
+    near = d.k_nearest(d.strain[index], d.stress[index], K + _DUPLICATES)
+    X = d.metric.coordinates(d.strain[near.ravel()], d.stress[near.ravel()]).reshape(n, near.shape[1], 2 * k)
+    Y = X - d.metric.coordinates(d.strain[index], d.stress[index])[:, None, :]
+    dist = np.linalg.norm(Y, axis=2)
+    dist[dist <= 0] = np.inf  # the datum itself and its duplicates
+    order = np.argsort(dist, axis=1, kind="stable")[:, :K]
+    rows = np.arange(n)[:, None]
+    h = 0.5 * dist[rows[:, 0], order[:, -1]]
+    _, _, Vt = np.linalg.svd(np.where(np.isfinite(dist[rows, order])[:, :, None], Y[rows, order], 0.0))
+    return h, Vt[:, :k, :]

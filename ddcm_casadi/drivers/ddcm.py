@@ -1,0 +1,266 @@
+"""The DDCM driver: one alternation loop for every data-driven scheme.
+
+Each load step alternates
+
+1. the projection onto ``Z_E`` (:class:`~ddcm_casadi.drivers.ddcm_projection.Projection`: the
+   chosen formulation, warm-started, checked against the exact branch enumeration where the
+   problem is affine with few contact pairs), and
+2. the material update of the scheme (:mod:`ddcm_casadi.drivers.scheme`): the nearest datum
+   (plain DDCM, with the data search of ``search``), LCDD or max-ent (``variant``),
+
+until the scheme says the material states have settled. Where each step starts, restarts, a
+greedy global improvement after the fixed point (:mod:`~ddcm_casadi.drivers.ddcm_improve`) and the
+scheme are chosen by :class:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions` (by default the first
+step starts from the data point nearest the origin and every later step from the previous one's
+material states). Every step is finished by the physical checks
+(:func:`~ddcm_casadi.drivers.checks.finish_step`) before it is reported, whatever the scheme.
+For one-element problems (and, with ``exact_max``, a few elements) the global DDCM optimum is also
+found by enumerating the data assignments (closed forms, :mod:`ddcm_casadi.drivers.ddcm_search`),
+with whether the search reached it and the gap.
+
+The exact enumeration, the greedy screen and the elastic start need the affine form of the
+problem (:attr:`~ddcm_casadi.problems.contract.ComplementarityProblem.affine`): otherwise they are
+skipped, and the steps and the path say so (``StepResult.notes``, ``PathResult.warnings``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Callable
+
+import numpy as np
+
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.problems.exact import ExactEnumerator
+from ddcm_casadi.data.extrapolation import DataCoverage
+from ddcm_casadi.problems.build import ProblemPair
+from ddcm_casadi.drivers import ddcm_improve
+from ddcm_casadi.drivers.checks import finish_step
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.ddcm_projection import Projection
+from ddcm_casadi.drivers.ddcm_search import point_ranges, start_assignment
+from ddcm_casadi.drivers.records import (
+    MaterialStates, PathResult, Run, StepResult, check_convergence, count, new_tally,
+)
+from ddcm_casadi.drivers.schemes import SCHEMES
+
+#: Why a method was skipped on a problem that is not affine.
+NOT_AFFINE = "the problem is not affine"
+
+
+class DDCMSolver:
+    """Alternating projections for one model and one built projection formulation.
+
+    Parameters
+    ----------
+    problems : ProblemPair
+        Needs the projection (a material data set).
+    built
+        The projection formulation, built.
+    options : DDCMOptions, optional
+        Iterations, data search, starts, restarts, improvement, certificates, scheme (default
+        ``DDCMOptions()``).
+    max_outer : int, optional
+        Replaces ``options.max_outer`` (validated as it).
+    search : str, optional
+        Replaces ``options.search``: a backend of :data:`ddcm_casadi.data.search.SEARCHES`.
+    enumerate_pairs : int
+        Affine problems with at most this many contact pairs consult the exact branch enumeration.
+    global_search : bool
+        Report the global optimum where it can be enumerated.
+    """
+
+    #: Exact projections remembered per problem (:meth:`_exact_projection`), keys and answers
+    #: together at most this many floats (8 MB).
+    EXACT_CACHE_VALUES = 1_000_000
+
+    def __init__(self, problems: ProblemPair, built, *, max_outer: int | None = None, enumerate_pairs: int = 4,
+                 global_search: bool = True, search: str | None = None, options: DDCMOptions | None = None) -> None:
+        if problems.projection is None:
+            raise InputError("the DDCM variant needs a material data set")
+        if options is not None and not isinstance(options, DDCMOptions):
+            raise InputError(f"DDCM options must be a DDCMOptions, got {type(options).__name__}")
+        options = options if options is not None else DDCMOptions()
+        given = {k: v for k, v in dict(max_outer=max_outer, search=search).items() if v is not None}
+        self.options = dataclasses.replace(options, **given) if given else options  # validated
+        self.problems, self.built = problems, built
+        model = problems.model
+        self._check_initial(model)
+        if self.options.variant == "lcdd" and model.strain_components != 1:
+            raise InputError("ddcm variant 'lcdd' is implemented for one-component points (bars, trusses)")
+        # The data's range and the exact enumeration, once per problem (not timed with the steps):
+        # the solvers of the formulations of one model share them.
+        self.coverage = problems.projection.shared(
+            ("data_coverage",), lambda: DataCoverage(model.dataset, model.n_points))
+        self.affine = bool(problems.projection.affine)
+        self.exact = (problems.projection.shared(
+            ("exact_enumerator", enumerate_pairs), lambda: ExactEnumerator(problems.projection, max_pairs=enumerate_pairs))
+            if self.affine and model.n_contacts <= enumerate_pairs else None)
+        # N^m assignments, in logarithms: it overflows a float for a continuum's thousands of points.
+        log_assign = float(np.sum(np.log(point_ranges(model)[1].astype(float))))
+        self.global_search = (global_search and self.exact is not None
+                              and (model.n_points == 1 or (self.options.exact_max > 0
+                                                            and log_assign <= np.log(self.options.exact_max) + 1e-12)))
+        self.scheme = SCHEMES[self.options.variant](model, self.options)
+        self.projection = Projection(problems, built, self.exact, self.EXACT_CACHE_VALUES)
+        #: What is left out for this problem, and why (each step's ``notes``, the path's ``warnings``).
+        self.notes = self._skipped(model, enumerate_pairs)
+
+    @property
+    def max_outer(self) -> int:
+        """Alternating projections per run (``options.max_outer``)."""
+        return self.options.max_outer
+
+    @property
+    def search(self) -> str:
+        """The data search backend (``options.search``)."""
+        return self.options.search
+
+    @property
+    def search_stats(self) -> dict:
+        """``queries`` and ``fallbacks`` (uncertified states) of the data search, accumulated."""
+        return getattr(self.scheme, "stats", {})
+
+    def _check_initial(self, model) -> None:
+        """An explicit initial assignment must give every point a datum of its own set."""
+        if self.options.initial is None:
+            return
+        initial = np.asarray(self.options.initial, dtype=np.intp)
+        offset, size = point_ranges(model)
+        if initial.size != model.n_points:
+            raise InputError(f"ddcm option initial has {initial.size} indices, the model has "
+                             f"{model.n_points} material points")
+        if np.any(initial < offset) or np.any(initial >= offset + size):
+            raise InputError("ddcm option initial: an index is outside its point's data set")
+
+    def _skipped(self, model, enumerate_pairs: int) -> list[str]:
+        """The notes of the methods skipped because the problem is not affine (none if it is)."""
+        if self.affine:
+            return []
+        o, notes = self.options, []
+        if model.n_contacts <= enumerate_pairs:
+            notes.append(f"exact branch enumeration and global optimum skipped: {NOT_AFFINE}")
+        if o.improve == "greedy" and o.greedy_screen:
+            notes.append(f"greedy moves not screened (next-nearest data instead): {NOT_AFFINE}")
+        if o.start == "elastic":
+            notes.append(f"elastic start replaced by the origin start: {NOT_AFFINE}")
+        return notes
+
+    def initial_assignment(self, k: int) -> np.ndarray:
+        """The data assignment load step ``k`` starts from when it does not continue the previous
+        step's: ``initial`` at the first step if given, else ``start`` (seeded per step; the
+        elastic start needs an affine problem, else the origin start)."""
+        o = self.options
+        if k == 0 and o.initial is not None:
+            return np.asarray(o.initial, dtype=np.intp)
+        start = "origin" if o.start == "elastic" and not self.affine else o.start
+        return start_assignment(self.problems.model, start, k, np.random.default_rng((o.seed, k, 0)))
+
+    def project_data(self, k: int, strain_star, stress_star, warm: tuple, cost: dict):
+        """The ``Z_E`` projection of step ``k``'s material states
+        (:meth:`~ddcm_casadi.drivers.ddcm_projection.Projection.project`)."""
+        return self.projection.project(k, strain_star, stress_star, warm, cost)
+
+    def _exact_projection(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """The exact projection (:meth:`~ddcm_casadi.drivers.ddcm_projection.Projection.exact_projection`)."""
+        return self.projection.exact_projection(params)
+
+    def alternate(self, k: int, start: MaterialStates, x, p, state) -> tuple[Run, tuple]:
+        """The alternation of step ``k`` from the material states ``start`` (the Z_E solves
+        warm-started from ``x, p, state``) until the scheme settles, a projection fails, or after
+        ``max_outer`` projections. Returns the run and the last ``(x, p, state)``."""
+        problems, scheme = self.problems, self.scheme
+        scheme.begin(start)
+        star = start
+        cost, t_search = dict(inner=0, t_project=0.0), 0.0
+        converged, message = False, "maximum outer iterations reached"
+        for outer in range(1, self.max_outer + 1):
+            sol, is_global, err, failed = self.project_data(k, star.strain, star.stress, (x, p, state), cost)
+            if failed:
+                message = failed
+                break
+            x, p, state = sol.x, sol.p, sol.state
+            t1 = time.perf_counter()
+            f = problems.fields("mpcc", sol.x, sol.p)
+            update = scheme.update(f["strain"], f["stress"])
+            t_search += time.perf_counter() - t1
+            star = update.star
+            if update.done:
+                converged, message = update.converged, update.message
+                break
+        f = problems.fields("mpcc", sol.x, sol.p)
+        star = scheme.finish(star)
+        distance = (float(0.5 * np.dot(problems.model.volumes, scheme.distance2(f["strain"], f["stress"], star)))
+                    if sol.converged else float("inf"))
+        run = Run(star=star, sol=sol, fields=f, distance=distance, converged=converged, message=message, outer=outer,
+                  inner=cost["inner"], t_project=cost["t_project"], t_search=t_search, error=err, is_global=is_global)
+        return run, (x, p, state)
+
+    def solve_step(self, k: int, start: MaterialStates, warm: tuple) -> tuple[StepResult, Run, tuple]:
+        """Load step ``k`` from the material states ``start``, the Z_E solves warm-started from
+        ``warm = (x, p, state)``: the alternation, then (for a scheme that assigns data) restarts,
+        greedy improvement and the global-optimum certificate. Returns the finished step, the
+        best run and the ``(x, p, state)`` it ended at."""
+        opts, tally = self.options, new_tally()
+        best, best_warm = self.alternate(k, start, *warm)
+        count(tally, best)
+        if self.scheme.assigns_data:
+            visited = {start.key, best.star.key}
+            best, best_warm = ddcm_improve.restart(self, k, best, best_warm, warm, visited, tally)
+            if opts.improve == "greedy" and best.converged:
+                best, best_warm = ddcm_improve.greedy(self, k, best, best_warm, visited, tally)
+        step = self._step_result(k, best, tally)
+        if self.global_search and self.scheme.assigns_data and best.sol.converged:
+            self.projection.certify(k, step)
+        return step, best, best_warm
+
+    def solve(self, *, formulation_name: str = "", raise_on_failure: bool = False,
+              progress: Callable[[StepResult], None] | None = None) -> PathResult:
+        """Every load step in turn, each from the previous step's material states and Z_E
+        solution (``warm``), or from its own start; ``progress(step)`` after each."""
+        problems, model = self.problems, self.problems.model
+        out = PathResult("ddcm", formulation_name, warnings=list(self.notes))
+        warm = (np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None)
+        start, self.projection.previous = None, None
+        t_all = time.perf_counter()
+        for k in range(model.n_steps):
+            t0 = time.perf_counter()
+            if start is None or not self.options.warm:
+                start = self.scheme.states(self.initial_assignment(k))
+            step, best, warm = self.solve_step(k, start, warm)
+            step.seconds = time.perf_counter() - t0
+            out.steps.append(step)
+            if progress is not None:
+                progress(step)
+            check_convergence(step, raise_on_failure, f"ddcm/{formulation_name}")
+            start = best.star
+            if step.converged:
+                self.projection.previous = dict(u=step.u, p=step.p, strain=step.strain, stress=step.stress)
+        out.solve_seconds = time.perf_counter() - t_all
+        return out
+
+    def _step_result(self, k: int, run: Run, tally: dict) -> StepResult:
+        """The record of step ``k`` from its best run, finished (:meth:`finish`)."""
+        model, sol, f, star = self.problems.model, run.sol, run.fields, run.star
+        distance = run.distance
+        if not np.isfinite(distance):  # a failed projection: report the distance of what it returned
+            distance = float(0.5 * np.dot(model.volumes, self.scheme.distance2(f["strain"], f["stress"], star)))
+        step = StepResult(step=k, load_parameter=float(model.load_parameter[k]), u=f["u"], p=f["p"],
+                          converged=run.converged, iterations=tally["inner"], outer_iterations=run.outer,
+                          residual=sol.residual, complementarity=sol.complementarity,
+                          penetration=sol.penetration, seconds=0.0, message=run.message,
+                          strain=f["strain"], stress=f["stress"], strain_star=star.strain.copy(),
+                          stress_star=star.stress.copy(), data_index=star.index.copy(),
+                          distance=distance, projection_error=run.error,
+                          projection_global=run.is_global, projection_seconds=tally["t_project"],
+                          search_seconds=tally["t_search"], projections=tally["projections"], runs=tally["runs"],
+                          improvements=tally["improvements"], notes="; ".join(self.notes))
+        self.finish(step)
+        return step
+
+    def finish(self, step: StepResult) -> None:
+        """:func:`~ddcm_casadi.drivers.checks.finish_step` with this solver's problem, penalty
+        stiffness and data range."""
+        finish_step(step, self.problems.projection, self.problems.model,
+                    penalty_stiffness=getattr(self.built, "penalty_stiffness", None), coverage=self.coverage)

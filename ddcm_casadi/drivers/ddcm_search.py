@@ -1,0 +1,186 @@
+r"""Initial data assignments of the DDCM driver and the exact global optimum by enumeration.
+
+Starts (:class:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions` ``start``):
+
+- ``origin``: every point at the datum nearest the zero state;
+- ``elastic``: every point at the datum nearest the state of the *linear* contact problem whose
+  material law is the metric, ``sigma_i = C_i eps_i``:
+
+  .. math::  \min_u \tfrac12 u^T K_C u - f^T u \quad\text{s.t.}\quad G u + g_0 \ge 0,
+             \qquad K_C = B^T (W \otimes C) B .
+
+  It is solved through its dual, a bound-constrained least-squares problem in the contact forces
+  ``lambda = a p``: with ``S = G K_C^{-1} G^T`` and ``q = G K_C^{-1} f + g_0`` the conditions
+  ``lambda >= 0, S lambda + q >= 0, lambda . (S lambda + q) = 0`` are those of
+  ``min_{lambda >= 0} ||L^T lambda + L^{-1} q||^2`` (``S = L L^T``; non-negative least squares),
+  then ``K_C u = f + G^T lambda``. A ``K_C`` that is singular (a body held only by its obstacles)
+  is regularised by ``1e-9 max diag(K_C)`` on its diagonal: the start is a guess, not a result.
+- ``random``: every point at a datum drawn uniformly from its own data set.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ddcm_casadi.problems.exact import ExactEnumerator
+from ddcm_casadi.linalg import SingularMatrix, factorize
+from ddcm_casadi.data.metric import block_diagonal
+
+
+def point_ranges(model) -> tuple[np.ndarray, np.ndarray]:
+    """Per material point: where its data set starts in the global index, and its size."""
+    data = model.dataset
+    _, material = data.point_materials(model.n_points)
+    sizes = np.array([len(d) for d in data.datasets], dtype=np.intp)
+    return np.asarray(data.offsets, dtype=np.intp)[material], sizes[material]
+
+
+def origin_assignment(model) -> np.ndarray:
+    """Every point at the datum nearest the zero state."""
+    origin = np.zeros(model.n_points * model.strain_components)
+    return model.dataset.nearest(origin, origin)
+
+
+def random_assignment(model, rng: np.random.Generator) -> np.ndarray:
+    """Every point at a datum drawn uniformly from its own data set."""
+    offset, size = point_ranges(model)
+    return offset + rng.integers(0, size).astype(np.intp)
+
+
+def _metric_blocks(model) -> np.ndarray:
+    """``(m, k, k)``: each point's metric ``C``."""
+    metrics, material = model.dataset.point_materials(model.n_points)
+    return np.stack([mt.matrix for mt in metrics])[material]
+
+
+def _elastic_operator(model):
+    """``(C, lu, KG, S)`` of the metric's linear problem: the point metrics, the factorised
+    ``K_C = B^T W C B``, ``K_C^-1 G^T`` and the contact compliance ``G K_C^-1 G^T``; the same at
+    every load step, so computed once per model."""
+    cached = model._cache.get("elastic_start")
+    if cached is None:
+        C = _metric_blocks(model)
+        B, G = model.strain_operator, model.gap_operator
+        K = (B.T @ block_diagonal(C * model.volumes[:, None, None]) @ B).tocsc()
+        try:
+            lu = factorize(K)
+        except SingularMatrix:
+            lu = factorize(K + 1e-9 * float(K.diagonal().max()) * sp.identity(K.shape[0], format="csc"))
+        KG = S = None
+        if model.n_contacts:
+            KG = lu.solve(G.T.toarray())  # K^-1 G^T, one column per pair
+            S = np.asarray(G @ KG)
+            S = 0.5 * (S + S.T)
+        cached = model._cache["elastic_start"] = (C, lu, KG, S)
+    return cached
+
+
+def elastic_state(model, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(u, strain, stress)`` of the linear contact problem with the metric as material law
+    (see the module's docstring), at load step ``step``."""
+    C, lu, KG, S = _elastic_operator(model)
+    k = model.strain_components
+    u = lu.solve(model.loads[step])
+    if model.n_contacts:
+        q = model.gap_operator @ u + model.gap_offsets[step]
+        if np.any(q < 0):  # some pair would penetrate: solve the dual
+            from scipy.optimize import nnls  # scipy.optimize costs a first run 0.08 s to import
+
+            scale = float(np.max(np.diag(S))) or 1.0
+            Sn = S / scale + 1e-12 * np.eye(S.shape[0])
+            L = np.linalg.cholesky(Sn)
+            lam, _ = nnls(L.T, -np.linalg.solve(L, q / scale), maxiter=50 * S.shape[0] + 100)
+            u = u + KG @ lam
+    strain = model.strain_operator @ u
+    stress = np.einsum("ijk,ik->ij", C, strain.reshape(-1, k)).reshape(-1)
+    return u, strain, stress
+
+
+def start_assignment(model, start: str, step: int, rng: np.random.Generator) -> np.ndarray:
+    """The initial assignment ``start`` ("origin", "elastic" or "random") at load step ``step``."""
+    if start == "origin":
+        return origin_assignment(model)
+    if start == "elastic":
+        _, strain, stress = elastic_state(model, step)
+        return model.dataset.nearest(strain, stress)
+    return random_assignment(model, rng)
+
+
+def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
+                      points: np.ndarray | None = None):
+    r"""The exact projections of every assignment near ``index``, as closed forms.
+
+    The projection's parameters are affine in the assigned data, ``P = P(index) + D c`` with
+    ``c`` the data's strain and stress minus those of ``index`` at the material points ``points``
+    (default: all; ``2 n k`` numbers for ``n`` points, point-major strains then stresses), so
+    every branch of ``Z_E`` is solved once for ``2 n k + 1`` right-hand sides
+    (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.affine_family`) and the objective of any
+    assignment that differs from ``index`` only at ``points`` is a closed-form quadratic in
+    ``c``. Centring ``c`` on ``index`` keeps the terms small near the assignment found, where
+    comparisons matter.
+
+    Returns ``(family, strain, stress)``: the :class:`~ddcm_casadi.problems.exact.AffineFamily` and the
+    assigned data of ``index`` as ``(m, k)`` arrays.
+    """
+    model = problems.model
+    data = model.dataset
+    m, k = model.n_points, model.strain_components
+    cur_e = data.strain[index].reshape(m, k)
+    cur_s = data.stress[index].reshape(m, k)
+    base = problems.projection_params(step, cur_e.ravel(), cur_s.ravel())
+    pts = np.arange(m) if points is None else np.asarray(points)
+    comps = (pts[:, None] * k + np.arange(k)).ravel()
+    cols = np.concatenate([comps, m * k + comps])  # their strains, then their stresses
+    zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
+    D = np.empty((base.size, cols.size))
+    for a, i in enumerate(cols):
+        unit = np.zeros(2 * m * k)
+        unit[i] = 1.0
+        D[:, a] = problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero
+    return exact.affine_family(base, D), cur_e, cur_s
+
+
+def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray,
+                 candidates: np.ndarray) -> tuple[np.ndarray, float]:
+    """The exact projection's objective (scaled) of every assignment that differs from ``index``
+    at one point: ``points[a]`` moved to datum ``candidates[a, b]``; returns ``(objectives,
+    objective of index)`` with ``objectives`` shaped like ``candidates``. Only the moving points
+    enter the closed forms (``2 n k`` directions for ``n`` points, not ``2 m k``)."""
+    family, cur_e, cur_s = assignment_family(problems, exact, step, index, points)
+    data, k = problems.model.dataset, problems.model.strain_components
+    strain = data.strain.reshape(len(data), k)
+    stress = data.stress.reshape(len(data), k)
+    n, n_c = len(points), candidates.shape[1]
+    c = np.zeros((2 * n * k, n * n_c))
+    for a, i in enumerate(points):
+        cols = slice(a * n_c, (a + 1) * n_c)
+        c[a * k:(a + 1) * k, cols] = (strain[candidates[a]] - cur_e[i]).T
+        c[n * k + a * k:n * k + (a + 1) * k, cols] = (stress[candidates[a]] - cur_s[i]).T
+    mine = float(family.best(np.zeros((2 * n * k, 1)))[0])
+    return family.best(c).reshape(n, n_c), mine
+
+
+def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,
+                   chunk: int = 1 << 20) -> tuple[float, float]:
+    """The exact global DDCM optimum of load step ``step`` by enumerating every one of the
+    ``N^m`` data assignments with the closed forms of :func:`assignment_family`, and the exact
+    projection's objective of the assignment ``index`` (both scaled)."""
+    model = problems.model
+    data = model.dataset
+    m, k = model.n_points, model.strain_components
+    family, cur_e, cur_s = assignment_family(problems, exact, step, index)
+    mine = float(family.best(np.zeros((2 * m * k, 1)))[0])
+    offset, size = point_ranges(model)
+    total = int(np.prod(size.astype(float)))
+    best = np.inf
+    strain = data.strain.reshape(len(data), k)
+    stress = data.stress.reshape(len(data), k)
+    for a in range(0, total, chunk):
+        flat = np.arange(a, min(total, a + chunk))
+        local = np.unravel_index(flat, tuple(size)) if m > 1 else (flat,)
+        glob = [offset[i] + local[i] for i in range(m)]
+        c = np.vstack([(strain[glob[i]] - cur_e[i]).T for i in range(m)]
+                      + [(stress[glob[i]] - cur_s[i]).T for i in range(m)])
+        best = min(best, float(np.min(family.best(c, chunk=chunk))))
+    return best, mine

@@ -1,0 +1,317 @@
+"""The loops that solve Fischer-Burmeister systems: active-set predictor, semismooth Newton,
+biactive corner polish, smoothing continuation and the primal-dual active-set branch finish.
+
+The system itself (CasADi Functions with named parameters) is built by
+:class:`ddcm_casadi.formulations.ncp.FBSystem`; the maths of each stage (why a corner needs
+its own branch, why the branch finish is exact, when the predictor's result is accepted) is in
+that class's docstring. This module owns the iteration and its state: the cache of
+factorisations per active set and the counters.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+
+from ddcm_casadi.problems.complementarity import CONTACT, b_stationarity, free_sign, identify
+from ddcm_casadi.linalg import ReferenceFactor, SingularMatrix, UpdatedFactor
+from ddcm_casadi.loops.newton import NewtonResult, newton_solve, smoothed_newton_solve
+
+
+class ActiveSetSolver:
+    """Solves one :class:`~ddcm_casadi.formulations.ncp.FBSystem` many times (state: the
+    factorisations of the piece systems, one per active set, and the counters ``stats``).
+
+    Parameters
+    ----------
+    system : FBSystem
+    predictor : bool
+        Try the active-set predictor before semismooth Newton (not for proximal systems).
+    """
+
+    #: Factors of piece systems kept (one per active set).
+    LU_CACHE = 4
+    #: Full factorisations those rest on (a few GB each at 1e6 unknowns).
+    FACTORS_KEPT = 2
+
+    def __init__(self, system, *, predictor: bool = True) -> None:
+        self.system = system
+        self.predictor = bool(predictor) and not system.proximal
+        self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
+        self._lu: OrderedDict[bytes, object] = OrderedDict()
+        self._reference: ReferenceFactor | None = None  # the last piece matrix factorised itself
+        if self.predictor:
+            system.branch_system()  # part of the build, not of the first solve
+
+    def reset(self) -> None:
+        """Forget the cached factorisations and the counters (for cold-start measurements)."""
+        self._lu.clear()
+        self._reference = None
+        self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
+
+    def solve(self, z0, base, opts, *, corner_tol: float = 1e-3):
+        """Predictor, semismooth Newton, a corner (biactive) polish, smoothing, branch finish.
+
+        ``base``: the values of the system's base parameters (the problem's, and ``lam``,
+        ``rho`` for a proximal system). Returns ``(x, p, state, result, mu, stages)``.
+        """
+        system = self.system
+        kw = dict(jacobian=system.jacobian, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        spent = 0
+        if self.predictor:
+            predicted, spent = self._active_set(z0, base, opts, corner_tol=corner_tol, max_switches=opts.max_iter)
+            if predicted is not None:
+                self.stats["predicted"] += 1
+                predicted.message = predicted.message.replace("active set", "active-set predictor")
+                x, p, st = system.split(predicted.z)
+                return x, p, st, predicted, 0.0, 0
+        self.stats["newton"] += 1
+
+        def pack(mu: float) -> np.ndarray:
+            return system.pack(base, mu=mu)
+
+        if not system.corner:
+            res, mu, stages = smoothed_newton_solve(system.rj, system.r, z0, pack, smoothing=opts.smoothing, **kw)
+            res.iterations += spent
+            x, p, st = system.split(res.z)
+            return x, p, st, res, mu, stages
+        best = newton_solve(system.rj, system.r, z0, pack(0.0), **kw)
+        total, mu, stages = spent + best.iterations, 0.0, 0
+        if not best.converged or self._creeping(best.z, base, corner_tol):
+            polished = self._corner(best.z, base, corner_tol, kw)
+            if polished is not None:
+                total += polished.iterations
+                best = polished
+        if not best.converged:
+            best, mu, stages = smoothed_newton_solve(system.rj, system.r, z0, pack, smoothing=opts.smoothing,
+                                                     try_plain=False, **kw)
+            total += best.iterations
+            polished = self._corner(best.z, base, corner_tol, kw)
+            if polished is not None:
+                total += polished.iterations
+                best, mu = polished, 0.0
+        if not best.converged:
+            finish, spent = self.branch_finish((best.z, z0), base, opts, corner_tol=corner_tol)
+            total += spent
+            if finish is not None:
+                best, mu = finish, 0.0
+        best.iterations = total
+        x, p, st = system.split(best.z)
+        return x, p, st, best, mu, stages
+
+    def _solve_piece(self, z, P, branch, held, kw) -> NewtonResult | None:
+        """Newton on the piece system ``branch`` with the pairs ``held`` at the corner (``P``: the
+        problem's parameter values); for a linear model with a cached factorisation. ``None`` if
+        the piece system is singular."""
+        rj, r, jac, linear = self.system.branch_system()
+        Pb = self.system.piece_parameters.pack(P, branch=branch, corner=held.astype(float))
+        if not linear:
+            return newton_solve(rj, r, z, Pb, **dict(kw, jacobian=jac))
+        key = branch.tobytes() + held.tobytes()
+        lu = self._lu.pop(key, None)
+        if lu is None:
+            res, J = rj(z, Pb)
+            try:
+                lu = self._factorize(jac(J))
+            except SingularMatrix:  # singular piece (degenerate active set)
+                return None
+        else:
+            res = r(z, Pb)
+        result = self._refine(z, res, lu, r, Pb, kw)
+        if (result is None or not result.converged) and isinstance(lu, UpdatedFactor):
+            # an update that misses the tolerances (an ill-conditioned capacitance matrix):
+            # factorise this piece itself
+            try:
+                lu = self._factorize(jac(rj(z, Pb)[1]), update=False)
+            except SingularMatrix:
+                return None
+            result = self._refine(z, res, lu, r, Pb, kw)
+        # A reference is cached by its factor only: its kept update columns (up to a few GB at
+        # 1e6 unknowns) serve updates while it is the reference, and go with it.
+        self._lu[key] = lu.factor if isinstance(lu, ReferenceFactor) else lu
+        self._trim_cache()
+        return result
+
+    def _trim_cache(self) -> None:
+        """Keep at most :attr:`LU_CACHE` piece factors, resting on at most :attr:`FACTORS_KEPT`
+        full factorisations (an update holds its base factor): the least recently used go."""
+        bases: list[int] = []
+        for key in reversed(list(self._lu)):
+            lu = self._lu[key]
+            base = id(lu.base if isinstance(lu, UpdatedFactor) else lu)
+            if base not in bases:
+                bases.append(base)
+            if len(bases) > self.FACTORS_KEPT:
+                del self._lu[key]
+        while len(self._lu) > self.LU_CACHE:
+            self._lu.popitem(last=False)
+
+    @staticmethod
+    def _refine(z, res, lu, r, Pb, kw) -> NewtonResult | None:
+        """Newton on a linear piece system with its exact factorised Jacobian ``lu`` from ``z``
+        (residual ``res``): the first step solves it, the next ones refine roundoff."""
+        z = np.array(z, dtype=float)
+        rnorm, increment, it = float(np.max(np.abs(res), initial=0.0)), np.inf, 0
+        for it in range(1, min(3, kw["max_iter"]) + 1):
+            dz = -lu.solve(res)
+            if not np.all(np.isfinite(dz)):
+                return None
+            z = z + dz
+            increment = float(np.max(np.abs(dz), initial=0.0)) / max(1.0, float(np.max(np.abs(z), initial=0.0)))
+            res = r(z, Pb)
+            rnorm = float(np.max(np.abs(res), initial=0.0))
+            if increment <= kw["tol"] and rnorm <= kw["residual_tol"]:
+                return NewtonResult(z, True, it, rnorm, increment, "converged")
+        return NewtonResult(z, False, it, rnorm, increment, "piece system: refinement stalled")
+
+    def _factorize(self, A, *, update: bool = True):
+        """A factor of the piece matrix ``A``: a low-rank update of the last full factorisation
+        when few rows differ (a few pairs switched piece; :class:`~ddcm_casadi.linalg.ReferenceFactor`),
+        else a factorisation of its own, which becomes the reference."""
+        if update and self._reference is not None:
+            lu = self._reference.update(A)
+            if lu is not None:
+                self.stats["updates"] += 1
+                return lu
+        self._reference = None  # its factor and kept columns may go before the new one is made
+        self._reference = ReferenceFactor(A, iterated=True)  # _refine corrects its solves
+        self.stats["factorizations"] += 1
+        return self._reference
+
+    def _signs(self, z, P, branch):
+        """The sign each piece leaves free: ``b_i`` where ``a_i = 0`` is imposed, else ``a_i``."""
+        a, b = self.system.ab(z, P)
+        return free_sign(a, b, branch > 0)
+
+    def branch_finish(self, starts, base, opts, *, corner_tol: float = 1e-3, max_switches: int | None = None):
+        """Primal-dual active-set finish on the pieces of ``Z_E`` (see the class notes).
+
+        Returns ``(result, spent)``: the converged Newton result, or ``None`` if no start leads to
+        a solution whose signs hold (then the caller reports the failure), and the linear solves
+        and Newton steps spent on every start.
+        """
+        max_switches = 2 * self.system.nc + 5 if max_switches is None else max_switches
+        spent = 0
+        for z in starts:
+            res, work = self._active_set(z, base, opts, corner_tol=corner_tol, max_switches=max_switches)
+            spent += work
+            if res is not None:
+                res.iterations = spent
+                res.message = res.message.replace("active set", "branch finish")
+                return res, spent
+        return None, spent
+
+    def _active_set(self, z, base, opts, *, corner_tol: float,
+                    max_switches: int) -> tuple[NewtonResult | None, int]:
+        """Primal-dual active-set iteration from ``z``: solve the piece system of the branches ``z``
+        lies on, switch the pairs whose free sign is violated, until every sign holds.
+
+        A sign-consistent result is accepted if strictly complementary; with biactive pairs (signs
+        hold to 1e-12 relative) it is accepted for ``mcp`` (any sign-consistent point solves the
+        pairs), and for ``mpcc`` those pairs are *held* at the corner as below. If the
+        iteration cycles, the pairs that switched back and forth are the biactive candidates: they
+        are held at the corner (``a_i = b_i = 0``, in the same linear piece system) while the
+        others go on switching; a result with held pairs is accepted only if B-stationary, and a
+        held pair whose multiplier says otherwise is released onto the piece it points to. A piece
+        solve that misses its tolerance still chooses the switches but is never accepted. ``None``
+        if a piece is singular, corners are held or released more than ``3 + nc`` times or
+        ``max_switches`` is reached.
+        Returns ``(result, spent)``, ``spent`` the linear solves and Newton steps (counted also
+        when it fails).
+        """
+        if not np.all(np.isfinite(z)):
+            return None, 0
+        system = self.system
+        P = system.problem_values(base)
+        kw = dict(tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        a, b = system.ab(z, P)
+        branch = (identify(a, b) == CONTACT).astype(float)
+        held = np.zeros(system.nc, dtype=bool)
+        # Each release frees at least one held pair, so one per pair (plus a few re-holds) lets a
+        # corner of many biactive pairs be unwound; max_switches still bounds the whole loop.
+        seen, total, flips, releases = set(), 0, np.zeros(system.nc, dtype=int), 3 + system.nc
+        for _ in range(max_switches):
+            seen.add(branch.tobytes() + held.tobytes())
+            res = self._solve_piece(z, P, branch, held, kw)
+            if res is None or not np.all(np.isfinite(res.z)):
+                return None, total
+            total += res.iterations
+            other = np.where(held, np.inf, self._signs(res.z, P, branch))
+            roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other[~held]), initial=0.0)))
+            worst = -float(np.min(other, initial=np.inf))
+            if not res.converged:
+                # An ill-conditioned piece (a far-off start) may miss residual_tol; its solution
+                # still says which pairs to switch, but it cannot be accepted.
+                if worst <= roundoff:
+                    return None, total
+            elif np.all(other > 0):
+                if not held.any():
+                    res.iterations, res.message = total, "converged (active set)"
+                    return res, total
+                wrong_theta, wrong_nu = b_stationarity(*system.corner_multipliers(res.z), held)
+                if not (wrong_theta.any() or wrong_nu.any()):
+                    res.iterations, res.message = total, "converged (biactive corner)"
+                    return res, total
+                if releases == 0:
+                    return None, total
+                # Not B-stationary: leave the corner along the piece its multipliers point to.
+                releases -= 1
+                held &= ~(wrong_theta | wrong_nu)
+                branch = np.where(wrong_theta, 0.0, np.where(wrong_nu, 1.0, branch))
+                z, seen, flips[:] = res.z, set(), 0
+                continue
+            elif worst <= roundoff:
+                if not system.corner:  # mcp: signs hold to roundoff; the caller checks the residual
+                    res.iterations, res.message = total, "converged (active set)"
+                    return res, total
+                if releases == 0:
+                    return None, total
+                # Biactive to roundoff: hold those pairs at the corner (accepted if B-stationary).
+                releases -= 1
+                held |= np.abs(other) <= roundoff
+                z, seen, flips[:] = res.z, set(), 0
+                continue
+            z = res.z
+            switch = other < 0
+            flips += switch
+            branch = np.where(switch, 1.0 - branch, branch)
+            if branch.tobytes() + held.tobytes() in seen:
+                # Cycling between pieces: the solution is at the corner of the pairs that switch
+                # back and forth, if anywhere.
+                if not system.corner or releases == 0:
+                    return None, total
+                releases -= 1
+                held |= flips >= 2
+                seen, flips[:] = set(), 0
+        return None, total
+
+    def polish_corner(self, z, base, opts, *, corner_tol: float = 1e-3):
+        """The biactive-branch solution near ``z`` if it is B-stationary, else ``None``."""
+        kw = dict(jacobian=self.system.jacobian, tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
+        return self._corner(z, base, corner_tol, kw) if self.system.corner else None
+
+    def _creeping(self, z, base, corner_tol) -> bool:
+        a, b = self.system.ab(z, self.system.problem_values(base))
+        near = np.maximum(np.abs(a), np.abs(b)) <= corner_tol
+        return bool(np.any(np.minimum(np.abs(a), np.abs(b))[near] > 1e-14))
+
+    def _corner(self, z, base, corner_tol, kw):
+        """Newton on the biactive branch of the pairs within ``corner_tol`` of a corner; ``None``
+        unless it converges and is B-stationary (no ``theta_i > 0``: ``a_i`` wants to open, nor
+        ``nu_i > 0``: ``b_i`` does; :func:`ddcm_casadi.problems.complementarity.b_stationarity`)."""
+        if not np.all(np.isfinite(z)):
+            return None
+        system = self.system
+        a, b = system.ab(z, system.problem_values(base))
+        sel = (np.maximum(np.abs(a), np.abs(b)) <= corner_tol).astype(float)
+        if not sel.any():
+            return None
+        res = newton_solve(system.rj, system.r, z, system.pack(base, mu=0.0, corner=sel), **kw)
+        if not res.converged:
+            return None
+        wrong_theta, wrong_nu = b_stationarity(*system.corner_multipliers(res.z), sel > 0)
+        if wrong_theta.any() or wrong_nu.any():
+            return None
+        res.message = "converged (biactive corner)"
+        return res

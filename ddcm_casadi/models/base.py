@@ -1,0 +1,487 @@
+"""The model description: what the problem is, independent of how contact is enforced.
+
+A :class:`ContactModel` describes a small-strain, linear structure with ``n`` displacement unknowns
+``u``, ``m`` material points (elements) and ``nc`` unilateral contact pairs:
+
+- kinematics ``strain = B u`` with a sparse ``B`` (m x n) and material-point volumes ``w`` (m);
+- equilibrium ``B^T W stress - G^T (a * p) = f`` with loads ``f``;
+- contact pairs ``gap = G u + gap0 >= 0``, ``p >= 0``, ``gap * p = 0`` with contact areas ``a``;
+- a material law ``stress = E strain`` (classical) and/or a material data set (DDCM).
+
+The load path is a sequence of steps, each with its own ``gap0`` (obstacle positions) and ``f``.
+Both the classical and the data-driven problem are built from this one object
+(see :mod:`ddcm_casadi.problems.contract`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+import scipy.sparse as sp
+
+from ddcm_casadi.models.contact_laws import get_contact_law
+from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.linalg import SingularMatrix, factorize, to_casadi
+
+
+#: Kinematics a model may declare: ``small`` (linear strains and gaps: the problems are affine) or
+#: ``finite`` (a nonlinear strain measure; the problems are nonlinear).
+KINEMATICS = ("small", "finite")
+
+#: Imposed strain beyond which :meth:`ContactModel.path_warnings` warns: small-strain kinematics
+#: then differ from finite-strain ones by more than ~5 % (Green-Lagrange ``e + e^2/2`` vs ``e``).
+LARGE_STRAIN = 0.1
+
+
+@dataclass(frozen=True)
+class FigureSpec:
+    """One figure of a model kind, as data: which drawing makes it, with which options.
+
+    A model kind says *which* figures it has (:meth:`ContactModel.figures`); the output layer owns
+    the functions that draw them, looked up by ``drawing`` in its registry
+    (:func:`ddcm_casadi.outputs.drawings.drawing`) and called as ``drawing(comparison, **options)``. So a
+    model never imports the plotting code (nor matplotlib).
+
+    Parameters
+    ----------
+    drawing : str
+        The name of the drawing function in the registry, e.g. ``"contact_history"``.
+    options : mapping
+        Keyword arguments of the drawing function, e.g. ``{"variant": "ddcm"}``.
+    """
+
+    drawing: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+def drawn_formulation(runs: Iterable[tuple[str, str]], variant: str) -> str | None:
+    """The formulation whose run of ``variant`` a one-run figure shows: Fischer-Burmeister if it
+    was run, else the first formulation run in that variant (``None`` if the variant was not run).
+
+    Parameters
+    ----------
+    runs : iterable of (str, str)
+        The ``(variant, formulation)`` keys of the runs made.
+    variant : str
+        ``"classical"`` or ``"ddcm"``.
+    """
+    names = [name for v, name in runs if v == variant]
+    if not names:
+        return None
+    return "fischer_burmeister" if "fischer_burmeister" in names else names[0]
+
+
+def _finite(name: str, a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"{name} must be finite (no NaN or infinity)")
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class ContactModel:
+    """A linear small-strain structure with unilateral contact pairs and a load path.
+
+    Parameters
+    ----------
+    strain_operator : sparse (m, n)
+        ``B``: material-point strains from free displacements.
+    volumes : (m,)
+        Material-point volumes ``w`` (area x length for bars).
+    gap_operator : sparse (nc, n)
+        ``G``: gap ``g = G u + gap0``.
+    contact_area : (nc,)
+        Area on which each contact pressure acts.
+    gap_offsets : (n_steps, nc)
+        ``gap0`` per load step.
+    loads : (n_steps, n)
+        External loads ``f`` per load step.
+    load_parameter : (n_steps,)
+        A scalar per step used to label results and plots (obstacle position for the bar).
+    youngs_modulus : (m,) or None
+        Classical material law; needed for the classical variant.
+    dataset : MaterialDataset, PointData or None
+        Material data; needed for the data-driven variant. One :class:`MaterialDataset` is shared
+        by every material point; :class:`PointData` gives each point its own data set and metric.
+    length_scale : float
+        Characteristic length, used only to nondimensionalise.
+    name : str
+        Human-readable name.
+    """
+
+    strain_operator: sp.csr_matrix
+    volumes: np.ndarray
+    gap_operator: sp.csr_matrix
+    contact_area: np.ndarray
+    gap_offsets: np.ndarray
+    loads: np.ndarray
+    load_parameter: np.ndarray
+    youngs_modulus: np.ndarray | None = None
+    dataset: MaterialDataset | PointData | None = None
+    length_scale: float = 1.0
+    name: str = "model"
+    load_parameter_name: str = "load parameter"
+    strain_components: int = 1
+    kinematics: str = "small"
+    contact_law: str = "signorini"
+    _cache: dict = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        B = sp.csr_matrix(self.strain_operator, dtype=float)
+        G = sp.csr_matrix(self.gap_operator, dtype=float)
+        get_contact_law(self.contact_law)
+        if self.kinematics not in KINEMATICS:
+            raise InputError(f"kinematics must be one of {', '.join(map(repr, KINEMATICS))}, got {self.kinematics!r}")
+        k = self.strain_components
+        if isinstance(k, bool) or int(k) != k or k < 1:
+            raise InputError(f"strain_components must be a positive integer, got {k!r}")
+        if B.shape[0] % k:
+            raise InputError(f"strain operator has {B.shape[0]} rows, not a multiple of {k} components")
+        m, n = B.shape[0] // k, B.shape[1]
+        nc = G.shape[0]
+        if G.shape[1] != n:
+            raise InputError(f"gap operator has {G.shape[1]} columns, expected {n}")
+        w = _finite("volumes", np.broadcast_to(self.volumes, (m,)).copy())
+        a = _finite("contact_area", np.broadcast_to(self.contact_area, (nc,)).copy())
+        if np.any(w <= 0):
+            raise InputError("volumes (area x length) must be positive")
+        if np.any(a <= 0):
+            raise InputError("contact_area must be positive")
+        g0 = _finite("obstacle positions", np.atleast_2d(self.gap_offsets))
+        n_steps = g0.shape[0]
+        if n_steps == 0:
+            raise InputError("the load path has no steps")
+        if g0.shape[1] != nc:
+            raise InputError(f"gap offsets have {g0.shape[1]} columns, expected {nc}")
+        f = _finite("loads", np.broadcast_to(self.loads, (n_steps, n)).copy())
+        lp = _finite("load parameter", np.broadcast_to(self.load_parameter, (n_steps,)).copy())
+        E = None
+        if self.youngs_modulus is not None:
+            E = _finite("youngs_modulus", np.broadcast_to(self.youngs_modulus, (m,)).copy())
+            if np.any(E <= 0):
+                raise InputError("youngs_modulus must be positive")
+        if E is None and self.dataset is None:
+            raise InputError("a model needs a Young's modulus, a material data set, or both")
+        L = check_positive("length", self.length_scale)
+        if self.dataset is not None:
+            if not isinstance(self.dataset, (MaterialDataset, PointData)):
+                raise InputError("dataset must be a MaterialDataset or PointData")
+            self.dataset.point_materials(m)  # checks a per-point material list against the model
+            if self.dataset.k != k:
+                raise InputError(f"the data set has {self.dataset.k} strain components per point, "
+                                 f"the model's material points have {k}")
+        for k, v in dict(strain_operator=B, gap_operator=G, volumes=w, contact_area=a,
+                         gap_offsets=g0, loads=f, load_parameter=lp, youngs_modulus=E,
+                         length_scale=L).items():
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "_cache", {})
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_dofs(self) -> int:
+        return self.strain_operator.shape[1]
+
+    @property
+    def n_points(self) -> int:
+        """Number of material points (elements)."""
+        return self.strain_operator.shape[0] // self.strain_components
+
+    @property
+    def n_contacts(self) -> int:
+        return self.gap_operator.shape[0]
+
+    @property
+    def n_steps(self) -> int:
+        return self.gap_offsets.shape[0]
+
+    # ----------------------------------------------------------------- scales
+    @property
+    def metric(self) -> np.ndarray:
+        """DDCM metric constant ``c`` per (one-component) material point."""
+        if self.dataset is None:
+            raise InputError("this model has no material data set")
+        return self.dataset.point_metric(self.n_points)
+
+    def point_stiffness(self, kind: str) -> np.ndarray:
+        """A representative modulus per material point: ``E`` (``"classical"``), or for the data
+        (``"ddcm"``) the secant modulus of each point's data set, ``std(stress) / std(strain)``
+        (exactly ``E`` for Hookean data), never the metric: the states a projection reaches
+        follow the data, whatever ``c`` is."""
+        if kind == "classical":
+            if self.youngs_modulus is None:
+                raise InputError("this model has no Young's modulus (classical variant unavailable)")
+            return self.youngs_modulus
+        _, material = self.dataset.point_materials(self.n_points)
+        return np.array([d.secant_modulus for d in self.dataset.datasets])[material]
+
+    def scales_for(self, kind: str) -> dict:
+        """Reference magnitudes of the ``"classical"`` or the ``"ddcm"`` problem (cached).
+
+        Derived from the problem itself, by a linear solve with a representative stiffness
+        ``K = B^T W D B`` (``D`` from :meth:`point_stiffness`):
+
+        - the response to the largest load, ``K u_f = f``;
+        - the displacement the obstacles impose where they penetrate the undeformed body
+          (``gap0 < 0``): ``(K + kappa G^T A G) u_g = -kappa G^T A gap0^-`` with a stiff spring
+          ``kappa``, rescaled so that the imposed normal displacement is the penetration.
+
+        Displacement ``max(|u_f|, max gap0^-)``, strain ``max |B u|`` of both, stress
+        ``D_max strain``, force ``stress x`` a representative section (mean contact area, or the
+        members' volume over length). An obstacle that never penetrates contributes nothing, and
+        the classical scales never see the data: a data set or its metric cannot change a
+        classical number. The projection's energy unit is ``sum(w) (c eps^2 + sigma^2 / c) / 2``
+        with the metric ``c`` (its largest eigenvalue), the size of a distance at these scales.
+        """
+        cached = self._cache.get(kind)
+        if cached is None:
+            cached = self._reference_scales(kind)
+            self._cache[kind] = cached
+        return dict(cached)
+
+    def _reference_scales(self, kind: str) -> dict:
+        D = self.point_stiffness(kind)
+        B, G, w, a = self.strain_operator, self.gap_operator, self.volumes, self.contact_area
+        k = self.strain_components
+        K = (B.T @ sp.diags(np.repeat(w * D, k)) @ B).tocsc()
+        k_max = float(np.max(K.diagonal())) if K.shape[0] else 1.0
+        load_step = int(np.argmax(np.max(np.abs(self.loads), axis=1))) if self.loads.size else 0
+        f = self.loads[load_step] if self.loads.size else np.zeros(self.n_dofs)
+        penetration = np.maximum(-self.gap_offsets, 0.0)
+        pen = float(np.max(penetration)) if penetration.size else 0.0
+        kappa = 1e3 * k_max / float(np.max(a)) if self.n_contacts else 0.0
+        GA = G.T @ sp.diags(a) if self.n_contacts else None
+        spring_lu = None
+
+        def spring():  # K with a stiff spring on every pair (bodies resting on obstacles only)
+            nonlocal spring_lu
+            if spring_lu is None:
+                spring_lu = factorize(K + kappa * (GA @ G) if self.n_contacts else K)
+            return spring_lu
+
+        u_f = np.zeros(self.n_dofs)
+        strain = 0.0
+        with np.errstate(over="ignore", invalid="ignore"):
+            if np.any(f):
+                try:
+                    lu = factorize(K)
+                except SingularMatrix:
+                    lu = spring()
+                u_f = lu.solve(f)
+                strain = float(np.max(np.abs(B @ u_f), initial=0.0))
+            if pen > 0:
+                worst = int(np.argmax(np.max(penetration, axis=1)))
+                u_g = spring().solve(kappa * (GA @ penetration[worst]))
+                normal = float(np.max(np.abs(G @ u_g), initial=0.0))
+                if normal > 0:
+                    imposed = float(np.max(np.abs(B @ u_g), initial=0.0)) * pen / normal
+                    self._cache[("imposed_strain", kind)] = imposed
+                    strain = max(strain, imposed)
+        U = max(float(np.max(np.abs(u_f), initial=0.0)), pen)
+        if not (U > 0 and strain > 0):
+            U, strain = 1e-3 * self.length_scale, 1e-3  # nothing moves: any unit will do
+        modulus = float(np.max(D))
+        rows = abs(B).max(axis=1).toarray().ravel() if B.nnz else np.zeros(0)
+        section = (float(np.mean(a)) if self.n_contacts else
+                   float(np.median(np.repeat(w, k)[rows > 0] * rows[rows > 0])) if np.any(rows > 0)
+                   else float(np.mean(w)) / self.length_scale)
+        stress = modulus * strain
+        if kind == "classical":
+            metric, energy = modulus, float(np.sum(w)) * modulus * strain ** 2
+        else:
+            metric = max(m.modulus for m in self.dataset.point_materials(self.n_points)[0])
+            energy = float(np.sum(w)) * 0.5 * (metric * strain ** 2 + stress ** 2 / metric)
+        scales = dict(length=self.length_scale, displacement=U, strain=strain, stress=stress,
+                      force=stress * section, energy=energy, modulus=modulus, metric=metric)
+        # Squares and products of scales (energies, d^2) must stay representable: each within 1e+-150.
+        bad = {k: v for k, v in scales.items() if not (np.isfinite(v) and 1e-150 <= v <= 1e150)}
+        if bad:
+            name, value = next(iter(bad.items()))
+            raise InputError(f"obstacle positions, loads or moduli are out of range: the {kind} problem's {name} "
+                             f"scale is {value:.3g}, outside 1e-150 to 1e150")
+        return scales
+
+    def path_warnings(self) -> list[str]:
+        """What is physically odd about the load path, one line each; refuses what is meaningless.
+
+        - The obstacles already penetrate the body at the first step: the body starts with
+          contact forces and no load (often an obstacle placed on the wrong side).
+        - The largest strain the obstacles impose (the penetration spread over the body as the
+          scales estimate it, :meth:`scales_for`) beyond :data:`LARGE_STRAIN`: far outside the
+          small-strain model.
+
+        Raises
+        ------
+        InputError
+            An imposed strain of 1 or more (an obstacle pushed past a fixed end, through the
+            body): a small-strain model is meaningless there.
+
+        The strain checks apply to small kinematics only.
+        """
+        out = []
+        first = -np.min(self.gap_offsets[0], initial=0.0)
+        if first > 1e-12 * self.length_scale:
+            n = int(np.sum(self.gap_offsets[0] < 0))
+            out.append(f"the obstacles start inside the body: {n} contact pair(s) penetrate by up to {first:.3g} m "
+                       f"at the first step ({self.load_parameter_name}={self.load_parameter[0]:.6g}), so there are "
+                       f"contact forces before any load")
+        if self.kinematics != "small":  # large strains and rotations are what finite kinematics model
+            return out
+        self.scales_for("classical" if self.youngs_modulus is not None else "ddcm")
+        imposed = max((v for k, v in self._cache.items() if isinstance(k, tuple) and k[0] == "imposed_strain"),
+                      default=0.0)
+        worst = int(np.argmin(np.min(self.gap_offsets, axis=1))) if self.n_contacts else 0
+        where = f"{self.load_parameter_name}={self.load_parameter[worst]:.6g}"
+        if imposed >= 1.0:
+            raise InputError(f"the obstacles impose a strain of about {imposed:.3g} at {where} (penetration "
+                             f"{-np.min(self.gap_offsets):.3g} m): pushed past a fixed end or through the body; "
+                             f"a small-strain model is meaningless there")
+        if imposed > LARGE_STRAIN:
+            out.append(f"the obstacles impose a strain of about {imposed:.3g} at {where}: far beyond the "
+                       f"small-strain model (> {LARGE_STRAIN:g})")
+        return out
+
+    @property
+    def scales(self) -> dict:
+        """Reference magnitudes of the classical problem if the model has one, else of the
+        projection (see :meth:`scales_for`)."""
+        return self.scales_for("classical" if self.youngs_modulus is not None else "ddcm")
+
+    @property
+    def contact_stiffness(self) -> float:
+        """Reference contact stiffness ``E / length`` (Pa/m), the unit of the penalty parameters."""
+        s = self.scales
+        return s["modulus"] / s["length"]
+
+    # -------------------------------------------------------------- mechanics
+    def material_matrix(self) -> sp.csr_matrix:
+        """The classical law ``stress = D strain`` of every material point: sparse ``(m k, m k)``,
+        block diagonal (cached). One component per point: ``D = diag(E)``; a model kind whose
+        points carry several components (continua) overrides this."""
+        D = self._cache.get("material_matrix")
+        if D is None:
+            if self.youngs_modulus is None:
+                raise InputError("this model has no Young's modulus (classical variant unavailable)")
+            if self.strain_components != 1:
+                raise InputError("a classical law for several strain components is not available for this model")
+            D = sp.diags(self.youngs_modulus).tocsr()
+            self._cache["material_matrix"] = D
+        return D
+
+    def stress(self, strain: np.ndarray) -> np.ndarray:
+        """Classical stresses ``D strain`` (flat, point-major, as :meth:`strain` gives them)."""
+        return self.material_matrix() @ np.asarray(strain)
+
+    def stiffness(self) -> sp.csr_matrix:
+        """Classical stiffness ``K = B^T W D B`` (sparse; ``W`` the volumes on every component)."""
+        B = self.strain_operator
+        W = sp.diags(np.repeat(self.volumes, self.strain_components))
+        return (B.T @ (W @ self.material_matrix()) @ B).tocsr()
+
+    # -------------------------------------------------------------- load steps and their history
+    def history_sizes(self) -> dict[str, int]:
+        """Names and sizes of the parameters a step takes from the previous converged step, after
+        ``gap0`` and ``f`` (none here; a frictional law adds the previous tangential
+        displacements, a follower load the previous configuration)."""
+        return {}
+
+    def step_values(self, step: int, previous: dict | None = None) -> dict[str, np.ndarray]:
+        """The parameter values of load step ``step`` by name: ``gap0``, ``f`` and those of
+        :meth:`history_sizes`. ``previous``: the physical fields (``u``, ``p``; for DDCM also
+        ``strain`` and ``stress``) of the last converged step, ``None`` before the first. The
+        drivers pass it; a model kind whose steps depend on their history overrides this."""
+        return dict(gap0=self.gap_offsets[step], f=self.loads[step])
+
+    def gap(self, u: np.ndarray, step: int) -> np.ndarray:
+        return self.gap_operator @ np.asarray(u) + self.gap_offsets[step]
+
+    def active_contacts(self, pressure: np.ndarray) -> np.ndarray:
+        """Which pairs carry a pressure above 1e-8 of the stress scale (one rule for tables and
+        figures); ``pressure`` may be stacked over steps."""
+        return np.asarray(pressure) > 1e-8 * self.scales["stress"]
+
+    def strain(self, u: np.ndarray) -> np.ndarray:
+        """Material-point strains (flat, point-major) of the free displacements ``u``."""
+        return self.strain_operator @ np.asarray(u)
+
+    def strain_expression(self, u):
+        """:meth:`strain` for a CasADi symbol ``u``. Small kinematics: ``B u``. A model kind with
+        ``kinematics = "finite"`` overrides both with its nonlinear strain (Green-Lagrange); the
+        problems then take the nonlinear form (:mod:`ddcm_casadi.problems.contract`), and ``B`` is the
+        strain's derivative at the reference configuration (used only for reference scales)."""
+        return to_casadi(self.strain_operator) @ u
+
+    def closed_form(self, step: int):
+        """Exact classical solution ``(u, p)`` if the model knows one in closed form, else ``None``."""
+        return None
+
+    # ------------------------------------------- self-description (what the front ends need)
+    # A model kind overrides these; the harness, CLI, plots and case files call them and never
+    # check a model's type.
+    def penalty_closed_form(self, step: int, gamma: float):
+        """The penalty solution ``(u, p)`` for the penalty stiffness ``gamma`` (Pa/m) if known in
+        closed form, else ``None`` (then a penalty run is compared with :meth:`closed_form`)."""
+        return None
+
+    def describe(self) -> dict:
+        """The model's record in ``results.json`` (small: sizes, names, moduli; no fields)."""
+        E = None
+        if self.youngs_modulus is not None:
+            moduli = np.unique(self.youngs_modulus)
+            E = float(moduli[0]) if moduli.size == 1 else self.youngs_modulus.tolist()
+        return dict(name=self.name, type=type(self).__name__, n_dofs=self.n_dofs, n_points=self.n_points,
+                    n_contacts=self.n_contacts, n_steps=self.n_steps,
+                    load_parameter_name=self.load_parameter_name,
+                    load_parameter=self.load_parameter.tolist(), youngs_modulus=E, kinematics=self.kinematics,
+                    contact_law=self.contact_law)
+
+    @property
+    def scalar(self) -> bool:
+        """One unknown, one material point, at most one pair: tables hold ``u`` and ``p`` themselves."""
+        return self.n_dofs == 1 and self.n_contacts <= 1 and self.n_points == 1
+
+    def step_summary(self, u: np.ndarray, p: np.ndarray) -> dict:
+        """The per-step columns of ``results.csv`` that describe the solution ``(u, p)``."""
+        if self.scalar:
+            return dict(u=float(u[-1]), p=float(p[0]) if p.size else float("nan"))
+        return dict(max_abs_u=float(np.max(np.abs(u))), total_contact_force=float(np.sum(self.contact_area * p)),
+                    active_contacts=int(np.sum(self.active_contacts(p))))
+
+    def extra_fields(self, u: np.ndarray, stress: np.ndarray) -> dict:
+        """Model-specific per-step fields (stacked over steps: ``u`` is ``(n_steps, n_dofs)``),
+        added to :meth:`ddcm_casadi.drivers.harness.Comparison.fields`."""
+        return {}
+
+    def contact_pair_labels(self) -> list[str]:
+        """A label per contact pair (legends)."""
+        return [f"pair {j}" for j in range(self.n_contacts)]
+
+    def results_fields(self, fields: dict) -> dict:
+        """What ``results.json`` keeps of one run's per-step fields (:meth:`Comparison.fields`):
+        everything for bars and trusses; a model kind with large fields keeps a summary and
+        has the fields written elsewhere (:meth:`field_outputs`)."""
+        return fields
+
+    def field_outputs(self) -> tuple[str, ...]:
+        """The field files this model kind has besides ``results.csv`` and ``results.json``, as the
+        names of writers in the output layer's registry (:func:`ddcm_casadi.outputs.drawings.field_writer`),
+        e.g. ``("vtu",)`` for a continuum. Bars and trusses have none."""
+        return ()
+
+    def figures(self, runs: Iterable[tuple[str, str]]) -> dict[str, FigureSpec]:
+        """The figures this model kind has, as data: ``{file name: FigureSpec}``, drawn by the
+        output layer (:func:`ddcm_casadi.outputs.save.save_figures`).
+
+        Parameters
+        ----------
+        runs : iterable of (str, str)
+            The ``(variant, formulation)`` keys of the runs made (a figure of one run picks one).
+
+        Returns
+        -------
+        dict
+            Any model: the contact-force history (``contact_history.png``).
+        """
+        return {"contact_history.png": FigureSpec("contact_history", {"pair_labels": self.contact_pair_labels()})}

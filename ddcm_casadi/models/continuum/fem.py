@@ -1,0 +1,236 @@
+r"""Finite-element operators of a small-strain solid, from scikit-fem bases.
+
+scikit-fem supplies the elements, the quadrature and the basis gradients; this module only
+arranges them into the sparse operators a :class:`~ddcm_casadi.models.base.ContactModel` needs:
+
+- the strain at every quadrature point in Mandel notation (``k = 3`` in plane strain,
+  ``k = 6`` in 3-D), ``eps = B u``, with ``B`` sparse ``(m k, N)``, ``m`` = elements x
+  quadrature points, and the quadrature weights ``w`` (the volume each point stands for);
+- load vectors from body forces and surface tractions;
+- the boundary dofs of contact and their tributary areas.
+
+Mandel strain from the displacement gradient ``G_ab = du_a / dx_b``:
+
+.. math::  \varepsilon = [G_{11}, G_{22}, (G_{12} + G_{21})/\sqrt 2]
+           \quad\text{(2-D)},\qquad
+           [G_{11}, G_{22}, G_{33}, (G_{23} + G_{32})/\sqrt 2, (G_{13} + G_{31})/\sqrt 2,
+           (G_{12} + G_{21})/\sqrt 2] \quad\text{(3-D)},
+
+so that ``eps . sigma`` is the tensor product and ``K = B^T W C B`` the stiffness
+(``docs/maths.md``, "Continua").
+
+The quadrature is the lowest that integrates the stiffness exactly (the centroid for linear
+elements, order 2 for quadratic ones): every quadrature point is a DDCM material point, so a higher order would
+only add unknowns.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+import skfem
+from skfem.quadrature import get_quadrature
+
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.data.metric import COMPONENTS
+
+_ELEMENTS = {
+    (2, 1): skfem.ElementTriP1, (2, 2): skfem.ElementTriP2,
+    (3, 1): skfem.ElementTetP1, (3, 2): skfem.ElementTetP2,
+}
+_SQRT2 = math.sqrt(2.0)
+
+
+def scalar_element(dimension: int, degree: int) -> skfem.Element:
+    """The Lagrange element of ``degree`` (1 or 2) on triangles or tetrahedra."""
+    try:
+        return _ELEMENTS[(dimension, degree)]()
+    except KeyError:
+        raise InputError(f"elements of degree {degree!r} in {dimension}-D are not available; use 1 or 2") from None
+
+
+@dataclass(frozen=True, eq=False)
+class Discretisation:
+    """A mesh with vector-valued Lagrange elements of one degree and its quadrature.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTri1 or skfem.MeshTet1
+    degree : {1, 2}
+    """
+
+    mesh: skfem.Mesh
+    degree: int
+    basis: skfem.CellBasis
+    scalar_basis: skfem.CellBasis
+
+    @classmethod
+    def create(cls, mesh: skfem.Mesh, degree: int) -> "Discretisation":
+        dim = mesh.p.shape[0]
+        element = scalar_element(dim, degree)
+        quadrature = _quadrature(element.refdom, 2 * (degree - 1))
+        return cls(mesh=mesh, degree=degree,
+                   basis=skfem.Basis(mesh, skfem.ElementVector(element, dim=dim), quadrature=quadrature),
+                   scalar_basis=skfem.Basis(mesh, element, quadrature=quadrature))
+
+    @property
+    def dimension(self) -> int:
+        return self.mesh.p.shape[0]
+
+    @property
+    def components(self) -> int:
+        """Mandel strain components per material point."""
+        return COMPONENTS[self.dimension]
+
+    @property
+    def n_dofs(self) -> int:
+        return self.basis.N
+
+    @property
+    def points_per_element(self) -> int:
+        return self.basis.X.shape[1]
+
+    @cached_property
+    def _vector_dofs(self) -> np.ndarray:
+        sb, vb = self.scalar_basis, self.basis
+        out = np.full((self.dimension, sb.N), -1, dtype=np.int64)
+        for name in ("nodal_dofs", "facet_dofs", "edge_dofs", "interior_dofs"):
+            s, v = getattr(sb, name, None), getattr(vb, name, None)
+            if s is not None and s.size:
+                out[:, s.ravel()] = v.reshape(self.dimension, -1)
+        if np.any(out < 0):  # pragma: no cover - an element with dofs of another kind
+            raise InputError("cannot map the scalar dofs of this element to its vector dofs")
+        return out
+
+    def vector_dofs(self) -> np.ndarray:
+        """``(d, N_scalar)``: the vector dofs at each scalar dof's location (one per component;
+        computed once)."""
+        return self._vector_dofs
+
+    def dof_locations(self) -> np.ndarray:
+        """``(N_scalar, d)`` coordinates of the scalar dofs (nodes, then edge midpoints)."""
+        return self.scalar_basis.doflocs.T.copy()
+
+    def rigid_body_modes(self) -> np.ndarray:
+        """``(N, 3)`` in 2-D, ``(N, 6)`` in 3-D: the translations, then the rotations in the
+        ``(x, y)`` (and ``(y, z)``, ``(x, z)``) planes about the dofs' centroid, as columns over
+        all vector dofs (the near-null space of an elastic stiffness)."""
+        d = self.dimension
+        X = self.dof_locations()
+        X = X - X.mean(axis=0)
+        vd = self.vector_dofs()
+        planes = [(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)]
+        modes = np.zeros((self.n_dofs, d + len(planes)))
+        for c in range(d):
+            modes[vd[c], c] = 1.0
+        for j, (a, b) in enumerate(planes, start=d):
+            modes[vd[a], j], modes[vd[b], j] = -X[:, b], X[:, a]
+        return modes
+
+    def quadrature_points(self) -> np.ndarray:
+        """``(m, d)`` global coordinates of the material points (element-major)."""
+        x = self.basis.mapping.F(self.basis.X)  # (d, nelems, nqp)
+        return x.reshape(self.dimension, -1).T.copy()
+
+    def element_of_point(self) -> np.ndarray:
+        """``(m,)`` the element of each material point."""
+        return np.repeat(np.arange(self.mesh.t.shape[1]), self.points_per_element)
+
+
+def _quadrature(refdom, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rule of ``order`` on the reference simplex; order 0 is the one-point centroid rule
+    (scikit-fem's lowest rule on triangles has three points)."""
+    if order == 0:
+        d = refdom.dim()
+        return np.full((d, 1), 1.0 / (d + 1)), np.array([1.0 / math.factorial(d)])
+    return get_quadrature(refdom, order)
+
+
+def strain_operator(disc: Discretisation) -> tuple[sp.csr_matrix, np.ndarray]:
+    """``B`` (Mandel strains at the quadrature points, ``(m k, N)``) and the weights ``w`` (m,).
+
+    Rows are point-major: the ``k`` components of point ``i`` are rows ``i k .. i k + k - 1``;
+    points are element-major (``i = element * nqp + q``). Built from the basis gradients without a
+    loop over elements (one pass per local basis function).
+    """
+    basis, d, k = disc.basis, disc.dimension, disc.components
+    ne, nq = basis.nelems, disc.points_per_element
+    if d == 2:
+        pairs = [(0, 0), (1, 1), (0, 1)]
+    else:
+        pairs = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
+    rows_base = (np.arange(ne * nq).reshape(ne, nq) * k)  # first row of each point
+    rows, cols, vals = [], [], []
+    for i, phi in enumerate(basis.basis):
+        G = phi[0].grad  # (d, d, ne, nq): G[a, b] = d phi_a / d x_b
+        col = np.broadcast_to(basis.element_dofs[i][:, None], (ne, nq))
+        for c, (a, b) in enumerate(pairs):
+            v = G[a, a] if a == b else (G[a, b] + G[b, a]) / _SQRT2
+            keep = v != 0.0
+            if not np.any(keep):
+                continue
+            rows.append((rows_base + c)[keep])
+            cols.append(col[keep])
+            vals.append(v[keep])
+    B = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(ne * nq * k, disc.n_dofs))
+    B.sum_duplicates()
+    return B, np.asarray(basis.dx, dtype=float).ravel().copy()
+
+
+def body_load(disc: Discretisation, force_density, elements: np.ndarray | None = None) -> np.ndarray:
+    """``int b . v dx`` over ``elements`` (all by default): a constant body force (N/m^3)."""
+    b = np.asarray(force_density, dtype=float)
+    basis = disc.basis if elements is None else skfem.Basis(disc.mesh, disc.basis.elem, elements=elements,
+                                                             intorder=max(1, 2 * (disc.degree - 1)))
+
+    @skfem.LinearForm
+    def form(v, w):
+        return sum(b[i] * v[i] for i in range(disc.dimension))
+
+    return np.asarray(form.assemble(basis), dtype=float)
+
+
+def surface_load(disc: Discretisation, facets: np.ndarray, traction) -> np.ndarray:
+    """``int t . v ds`` over boundary ``facets``: a constant traction (Pa)."""
+    t = np.asarray(traction, dtype=float)
+    fb = skfem.FacetBasis(disc.mesh, disc.basis.elem, facets=facets, intorder=max(2, 2 * disc.degree))
+
+    @skfem.LinearForm
+    def form(v, w):
+        return sum(t[i] * v[i] for i in range(disc.dimension))
+
+    return np.asarray(form.assemble(fb), dtype=float)
+
+
+def boundary_dofs(disc: Discretisation, facets: np.ndarray) -> np.ndarray:
+    """The scalar dofs on boundary ``facets`` (their nodes, and edge midpoints for P2)."""
+    dofs = disc.scalar_basis.get_dofs(facets)
+    return np.unique(dofs.all()).astype(np.int64)
+
+
+def tributary_areas(disc: Discretisation, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""The scalar dofs on ``facets`` and the boundary area each stands for (lumped, HRZ).
+
+    On every facet ``f`` of area ``|f|`` each local basis function gets
+    ``|f| M_ii / sum_j M_jj`` with ``M_ii = int_f phi_i^2``: positive for any element degree
+    (row sums give zero vertex areas for quadratic triangles) and equal shares for linear ones.
+    A dof's area sums over its facets, so the areas add up to the boundary's area.
+    """
+    fb = skfem.FacetBasis(disc.mesh, disc.scalar_basis.elem, facets=facets, intorder=max(2, 2 * disc.degree))
+    dx = fb.dx  # (nf, nq)
+    diag = np.stack([np.sum(np.asarray(phi[0]) ** 2 * dx, axis=1) for phi in fb.basis])  # (nbf, nf)
+    area = np.sum(dx, axis=1)
+    share = diag / np.sum(diag, axis=0) * area
+    total = np.bincount(fb.element_dofs.ravel(), weights=share.ravel(), minlength=disc.scalar_basis.N)
+    used = boundary_dofs(disc, facets)  # the element's other dofs have phi = 0 on the facet
+    return used, total[used]
+
+
+def boundary_triangles(mesh: skfem.Mesh) -> np.ndarray:
+    """``(nf, 3)`` the boundary faces of a tetrahedral mesh (for drawing its surface)."""
+    return mesh.facets[:, mesh.boundary_facets()].T.copy()

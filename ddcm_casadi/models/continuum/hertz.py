@@ -1,0 +1,181 @@
+r"""Hertz contact: the closed forms a continuum model is validated against.
+
+A rigid cylinder (2-D, plane strain) or sphere (3-D) of radius ``R`` pressed into an isotropic
+elastic body (``E``, ``nu``) with a frictionless contact; against a rigid indenter the effective
+modulus is ``E* = E / (1 - nu^2)`` (``docs/maths.md``, "Hertz contact").
+
+2-D, load ``P`` per unit thickness:
+
+.. math::  a = 2 \sqrt{R P / (\pi E^*)},\qquad p_0 = 2 P / (\pi a),\qquad
+           p(x) = p_0 \sqrt{1 - x^2 / a^2} .
+
+3-D, force ``F``:
+
+.. math::  a = (3 F R / (4 E^*))^{1/3},\qquad p_0 = 3 F / (2 \pi a^2),\qquad
+           p(r) = p_0 \sqrt{1 - r^2 / a^2} .
+
+The indentation depth of a 2-D body depends on its size, so the reference is evaluated for the
+*measured* contact force of the finite-element solution, and the finite-element pressure is
+compared with that Hertz profile:
+
+- ``p0``: the largest nodal contact pressure;
+- ``a`` from the pressure's second moment, which for the Hertz profile is
+  ``int x^2 p / int p = a^2 / 4`` (2-D) and ``int r^2 p dA / int p dA = 2 a^2 / 5`` (3-D): an
+  integral measure, free of the one-element uncertainty of "the last node in contact";
+- the relative L2 error of the pressure over the contact surface, with the nodal (lumped)
+  quadrature of the tributary areas.
+
+A model of a symmetric part of the body (half in 2-D, a quarter in 3-D) sets ``force_factor``
+(2 or 4): the measured force is multiplied by it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ddcm_casadi.errors import InputError
+
+
+def effective_modulus(youngs_modulus: float, poisson_ratio: float) -> float:
+    """``E* = E / (1 - nu^2)`` of an elastic body against a rigid one."""
+    return float(youngs_modulus) / (1.0 - float(poisson_ratio) ** 2)
+
+
+def _compressive(load: float) -> None:
+    if not (math.isfinite(load) and load >= 0):
+        raise InputError(f"the Hertz solution needs a finite compressive load >= 0, got {load!r}")
+
+
+def hertz_2d(load: float, radius: float, e_star: float) -> tuple[float, float]:
+    """Half-width ``a`` and peak pressure ``p0`` for a load ``P >= 0`` per unit thickness."""
+    _compressive(load)
+    a = 2.0 * math.sqrt(radius * load / (math.pi * e_star))
+    return a, 2.0 * load / (math.pi * a) if a > 0 else 0.0
+
+
+def hertz_3d(force: float, radius: float, e_star: float) -> tuple[float, float]:
+    """Contact radius ``a`` and peak pressure ``p0`` for a force ``F >= 0``."""
+    _compressive(force)
+    a = (3.0 * force * radius / (4.0 * e_star)) ** (1.0 / 3.0)
+    return a, 3.0 * force / (2.0 * math.pi * a ** 2) if a > 0 else 0.0
+
+
+def profile(x: np.ndarray, a: float, p0: float) -> np.ndarray:
+    """``p0 sqrt(1 - x^2/a^2)`` inside the contact, zero outside."""
+    x = np.asarray(x, dtype=float)
+    if a <= 0:
+        return np.zeros_like(x)
+    return p0 * np.sqrt(np.clip(1.0 - (x / a) ** 2, 0.0, None))
+
+
+@dataclass(frozen=True)
+class HertzReference:
+    """The Hertz solution for one rigid round obstacle of a continuum model.
+
+    Parameters
+    ----------
+    youngs_modulus, poisson_ratio : float
+        The body's isotropic law.
+    obstacle : int
+        Index of the indenter among the model's obstacles (a :class:`~.obstacles.Ball`).
+    force_factor : float
+        The full body's force over the modelled part's (2 for a half, 4 for a quarter).
+    """
+
+    youngs_modulus: float
+    poisson_ratio: float
+    obstacle: int = 0
+    force_factor: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.force_factor) and self.force_factor >= 1):
+            raise InputError(f"[hertz] force_factor must be a number >= 1, got {self.force_factor!r}")
+
+    @property
+    def e_star(self) -> float:
+        return effective_modulus(self.youngs_modulus, self.poisson_ratio)
+
+    def describe(self) -> dict:
+        return dict(kind="hertz", youngs_modulus=self.youngs_modulus, poisson_ratio=self.poisson_ratio,
+                    e_star=self.e_star, obstacle=self.obstacle, force_factor=self.force_factor)
+
+    # ------------------------------------------------------------------ geometry
+    def _indenter(self, model):
+        try:
+            ob = model.obstacles[self.obstacle]
+        except IndexError:
+            raise InputError(f"[hertz] obstacle {self.obstacle} does not exist") from None
+        if getattr(ob, "kind", None) != "ball":
+            raise InputError("[hertz] needs a circle (2-D) or sphere (3-D) obstacle")
+        return ob
+
+    def coordinates(self, model) -> tuple[np.ndarray, np.ndarray]:
+        """The indenter's pairs and their distance from its axis (2-D: signed ``x``; 3-D: ``r``)."""
+        ob = self._indenter(model)
+        pairs = np.flatnonzero(model.contact_obstacle == self.obstacle)
+        d = np.asarray(ob.direction, float) / np.linalg.norm(ob.direction)
+        rel = model.contact_points[pairs] - ob.center
+        lateral = rel - np.outer(rel @ d, d)
+        if model.dimension == 2:
+            t = np.array([-d[1], d[0]])
+            return pairs, lateral @ t
+        return pairs, np.linalg.norm(lateral, axis=1)
+
+    # ----------------------------------------------------------------- measures
+    def measure(self, model, pressure: np.ndarray) -> dict:
+        """Compare one step's contact pressures (Pa, one per pair) with Hertz.
+
+        Returns
+        -------
+        dict
+            ``force`` (the full body's, along the indenter's travel), ``a_hertz``, ``p0_hertz``,
+            ``a_fe``, ``p0_fe``, ``error_a``, ``error_p0`` (relative), ``error_l2`` (relative L2
+            of the pressure profile), ``nodes_in_contact``.
+        """
+        ob = self._indenter(model)
+        pairs, x = self.coordinates(model)
+        p = np.asarray(pressure, float)[pairs]
+        area = model.contact_area[pairs]
+        d = np.asarray(ob.direction, float) / np.linalg.norm(ob.direction)
+        # The contact forces a p n resolved against the travel d. A step without contact sums
+        # roundoff of either sign (penalty: -1e-20 Pa): no load.
+        along = model.contact_force_vectors(pressure)[pairs] @ d
+        force = max(0.0, self.force_factor * float(np.sum(along)))
+        w = area * p
+        moment = float(np.sum(w * x ** 2) / np.sum(w)) if np.sum(w) > 0 else 0.0
+        if model.dimension == 2:
+            a_h, p0_h = hertz_2d(force, ob.radius, self.e_star)
+            a_fe = 2.0 * math.sqrt(moment)
+        else:
+            a_h, p0_h = hertz_3d(force, ob.radius, self.e_star)
+            a_fe = math.sqrt(2.5 * moment)
+        ref = profile(x, a_h, p0_h)
+        den = math.sqrt(float(np.sum(area * ref ** 2)))
+        l2 = math.sqrt(float(np.sum(area * (p - ref) ** 2))) / den if den > 0 else float("nan")
+        p0_fe = float(np.max(p)) if p.size else 0.0
+        rel = (lambda v, r: abs(v - r) / r if r > 0 else float("nan"))  # noqa: E731
+        return dict(force=force, a_hertz=a_h, p0_hertz=p0_h, a_fe=a_fe, p0_fe=p0_fe,
+                    error_a=rel(a_fe, a_h), error_p0=rel(p0_fe, p0_h), error_l2=l2,
+                    nodes_in_contact=int(np.sum(model.active_contacts(p))))
+
+    def step_summary(self, model, pressure: np.ndarray) -> dict:
+        """The per-step columns of ``results.csv``: force, ``a`` and ``p0`` errors."""
+        m = self.measure(model, pressure)
+        return dict(hertz_force=m["force"], hertz_error_a=m["error_a"], hertz_error_p0=m["error_p0"],
+                    hertz_error_l2=m["error_l2"])
+
+    def curve(self, model, pressure: np.ndarray, n: int = 201) -> dict:
+        """The Hertz profile for the measured force, for figures: ``{"x", "pressure", "label"}``."""
+        m = self.measure(model, pressure)
+        a = m["a_hertz"]
+        lo = -1.3 * a if model.dimension == 2 and self._two_sided(model) else 0.0
+        x = np.linspace(lo, 1.3 * a, n)
+        return dict(x=x, pressure=profile(x, a, m["p0_hertz"]),
+                    label=f"Hertz (F = {m['force']:.4g} N{'/m' if model.dimension == 2 else ''})")
+
+    def _two_sided(self, model) -> bool:
+        _, x = self.coordinates(model)
+        return bool(np.any(x < 0) and np.any(x > 0))

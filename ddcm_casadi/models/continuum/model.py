@@ -1,0 +1,412 @@
+r"""Continuum contact models: linear small-strain solids on triangles (plane strain) or tetrahedra.
+
+:func:`continuum_model` turns a mesh, materials, supports, loads and rigid obstacles into a
+:class:`ContinuumModel`, a plain :class:`~ddcm_casadi.models.base.ContactModel` with ``k`` Mandel
+components per material point, so that every formulation and both variants apply unchanged:
+
+- material points are the quadrature points; ``B`` gives their Mandel strains and ``w`` their
+  volumes (per unit thickness in 2-D) (:mod:`ddcm_casadi.models.continuum.fem`);
+- the classical law is isotropic per region, ``sigma = C(E, nu) eps``
+  (:func:`~ddcm_casadi.data.metric.isotropic_elasticity`); a region may instead (or also) carry a data set;
+- every boundary dof a contact surface holds is one contact pair with its obstacle: gap along the
+  obstacle normal at the reference configuration (:mod:`ddcm_casadi.models.continuum.obstacles`), and a
+  pressure acting on its tributary boundary area (lumped), so that ``a p`` is the nodal force;
+- supports fix displacement components on boundaries; body forces and surface tractions are scaled
+  by one load factor per step, obstacles move by their own travel per step.
+
+Displacements of fixed dofs are zero; the unknowns ``u`` are the free dofs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+import skfem
+
+from ddcm_casadi.data.dataset import MaterialDataset, PointData
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.data.metric import block_diagonal, isotropic_elasticity
+from ddcm_casadi.models.base import ContactModel, FigureSpec, drawn_formulation
+from ddcm_casadi.models.continuum import fem
+from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh, select_facets
+from ddcm_casadi.models.continuum.obstacles import Obstacle
+
+AXES = "xyz"
+#: A boundary: its name in ``mesh.boundaries``, or a predicate on facet midpoints ``(d, nf)``.
+Where = str | Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Material:
+    """The material of one region.
+
+    Parameters
+    ----------
+    region : str or None
+        A subdomain name of the mesh; ``None``: every element no other material claims.
+    youngs_modulus, poisson_ratio : float, optional
+        The isotropic law (the classical variant needs it in every region).
+    data : int, optional
+        Index of this region's data set in the ``datasets`` of :func:`continuum_model` (the
+        data-driven variant needs one in every region).
+    """
+
+    region: str | None = None
+    youngs_modulus: float | None = None
+    poisson_ratio: float | None = None
+    data: int | None = None
+
+
+@dataclass(frozen=True)
+class Support:
+    """Fix the displacement components ``components`` (e.g. ``"xy"``, ``"z"``) on a boundary."""
+
+    where: Where
+    components: str
+
+
+@dataclass(frozen=True)
+class Traction:
+    """A constant traction (Pa) on a boundary, scaled by the load factor of each step."""
+
+    where: Where
+    traction: Sequence[float]
+
+
+@dataclass(frozen=True)
+class BodyForce:
+    """A constant body force (N/m^3) on a region (``None``: everywhere), scaled by the load factor."""
+
+    force_density: Sequence[float]
+    region: str | None = None
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A rigid ``obstacle`` that the dofs of the boundary ``where`` may touch."""
+
+    obstacle: Obstacle
+    where: Where
+
+
+@dataclass(frozen=True, eq=False)
+class ContinuumModel(ContactModel):
+    """A :class:`ContactModel` that remembers its mesh, elements and obstacles."""
+
+    discretisation: fem.Discretisation | None = None
+    poisson_ratio: np.ndarray | None = None
+    free_dofs: np.ndarray | None = None
+    point_region: np.ndarray | None = None
+    region_names: tuple = ()
+    obstacles: tuple = ()
+    contact_dofs: np.ndarray | None = None       # scalar dof of each pair
+    contact_points: np.ndarray | None = None     # (nc, d) reference coordinates
+    contact_normals: np.ndarray | None = None    # (nc, d)
+    contact_obstacle: np.ndarray | None = None   # (nc,) obstacle index
+    reference: object | None = None               # e.g. a HertzReference
+
+    # --------------------------------------------------------------- geometry
+    @property
+    def mesh(self) -> skfem.Mesh:
+        return self.discretisation.mesh
+
+    @property
+    def dimension(self) -> int:
+        return self.discretisation.dimension
+
+    def full_displacement(self, u: np.ndarray) -> np.ndarray:
+        """All dofs (fixed ones zero) from the free unknowns; ``u`` may be stacked over steps."""
+        u = np.asarray(u)
+        out = np.zeros(u.shape[:-1] + (self.discretisation.n_dofs,))
+        out[..., self.free_dofs] = u
+        return out
+
+    def dof_displacement(self, u: np.ndarray) -> np.ndarray:
+        """``(N_scalar, d)`` displacement at every scalar dof location (nodes, P2 midpoints)."""
+        full = self.full_displacement(u)
+        return full[self.discretisation.vector_dofs()].T
+
+    # ------------------------------------------------------------- mechanics
+    def material_matrix(self) -> sp.csr_matrix:
+        """Block diagonal of the isotropic Mandel elasticity matrices ``C(E, nu)`` per point."""
+        D = self._cache.get("material_matrix")
+        if D is None:
+            if self.youngs_modulus is None or self.poisson_ratio is None:
+                raise InputError("this model has no isotropic law (classical variant unavailable)")
+            D = block_diagonal(isotropic_elasticity(self.youngs_modulus, self.poisson_ratio, self.dimension))
+            self._cache["material_matrix"] = D
+        return D
+
+    def contact_force_vectors(self, p: np.ndarray) -> np.ndarray:
+        """Nodal contact forces ``a p n`` (N; N/m in 2-D) per pair, ``(..., nc, d)``."""
+        p = np.asarray(p)
+        return (self.contact_area * p)[..., None] * self.contact_normals
+
+    # ------------------------------------------- self-description for the front ends
+    def describe(self) -> dict:
+        out = super().describe()
+        out.update(dimension=self.dimension, degree=self.discretisation.degree,
+                   strain_components=self.strain_components, mesh=describe_mesh(self.mesh),
+                   regions=list(self.region_names),
+                   poisson_ratio=None if self.poisson_ratio is None else sorted(set(map(float, self.poisson_ratio))),
+                   obstacles=[o.describe() for o in self.obstacles])
+        if isinstance(out.get("youngs_modulus"), list):
+            out["youngs_modulus"] = sorted(set(out["youngs_modulus"]))
+        if self.reference is not None:
+            out["reference"] = self.reference.describe()
+        return out
+
+    def step_summary(self, u: np.ndarray, p: np.ndarray) -> dict:
+        out = super().step_summary(u, p)
+        if self.reference is not None:
+            out.update(self.reference.step_summary(self, p))
+        return out
+
+    def contact_pair_labels(self) -> list[str]:
+        return [f"{self.obstacles[o].name} @ ({', '.join(f'{c:.3g}' for c in x)})"
+                for o, x in zip(self.contact_obstacle, self.contact_points)]
+
+    def results_fields(self, fields: dict) -> dict:
+        """What ``results.json`` keeps of a run's fields: the contact only (coordinates,
+        pressures per step, total force per step); the full fields go to the VTU files."""
+        p = np.asarray(fields["contact_pressure"])
+        return dict(contact_coordinates=self.contact_points, contact_obstacle=self.contact_obstacle,
+                    contact_pressure=p, total_contact_force=np.sum(self.contact_area * p, axis=-1),
+                    converged=fields["converged"])
+
+    def field_outputs(self) -> tuple[str, ...]:
+        """One VTU file per step and run with a ``.pvd`` series each
+        (:func:`ddcm_casadi.outputs.continuum_results.write_vtu`)."""
+        return ("vtu",)
+
+    def figures(self, runs) -> dict[str, FigureSpec]:
+        """``pressure_profile.png`` (with contact pairs), ``deformed_<variant>.png`` (last step,
+        Fischer-Burmeister if it was run, else the first formulation of that variant) and
+        ``contact_history.png``; drawn by :mod:`ddcm_casadi.outputs.continuum_results`."""
+        runs = list(runs)
+        specs = {"pressure_profile.png": FigureSpec("pressure_profile")} if self.n_contacts else {}
+        for variant in ("classical", "ddcm"):
+            name = drawn_formulation(runs, variant)
+            if name is not None:
+                specs[f"deformed_{variant}.png"] = FigureSpec("deformed_body", {"variant": variant, "formulation": name})
+        return {**specs, **super().figures(runs)}
+
+
+# ------------------------------------------------------------------------------------ builder
+def _components(spec: str, d: int) -> list[int]:
+    if not isinstance(spec, str) or not spec or any(c not in AXES[:d] for c in spec.lower()):
+        raise InputError(f"support components must be letters from {AXES[:d]!r}, got {spec!r}")
+    return sorted({AXES.index(c) for c in spec.lower()})
+
+
+def _elements_of(mesh: skfem.Mesh, region: str) -> np.ndarray:
+    subs = getattr(mesh, "subdomains", None) or {}
+    if region not in subs:
+        known = ", ".join(sorted(subs)) or "none"
+        raise InputError(f"unknown region {region!r}; the mesh's regions: {known}")
+    return np.asarray(subs[region], dtype=np.int64)
+
+
+def _vector(name: str, value, d: int) -> np.ndarray:
+    v = np.asarray(value, dtype=float).ravel()
+    if v.size != d or not np.all(np.isfinite(v)):
+        raise InputError(f"{name} must be {d} finite numbers, got {value!r}")
+    return v
+
+
+def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports: Sequence[Support],
+                    contacts: Sequence[Contact] = (), degree: int = 1, tractions: Sequence[Traction] = (),
+                    body_forces: Sequence[BodyForce] = (), load_factors: Sequence[float] | None = None,
+                    datasets: Sequence[MaterialDataset] = (), name: str = "continuum",
+                    reference=None) -> ContinuumModel:
+    """Build a :class:`ContinuumModel`.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTri1 or skfem.MeshTet1
+        With named boundaries/subdomains where the other arguments name them (checked with
+        :func:`~ddcm_casadi.models.continuum.mesh.check_mesh`).
+    materials : sequence of Material
+        One per region; at most one with ``region=None`` (the rest of the mesh).
+    supports : sequence of Support
+    contacts : sequence of Contact
+        Rigid obstacles and the boundaries that may touch them.
+    degree : {1, 2}
+        Lagrange elements (P1 or P2).
+    tractions, body_forces : sequences
+        Reference loads, scaled by ``load_factors``.
+    load_factors : sequence of float, optional
+        One per step; default: the loads in full at every step, as many steps as the obstacles'
+        travel has values.
+    datasets : sequence of MaterialDataset
+        The data sets the materials name by index (``Material.data``).
+    name : str
+    reference : optional
+        An independent reference the model reports against (e.g.
+        :class:`~ddcm_casadi.models.continuum.hertz.HertzReference`).
+    """
+    check_mesh(mesh)
+    disc = fem.Discretisation.create(mesh, int(degree) if degree in (1, 2) else _bad_degree(degree))
+    d, k = disc.dimension, disc.components
+    ne, nq = mesh.t.shape[1], disc.points_per_element
+
+    # --- regions and materials
+    if not materials:
+        raise InputError("a continuum needs at least one material")
+    element_material = np.full(ne, -1, dtype=np.int64)
+    rest = [i for i, mat in enumerate(materials) if mat.region is None]
+    if len(rest) > 1:
+        raise InputError("only one material may leave its region unnamed (the rest of the mesh)")
+    for i, mat in enumerate(materials):
+        if mat.region is not None:
+            els = _elements_of(mesh, mat.region)
+            if np.any(element_material[els] >= 0):
+                raise InputError(f"region {mat.region!r} overlaps another material's region")
+            element_material[els] = i
+    if rest:
+        element_material[element_material < 0] = rest[0]
+    if np.any(element_material < 0):
+        raise InputError(f"{int(np.sum(element_material < 0))} elements have no material; "
+                         "add a material without a region for the rest of the mesh")
+    point_region = np.repeat(element_material, nq)
+    has_law = [m.youngs_modulus is not None for m in materials]
+    has_data = [m.data is not None for m in materials]
+    E = nu = None
+    if all(has_law):
+        for mat in materials:  # checks each law, with the values the user gave
+            isotropic_elasticity(mat.youngs_modulus, mat.poisson_ratio, d)
+        E = np.array([m.youngs_modulus for m in materials], dtype=float)[point_region]
+        nu = np.array([m.poisson_ratio for m in materials], dtype=float)[point_region]
+    elif any(has_law):
+        raise InputError("give youngs_modulus and poisson_ratio for every material, or for none (DDCM only)")
+    dataset = None
+    if any(has_data):
+        if not all(has_data):
+            raise InputError("give a data set for every material, or for none (classical only)")
+        sets = list(datasets)
+        for mat in materials:
+            if not 0 <= int(mat.data) < len(sets):
+                raise InputError(f"material data index {mat.data!r} out of range: {len(sets)} data sets")
+        for s in sets:
+            if s.k != k:
+                raise InputError(f"a data set has {s.k} strain components per point; a {d}-D continuum "
+                                 f"needs {k} (Mandel: {'e11,e22,sqrt2 e12' if d == 2 else 'e11,e22,e33,sqrt2 e23,sqrt2 e13,sqrt2 e12'})")
+        per_point = np.array([materials[i].data for i in range(len(materials))])[point_region]
+        if len(sets) == 1:
+            dataset = sets[0]
+        else:
+            dataset = PointData(sets, per_point)
+    if E is None and dataset is None:
+        raise InputError("a continuum needs an isotropic law (youngs_modulus, poisson_ratio) or data")
+
+    # --- operators and supports
+    B_all, w = fem.strain_operator(disc)
+    vdofs = disc.vector_dofs()
+    fixed = np.zeros(disc.n_dofs, dtype=bool)
+    for s in supports:
+        comps = _components(s.components, d)
+        dofs = fem.boundary_dofs(disc, select_facets(mesh, s.where))
+        for c in comps:
+            fixed[vdofs[c, dofs]] = True
+    free = np.flatnonzero(~fixed)
+    if free.size == 0:
+        raise InputError("the supports fix every degree of freedom")
+    index_of = np.full(disc.n_dofs, -1, dtype=np.int64)
+    index_of[free] = np.arange(free.size)
+    B = B_all[:, free].tocsr()
+
+    # --- loads
+    f_ref = np.zeros(disc.n_dofs)
+    for t in tractions:
+        f_ref += fem.surface_load(disc, select_facets(mesh, t.where), _vector("traction", t.traction, d))
+    for b in body_forces:
+        els = None if b.region is None else _elements_of(mesh, b.region)
+        f_ref += fem.body_load(disc, _vector("body force", b.force_density, d), els)
+
+    # --- contact pairs
+    n_steps = None
+    if load_factors is not None:
+        n_steps = len(load_factors)
+    for c in contacts:
+        trav = np.asarray(c.obstacle.travel)
+        if trav.ndim == 1 and n_steps is None:
+            n_steps = trav.size
+    n_steps = n_steps or 1
+    factors = np.ones(n_steps) if load_factors is None else np.asarray(load_factors, dtype=float)
+    obstacles, rows_dofs, points, normals, areas, owner, g0 = [], [], [], [], [], [], []
+    size = float(np.max(np.ptp(mesh.p, axis=1)))
+    if contacts and d == 3 and disc.degree == 2:
+        # int_f phi_vertex = 0 on a quadratic triangle: a uniform pressure puts no force on the
+        # vertices, so nodal contact would leave them biactive and their pressures meaningless.
+        raise InputError("contact on quadratic tetrahedra is not supported (a quadratic triangle's vertices "
+                         "carry no share of a pressure); use degree = 1 in 3-D")
+    for i, c in enumerate(contacts):
+        ob = c.obstacle
+        if ob.dimension != d:
+            raise InputError(f"obstacle {ob.name!r} is {ob.dimension}-D, the mesh {d}-D")
+        dofs, area = fem.tributary_areas(disc, select_facets(mesh, c.where))
+        X = disc.dof_locations()[dofs]
+        gaps = ob.gap_offsets(X, n_steps)
+        if float(np.min(gaps)) > size:
+            raise InputError(f"obstacle {ob.name!r} cannot touch the body: it comes no closer than "
+                             f"{float(np.min(gaps)):.3g} m along the path, more than the body's size {size:.3g} m")
+        obstacles.append(ob)
+        rows_dofs.append(dofs)
+        points.append(X)
+        normals.append(ob.normals(X, n_steps))
+        areas.append(area)
+        owner.append(np.full(dofs.size, i))
+        g0.append(gaps)
+    nc = int(sum(r.size for r in rows_dofs))
+    if nc:
+        cdofs = np.concatenate(rows_dofs)
+        N = np.concatenate(normals)
+        cols = index_of[vdofs[:, cdofs]].T  # (nc, d)
+        keep = cols >= 0  # a fixed component moves no gap
+        G = sp.csr_matrix((N[keep], (np.nonzero(keep)[0], cols[keep])), shape=(nc, free.size))
+        contact = dict(contact_dofs=cdofs, contact_points=np.concatenate(points), contact_normals=N,
+                       contact_obstacle=np.concatenate(owner))
+        area_all, gap0 = np.concatenate(areas), np.concatenate(g0, axis=1)
+    else:
+        G = sp.csr_matrix((0, free.size))
+        contact = dict(contact_dofs=np.zeros(0, np.int64), contact_points=np.zeros((0, d)),
+                       contact_normals=np.zeros((0, d)), contact_obstacle=np.zeros(0, np.int64))
+        area_all, gap0 = np.zeros(0), np.zeros((n_steps, 0))
+    loads = factors[:, None] * f_ref[free][None, :]
+    load_parameter = (contacts[0].obstacle.travels(n_steps) if contacts and load_factors is None else factors)
+    lp_name = "obstacle travel (m)" if contacts and load_factors is None else "load factor"
+
+    model = ContinuumModel(
+        strain_operator=B, volumes=w, gap_operator=G, contact_area=area_all, gap_offsets=gap0, loads=loads,
+        load_parameter=load_parameter, youngs_modulus=E, dataset=dataset, length_scale=size, name=name,
+        load_parameter_name=lp_name, strain_components=k, discretisation=disc, poisson_ratio=nu,
+        free_dofs=free, point_region=point_region,
+        region_names=tuple(m.region or "(rest)" for m in materials), obstacles=tuple(obstacles),
+        reference=reference, **contact)
+    _check_held(model)
+    return model
+
+
+def _bad_degree(degree) -> int:
+    raise InputError(f"element degree must be 1 or 2, got {degree!r}")
+
+
+def _check_held(model: ContinuumModel) -> None:
+    """Refuse a body its supports do not hold: some rigid-body motion (translations, rotations)
+    vanishes on every fixed dof. The classical problem would be singular wherever the obstacles
+    do not touch. (A mesh of several disconnected bodies is not checked piece by piece.)"""
+    disc = model.discretisation
+    modes = disc.rigid_body_modes()
+    fixed = np.setdiff1d(np.arange(disc.n_dofs), model.free_dofs)
+    R = modes[fixed]
+    if R.shape[0] == 0 or np.linalg.matrix_rank(R, tol=1e-9 * max(1.0, float(np.abs(R).max()))) < modes.shape[1]:
+        raise InputError("the supports leave a rigid-body motion free; fix more displacement components")
+
+
+def with_reference(model: ContinuumModel, reference) -> ContinuumModel:
+    """The same model reporting against ``reference``."""
+    return dataclasses.replace(model, reference=reference)

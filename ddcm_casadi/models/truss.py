@@ -1,0 +1,507 @@
+"""Pin-jointed trusses in 1-D, 2-D and 3-D with rigid planar obstacles (small strain).
+
+A truss is ``nodes`` (nn x d), ``members`` (ne x 2 node indices) with a cross-section and a
+material each, ``supports`` (fixed nodal directions), nodal and distributed loads scaled by a load
+factor per step, and rigid planes, each acting on chosen nodes with the gap
+
+.. math::  g = n \\cdot (X + u) - d \\;\\ge 0 ,
+
+``n`` the unit normal pointing away from the obstacle and ``d`` its offset (possibly moving, one
+value per step). Every member is one material point with strain ``e . (u_j - u_i) / L`` (``e``
+the unit vector from node ``i`` to ``j``). The result is a plain
+:class:`~ddcm_casadi.models.base.ContactModel` (sparse ``B`` and ``G``, built without a loop over
+members), so every formulation and both variants apply unchanged.
+
+A contact pair's pressure acts on the mean cross-section of the members at its node, so pressures
+are stress-like (well scaled); :meth:`TrussModel.contact_force` gives forces in newtons.
+A bar of N elements is a 1-D truss (:func:`bar_chain`).
+
+The model describes itself to the front ends (:meth:`TrussModel.describe`,
+:meth:`TrussModel.extra_fields`, :meth:`TrussModel.figures`); the ``[structure]`` case files are
+parsed by :mod:`ddcm_casadi.casefiles.truss`, and the figures drawn by :mod:`ddcm_casadi.outputs.plots`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.linalg import to_casadi
+from ddcm_casadi.models.base import ContactModel, FigureSpec, drawn_formulation
+
+AXES = "xyz"
+
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A rigid plane ``n . x = d`` acting on ``nodes``; the admissible side is ``n . x >= d``.
+
+    Parameters
+    ----------
+    normal : sequence of float
+        Outward normal of the obstacle (normalised here).
+    offset : float or sequence of float
+        ``d`` (m): a constant, or one value per load step (a moving obstacle).
+    nodes : sequence of int
+        Nodes that may touch this obstacle (one contact pair each).
+    """
+
+    normal: Sequence[float]
+    offset: float | Sequence[float]
+    nodes: Sequence[int]
+
+
+def _as_per_member(name: str, value, ne: int) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 0:
+        a = np.full(ne, float(a))
+    if a.shape != (ne,):
+        raise InputError(f"{name} must be one number or one per member ({ne}), got {a.size}")
+    if not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise InputError(f"{name} must be finite and positive for every member")
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class TrussModel(ContactModel):
+    """A :class:`ContactModel` that remembers its truss geometry (for results and plots)."""
+
+    nodes: np.ndarray | None = None
+    members: np.ndarray | None = None
+    free_dofs: np.ndarray | None = None
+    contact_nodes: np.ndarray | None = None
+    contact_normals: np.ndarray | None = None
+    member_area: np.ndarray | None = None
+
+    @property
+    def dimension(self) -> int:
+        return self.nodes.shape[1]
+
+    def nodal_displacements(self, u: np.ndarray) -> np.ndarray:
+        """``(nn, d)`` nodal displacements from the free unknowns ``u`` (fixed ones are 0)."""
+        full = np.zeros(self.nodes.size)
+        full[self.free_dofs] = u
+        return full.reshape(self.nodes.shape)
+
+    # ------------------------------------------------------------ kinematics
+    def _differences(self) -> list[sp.csr_matrix]:
+        """Per axis ``c``, ``D_c`` (ne x n): ``(u_j - u_i)_c / L`` of every member (cached)."""
+        D = self._cache.get("differences")
+        if D is None:
+            nn, d = self.nodes.shape
+            ne = self.members.shape[0]
+            L = self.volumes / self.member_area
+            rows = np.repeat(np.arange(ne), 2)
+            D = []
+            for c in range(d):
+                cols = (self.members * d + c).ravel()
+                vals = np.column_stack([-1.0 / L, 1.0 / L]).ravel()
+                D.append(sp.csr_matrix((vals, (rows, cols)), shape=(ne, nn * d))[:, self.free_dofs].tocsr())
+            self._cache["differences"] = D
+        return D
+
+    def strain(self, u: np.ndarray) -> np.ndarray:
+        """Member strains. Small kinematics: ``e . (u_j - u_i) / L``. Finite: the Green-Lagrange
+        strain ``E = (l^2 - L^2) / (2 L^2) = e . du / L + |du|^2 / (2 L^2)``, ``du = u_j - u_i`` and
+        ``l`` the current length (exact for any displacement and rotation)."""
+        u = np.asarray(u, float)
+        linear = self.strain_operator @ u
+        if self.kinematics == "small":
+            return linear
+        return linear + 0.5 * sum((D @ u) ** 2 for D in self._differences())
+
+    def strain_expression(self, u):
+        """:meth:`strain` for a CasADi symbol ``u``."""
+        linear = super().strain_expression(u)
+        if self.kinematics == "small":
+            return linear
+        return linear + 0.5 * sum(ca.mtimes(to_casadi(D), u) ** 2 for D in self._differences())
+
+    def contact_force(self, p: np.ndarray) -> np.ndarray:
+        """Contact forces (N) from contact pressures: ``area * p``, one per pair."""
+        return self.contact_area * np.asarray(p)
+
+    def member_force(self, stress: np.ndarray) -> np.ndarray:
+        """Member forces (N) from member stresses: ``member_area * stress`` (stacked steps too)."""
+        return self.member_area * np.asarray(stress)
+
+    def contact_pair_labels(self) -> list[str]:
+        """One legend label per contact pair: the node it acts on."""
+        return [f"node {int(n)}" for n in self.contact_nodes]
+
+    # ------------------------------------------------------------ self-description
+    def describe(self) -> dict:
+        """The generic model record plus the truss's ``dimension``, ``n_nodes`` and ``n_members``."""
+        out = super().describe()
+        if self.nodes is not None:
+            out.update(dimension=int(self.nodes.shape[1]), n_nodes=int(self.nodes.shape[0]),
+                       n_members=int(self.members.shape[0]))
+        return out
+
+    def extra_fields(self, u: np.ndarray, stress: np.ndarray) -> dict:
+        """``nodal_displacement`` (n_steps, n_nodes, dim) and ``member_force`` (n_steps, n_members)."""
+        return dict(nodal_displacement=np.array([self.nodal_displacements(x) for x in u]),
+                    member_force=self.member_force(stress))
+
+    def figures(self, runs) -> dict[str, FigureSpec]:
+        """``structure_classical.png`` and ``structure_ddcm.png`` (last step, Fischer-Burmeister
+        if it was run, else the first formulation of that variant; a variant that was not run is
+        skipped; drawn by :func:`ddcm_casadi.outputs.plots.figure_structure`) and ``contact_history.png``."""
+        runs = list(runs)
+        specs = {}
+        for variant in ("classical", "ddcm"):
+            name = drawn_formulation(runs, variant)
+            if name is not None:
+                specs[f"structure_{variant}.png"] = FigureSpec("structure", {"variant": variant, "formulation": name})
+        return {**specs, **super().figures(runs)}
+
+
+def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=None,
+                distributed_loads=None, obstacles: Sequence[Obstacle] = (), load_factors=None,
+                dataset: MaterialDataset | Sequence[MaterialDataset] | None = None, material=None,
+                name: str = "truss", kinematics: str = "small") -> TrussModel:
+    """Build a truss contact model.
+
+    Parameters
+    ----------
+    nodes : (nn, d) array_like
+        Node coordinates (m), ``d`` in {1, 2, 3}.
+    members : (ne, 2) array_like of int
+        Node pairs.
+    area, youngs_modulus : float or (ne,)
+        Cross-sections (m^2) and moduli (Pa; omit for a data-only model).
+    supports : (nn, d) array_like of bool, or sequence of (node, axes)
+        Fixed directions, e.g. ``[(0, "xy"), (4, "y")]``.
+    loads : (nn, d) array_like, optional
+        Reference nodal forces (N), multiplied by the load factor of each step.
+    distributed_loads : (ne, d) array_like, optional
+        Reference load per unit length on each member (N/m), lumped half to each end node.
+    obstacles : sequence of Obstacle
+    load_factors : (n_steps,) array_like, optional
+        Load factor per step. Default: ones, as many steps as the obstacle offsets have (or one).
+    dataset : MaterialDataset or sequence of MaterialDataset, optional
+        Data for the DDCM variant: one set for all members, or one per material.
+    material : (ne,) array_like of int, optional
+        Data set of each member when several are given.
+    kinematics : {"small", "finite"}
+        ``"finite"``: large displacements and rotations, Green-Lagrange member strains
+        (:meth:`TrussModel.strain`); data and stresses are then ``(E, S)`` pairs.
+    """
+    X = np.asarray(nodes, dtype=float)
+    if X.ndim == 1:
+        X = X[:, None]
+    if X.ndim != 2 or X.shape[1] not in (1, 2, 3) or X.shape[0] < 2:
+        raise InputError("nodes must be a list of at least two points with 1, 2 or 3 coordinates each")
+    if not np.all(np.isfinite(X)):
+        raise InputError("node coordinates must be finite")
+    nn, d = X.shape
+    M = np.asarray(members)
+    if M.ndim != 2 or M.shape[1] != 2 or M.shape[0] == 0 or not np.issubdtype(M.dtype, np.integer):
+        raise InputError("members must be a non-empty list of [node_i, node_j] integer pairs")
+    if M.min() < 0 or M.max() >= nn:
+        raise InputError(f"member refers to a node outside 0..{nn - 1}")
+    ne = M.shape[0]
+    vec = X[M[:, 1]] - X[M[:, 0]]
+    length = np.linalg.norm(vec, axis=1)
+    if np.any(length <= 0):
+        raise InputError(f"member {int(np.argmin(length))} has zero length")
+    e = vec / length[:, None]
+    A = _as_per_member("area", area, ne)
+    E = None if youngs_modulus is None else _as_per_member("youngs_modulus", youngs_modulus, ne)
+
+    fixed = _supports(supports, nn, d)
+    free = np.flatnonzero(~fixed.ravel())
+    if free.size == 0:
+        raise InputError("every degree of freedom is fixed")
+    # B (ne x nn d): -e/L at node i, +e/L at node j; then keep the free columns.
+    rows = np.repeat(np.arange(ne), 2 * d)
+    cols = np.concatenate([M[:, [0]] * d + np.arange(d), M[:, [1]] * d + np.arange(d)], axis=1).ravel()
+    vals = np.concatenate([-e / length[:, None], e / length[:, None]], axis=1).ravel()
+    B = sp.csr_matrix((vals, (rows, cols)), shape=(ne, nn * d))[:, free]
+
+    f_ref = np.zeros((nn, d))
+    if loads is not None:
+        f_ref += _nodal_array("loads", loads, nn, d)
+    if distributed_loads is not None:
+        q = np.asarray(distributed_loads, dtype=float)
+        if q.shape != (ne, d) or not np.all(np.isfinite(q)):
+            raise InputError(f"distributed_loads must be finite, one {d}-vector per member")
+        half = 0.5 * q * length[:, None]
+        np.add.at(f_ref, M[:, 0], half)
+        np.add.at(f_ref, M[:, 1], half)
+
+    # Contact pairs: one per (obstacle, node).
+    normals, pair_nodes, offsets = [], [], []
+    steps_from_obstacles = None
+    for k, ob in enumerate(obstacles):
+        n = np.asarray(ob.normal, dtype=float).ravel()
+        if n.size != d or not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
+            raise InputError(f"obstacle {k}: normal must be a non-zero {d}-vector")
+        n = n / np.linalg.norm(n)
+        nodes_k = np.asarray(ob.nodes).ravel()
+        if nodes_k.size == 0 or not np.issubdtype(nodes_k.dtype, np.integer) or nodes_k.min() < 0 or nodes_k.max() >= nn:
+            raise InputError(f"obstacle {k}: nodes must be a non-empty list of node indices 0..{nn - 1}")
+        if np.unique(nodes_k).size != nodes_k.size:
+            raise InputError(f"obstacle {k}: a node is listed twice")
+        off = np.asarray(ob.offset, dtype=float).ravel()
+        if not np.all(np.isfinite(off)) or off.size == 0:
+            raise InputError(f"obstacle {k}: offset must be finite")
+        if off.size > 1:
+            if steps_from_obstacles not in (None, off.size):
+                raise InputError("obstacles with offsets per step must all have the same number of steps")
+            steps_from_obstacles = off.size
+        for node in nodes_k:
+            normals.append(n)
+            pair_nodes.append(int(node))
+            offsets.append(off)
+    nc = len(pair_nodes)
+    lf = None if load_factors is None else np.asarray(load_factors, dtype=float).ravel()
+    if lf is not None and (lf.size == 0 or not np.all(np.isfinite(lf))):
+        raise InputError("load_factors must be a non-empty list of finite numbers")
+    n_steps = lf.size if lf is not None else (steps_from_obstacles or 1)
+    if steps_from_obstacles is not None and steps_from_obstacles != n_steps:
+        raise InputError(f"{n_steps} load factors but obstacle offsets for {steps_from_obstacles} steps")
+    if lf is None:
+        lf = np.ones(n_steps)
+    dof = (np.asarray(pair_nodes, dtype=np.intp)[:, None] * d + np.arange(d)).ravel() if nc else np.zeros(0, np.intp)
+    G_full = sp.csr_matrix((np.asarray(normals).ravel() if nc else np.zeros(0),
+                            (np.repeat(np.arange(nc), d), dof)), shape=(nc, nn * d))
+    G = G_full[:, free]
+    if nc:
+        base = np.einsum("ij,ij->i", np.asarray(normals), X[np.asarray(pair_nodes)])
+        off = np.column_stack([np.broadcast_to(o, (n_steps,)) for o in offsets])
+        gap0 = base[None, :] - off
+    else:
+        gap0 = np.zeros((n_steps, 0))
+    # Contact area: mean section of the members at the node (pressures stay stress-like).
+    section_sum = np.bincount(M.ravel(), weights=np.repeat(A, 2), minlength=nn)
+    member_count = np.bincount(M.ravel(), minlength=nn)
+    loose = [node for node in pair_nodes if member_count[node] == 0]
+    if loose:
+        raise InputError(f"contact node {loose[0]} belongs to no member")
+    node_area = section_sum / np.maximum(member_count, 1)
+    contact_area = node_area[np.asarray(pair_nodes, dtype=np.intp)] if nc else np.zeros(0)
+
+    check_not_mechanism(B, A * length)
+    data = member_data(dataset, material)
+    size = float(np.max(np.ptp(X, axis=0))) or float(np.max(length))
+    return TrussModel(
+        strain_operator=B, volumes=A * length, gap_operator=G, contact_area=contact_area,
+        gap_offsets=gap0, loads=lf[:, None] * f_ref.ravel()[free][None, :], load_parameter=np.arange(n_steps, dtype=float)
+        if load_factors is None else lf, youngs_modulus=E, dataset=data, length_scale=size, name=name,
+        load_parameter_name="load step" if load_factors is None else "load factor",
+        nodes=X, members=M.astype(np.intp), free_dofs=free, contact_nodes=np.asarray(pair_nodes, dtype=np.intp),
+        contact_normals=np.asarray(normals).reshape(nc, d), member_area=A, kinematics=kinematics)
+
+
+#: Up to this many unknowns the mechanism check is an exact eigenvalue count (dense, n x n).
+EXACT_RANK_LIMIT = 1000
+
+
+def check_not_mechanism(B: sp.spmatrix, volumes: np.ndarray) -> None:
+    """Raise :class:`InputError` if members and supports leave a free degree of freedom
+    unrestrained (``K = B^T W B`` singular).
+
+    Small models: eigenvalues of ``K`` below ``1e-12 max`` (roundoff is ``n eps ||K||``, below
+    that for ``n <= 1000``, while a slender real structure stays above ``1/n^2``). Larger ones:
+    the same test on the pivots of a sparse LU of ``K``.
+    """
+    n = B.shape[1]
+    K = (B.T @ sp.diags(volumes) @ B).tocsc()
+    if n <= EXACT_RANK_LIMIT:
+        ev = np.linalg.eigvalsh(K.toarray())
+        free = int(np.sum(ev <= 1e-12 * max(float(ev[-1]), 1e-300)))
+    else:
+        try:
+            pivots = np.abs(spla.splu(K).U.diagonal())
+            free = int(np.sum(pivots <= 1e-12 * pivots.max()))
+        except RuntimeError:  # exactly singular
+            free = 1
+    if free:
+        raise InputError(f"the structure is a mechanism: members and supports leave {free} of its {n} free "
+                         "degrees of freedom unrestrained (add supports or members)")
+
+
+def _supports(supports, nn: int, d: int) -> np.ndarray:
+    arr = np.asarray(supports, dtype=object)
+    if arr.shape == (nn, d) and all(isinstance(v, (bool, np.bool_)) for v in arr.ravel()):
+        return arr.astype(bool)
+    fixed = np.zeros((nn, d), dtype=bool)
+    for entry in supports:
+        try:
+            node, axes = entry
+            node = int(node)
+        except (TypeError, ValueError):
+            raise InputError(f"support {entry!r} must be (node, axes) such as (0, 'xy')") from None
+        if not 0 <= node < nn:
+            raise InputError(f"support at node {node}: nodes are numbered 0..{nn - 1}")
+        axes = str(axes).lower()
+        bad = [a for a in axes if a not in AXES[:d]]
+        if bad or not axes:
+            raise InputError(f"support at node {node}: axes must be letters from {AXES[:d]!r}, got {axes!r}")
+        for a in axes:
+            fixed[node, AXES.index(a)] = True
+    return fixed
+
+
+def _nodal_array(name: str, value, nn: int, d: int) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 1 and d == 1:
+        a = a[:, None]
+    if a.shape != (nn, d) or not np.all(np.isfinite(a)):
+        raise InputError(f"{name} must be finite, one {d}-vector per node")
+    return a
+
+
+def member_data(dataset, material):
+    """The data of a truss's members: one set (shared), a list of sets with a ``material`` index
+    per member (:class:`PointData`), or ``None``."""
+    if dataset is None:
+        return None
+    if isinstance(dataset, (MaterialDataset, PointData)):
+        if material is not None and not isinstance(dataset, PointData):
+            return PointData([dataset], material)
+        return dataset
+    sets = list(dataset)
+    if len(sets) == 1 and material is None:
+        return sets[0]
+    if material is None:
+        raise InputError("several data sets need a 'material' index per member")
+    return PointData(sets, material)
+
+
+class StoppedBarModel(TrussModel):
+    """A bar fixed at ``x = 0``, pushed at its tip by a moving obstacle, with fixed stops behind
+    interior nodes. It has a closed form (see :meth:`closed_form`)."""
+
+    def closed_form(self, step: int):
+        """The classical solution by the 1-D obstacle problem's upper concave envelope.
+
+        With no loads and a uniform bar, the displacement minimises the Dirichlet energy with
+        ``u(0) = 0``, ``u(L) <= w`` and ``u(x_j) >= -s_j``: for ``w >= 0`` it is 0, otherwise the
+        least concave majorant of the points ``(0, 0)``, ``(x_j, -s_j)`` and ``(L, w)`` (linear
+        between touching nodes). Pressures are the jumps of the stress ``E u'``.
+        """
+        if self.youngs_modulus is None:
+            return None
+        x = self.nodes[:, 0]
+        E = float(self.youngs_modulus[0])
+        w = self.gap_offsets[step, 0]  # tip pair first: g = w - u_N, so gap0 = w = h - l0
+        stops = self.gap_offsets[step, 1:]  # g_j = u_j + s_j
+        n_free = x.size - 1
+        if w >= 0:
+            return np.zeros(n_free), np.zeros(self.n_contacts)
+        pts_x = np.concatenate([[x[0]], x[self.contact_nodes[1:]], [x[-1]]])
+        pts_y = np.concatenate([[0.0], -stops, [w]])
+        order = np.argsort(pts_x, kind="stable")
+        hull = _upper_hull(pts_x[order], pts_y[order])
+        hx, hy = pts_x[order][hull], pts_y[order][hull]
+        u = np.interp(x, hx, hy)
+        slope = np.diff(u) / np.diff(x)
+        stress = E * slope
+        p = np.empty(self.n_contacts)
+        p[0] = -stress[-1]
+        for i, node in enumerate(self.contact_nodes[1:], start=1):
+            p[i] = stress[node - 1] - stress[node]  # jump of the normal force / A
+        return u[1:], p
+
+
+def _upper_hull(x: np.ndarray, y: np.ndarray) -> list[int]:
+    """Indices of the upper concave envelope of points sorted by ``x`` (monotone chain)."""
+    hull: list[int] = []
+    for i in range(x.size):
+        while len(hull) >= 2:
+            a, b = hull[-2], hull[-1]
+            if (x[b] - x[a]) * (y[i] - y[a]) - (y[b] - y[a]) * (x[i] - x[a]) >= 0:
+                hull.pop()  # b lies on or below the chord a-i
+            else:
+                break
+        hull.append(i)
+    return hull
+
+
+def bar_chain(*, length: float, elements: int, area: float = 1.0, youngs_modulus: float | None = None,
+              tip_positions, stops: dict[int, float] | None = None,
+              dataset: MaterialDataset | None = None, name: str = "bar with stops") -> StoppedBarModel:
+    """An N-element bar fixed at ``x = 0``, pushed by a rigid obstacle at ``x = h`` (as in the
+    paper), with fixed stops behind interior nodes that close one after another.
+
+    Parameters
+    ----------
+    length : float
+        ``l0`` (m).
+    elements : int
+        Number of equal elements ``N``.
+    tip_positions : array_like
+        Obstacle position ``h`` per step (m).
+    stops : {node: clearance}, optional
+        A rigid stop at ``x_j - s_j`` behind node ``j`` (``0 < j < N``): ``u_j >= -s_j``.
+    """
+    L = check_positive("length", length)
+    if isinstance(elements, bool) or int(elements) != elements or elements < 1:
+        raise InputError(f"elements must be a positive integer, got {elements!r}")
+    N = int(elements)
+    x = np.linspace(0.0, L, N + 1)
+    h = np.asarray(tip_positions, dtype=float).ravel()
+    if h.size == 0 or not np.all(np.isfinite(h)):
+        raise InputError("tip positions must be a non-empty list of finite numbers")
+    obstacles = [Obstacle(normal=[-1.0], offset=-h, nodes=[N])]
+    for node, s in (stops or {}).items():
+        if isinstance(node, bool) or not isinstance(node, (int, np.integer)) or not 0 < node < N:
+            raise InputError(f"stop at node {node}: interior nodes are 1..{N - 1}")
+        s = float(s)
+        if not np.isfinite(s) or s < 0:
+            raise InputError(f"stop at node {node}: clearance must be finite and >= 0")
+        obstacles.append(Obstacle(normal=[1.0], offset=x[int(node)] - s, nodes=[int(node)]))
+    base = truss_model(nodes=x[:, None], members=np.column_stack([np.arange(N), np.arange(1, N + 1)]),
+                       area=area, youngs_modulus=youngs_modulus, supports=[(0, "x")], obstacles=obstacles,
+                       load_factors=None, dataset=dataset, name=name)
+    kw = {f: getattr(base, f) for f in base.__dataclass_fields__ if not f.startswith("_")}
+    kw.update(load_parameter=h, load_parameter_name="h", length_scale=L)
+    return StoppedBarModel(**kw)
+
+
+def warren_truss(*, panels: int, gap: float, contact_nodes, load_factors, panel_length: float = 1.0,
+                 height: float = 0.8, area: float = 1e-3, youngs_modulus: float | None = 200e9,
+                 node_load: float = 1e5, dataset=None, name: str | None = None) -> TrussModel:
+    """A 2-D Warren truss on a pin and a roller, its top nodes loaded downwards, above a plane.
+
+    Parameters
+    ----------
+    panels : int
+        Number of bottom-chord panels (``4 panels - 1`` members, ``2 panels + 1`` nodes).
+    gap : float or sequence of float
+        Initial distance (m) between the bottom chord and the plane ``y = -gap`` under each
+        contact node (one value, or one per contact node: a stepped ground).
+    contact_nodes : sequence of int
+        Bottom-chord nodes (``0 .. panels``) that may touch the ground.
+    load_factors : sequence of float
+        Load path: the top-node loads ``-node_load`` (N, in ``y``) times each factor.
+    """
+    panels = int(panels)
+    if panels < 2:
+        raise InputError(f"a Warren truss needs at least 2 panels, got {panels}")
+    nb = panels + 1
+    X = np.vstack([np.column_stack([np.arange(nb) * panel_length, np.zeros(nb)]),
+                   np.column_stack([(np.arange(panels) + 0.5) * panel_length, np.full(panels, height)])])
+    i = np.arange(panels)
+    members = np.vstack([np.column_stack([i, i + 1]), np.column_stack([nb + i[:-1], nb + i[1:]]),
+                         np.column_stack([i, nb + i]), np.column_stack([i + 1, nb + i])])
+    loads = np.zeros_like(X)
+    loads[nb:, 1] = -node_load
+    contact_nodes = np.asarray(contact_nodes, dtype=int).ravel()
+    gaps = np.broadcast_to(np.asarray(gap, dtype=float), contact_nodes.shape)
+    obstacles = [Obstacle(normal=[0, 1], offset=-float(g), nodes=contact_nodes[gaps == g].tolist())
+                 for g in np.unique(gaps)]
+    return truss_model(nodes=X, members=members, area=area, youngs_modulus=youngs_modulus,
+                       supports=[(0, "xy"), (panels, "y")], loads=loads, obstacles=obstacles,
+                       load_factors=list(load_factors), dataset=dataset,
+                       name=name or f"Warren truss, {panels} panels")

@@ -1,0 +1,211 @@
+"""The classical problem and the DDCM projection of one model, built once
+(:func:`build_problems`): as sparse matrices for small kinematics, as CasADi expressions for
+finite ones. :class:`ProblemPair` maps scaled unknowns to physical fields and packs each step's
+parameters (the load step, the assigned data, the previous step's history)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ddcm_casadi.data.metric import block_diagonal, weighted_distance2
+from ddcm_casadi.linalg import to_casadi
+from ddcm_casadi.models.base import ContactModel
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.maps import Affine, Distance, NonlinearMap, NonlinearObjective
+from ddcm_casadi.problems.parameters import Parameters
+
+
+@dataclass(frozen=True, eq=False)
+class ProblemPair:
+    """Both problems of one model, with the maps between scaled unknowns and physical fields."""
+
+    model: ContactModel
+    classical: ComplementarityProblem | None
+    projection: ComplementarityProblem | None
+
+    def _problem(self, kind: str) -> ComplementarityProblem:
+        return self.classical if kind == "mcp" else self.projection
+
+    def step_params(self, step: int, previous: dict | None = None) -> np.ndarray:
+        """Parameters of the classical problem at a load step (``previous``: the last converged
+        step's physical fields, for models whose steps have a history,
+        :meth:`~ddcm_casadi.models.base.ContactModel.step_values`)."""
+        return self.classical.parameters.pack(**self.model.step_values(step, previous))
+
+    def projection_params(self, step: int, strain_star: np.ndarray, stress_star: np.ndarray,
+                          previous: dict | None = None) -> np.ndarray:
+        """Parameters of the ``Z_E`` projection: the load step and the assigned data, per point
+        (``(m,)`` or ``(m, k)``, flattened point-major). For one-component points, ``(m, N)``
+        arrays give an ``(n_params, N)`` matrix, one column per data assignment."""
+        strain_star, stress_star = np.asarray(strain_star, float), np.asarray(stress_star, float)
+        if strain_star.ndim < 2 or self.model.strain_components > 1:
+            strain_star, stress_star = strain_star.reshape(-1), stress_star.reshape(-1)
+        return self.projection.parameters.pack(**self.model.step_values(step, previous),
+                                               strain_star=strain_star, stress_star=stress_star)
+
+    def scales(self, kind: str) -> dict:
+        """The reference scales of the ``"mcp"`` (classical) or ``"mpcc"`` (projection) problem."""
+        return self.model.scales_for("classical" if kind == "mcp" else "ddcm")
+
+    def fields(self, kind: str, x: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
+        """Physical displacement, contact pressure, strain and stress from scaled unknowns
+        (strain and stress flat and point-major: ``m k`` values)."""
+        s = self.scales(kind)
+        n = self.model.n_dofs
+        u = s["displacement"] * np.asarray(x[:n])
+        pressure = s["stress"] * np.asarray(p)
+        strain = self.model.strain(u)
+        if kind == "mpcc":
+            stress = s["stress"] * np.asarray(x[n:])
+        else:
+            stress = self.model.stress(strain)
+        return dict(u=u, p=pressure, strain=strain, stress=stress)
+
+    def scaled_start(self, kind: str, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None):
+        """Scaled unknowns ``(x, p)`` from physical fields (for warm starts)."""
+        s = self.scales(kind)
+        x = [np.asarray(u) / s["displacement"]]
+        if kind == "mpcc":
+            x.append(np.asarray(stress).reshape(-1) / s["stress"])
+        return np.concatenate(x), np.asarray(p) / s["stress"]
+
+
+def _common(model: ContactModel, s: dict, fb_beta: float, n_z: int, P: Parameters) -> dict:
+    """The gaps ``(G u + gap0) / s_d`` with ``u = s_d u_hat`` (``gap0`` the first parameter) and the scales."""
+    nc = model.n_contacts
+    gap = Affine(sp.hstack([model.gap_operator, sp.csr_matrix((nc, n_z - model.n_dofs))]),
+                 sp.hstack([sp.identity(nc) / s["displacement"], sp.csr_matrix((nc, P.size - nc))]))
+    return dict(parameters=P, gap_map=gap, gap_ref=s["displacement"], pressure_ref=s["stress"],
+                contact_stiffness=model.contact_stiffness, fb_alpha=1.0 / (0.01 * model.length_scale),
+                fb_beta=fb_beta, contact_law=model.contact_law, kinematics=model.kinematics)
+
+
+def _selection(rows: int, start: int, columns: int, scale: float = 1.0) -> sp.csr_matrix:
+    """``scale`` times the identity placed at column ``start`` of a ``rows x columns`` matrix."""
+    return sp.hstack([sp.csr_matrix((rows, start)), scale * sp.identity(rows),
+                      sp.csr_matrix((rows, columns - start - rows))]).tocsr()
+
+
+def distance_weight(model: ContactModel) -> sp.csr_matrix:
+    """``W`` with ``sum_i w_i d_i^2 = d^T W d`` for ``d`` point-major ``[e_i - e*_i; s_i - s*_i]``.
+
+    Per point, its volume times half the Hessian of :func:`~ddcm_casadi.data.metric.weighted_distance2`
+    (the one place the metric's formula is written) for one point of unit weight of its material.
+    """
+    m, k = model.n_points, model.strain_components
+    metrics, material = model.dataset.point_materials(m)
+    nm, half = len(metrics), len(metrics) * k
+    e, s = ca.SX.sym("e", half), ca.SX.sym("s", half)
+    d2 = weighted_distance2(e, s, metrics, np.arange(nm), np.ones(nm))
+    H = ca.evalf(ca.hessian(d2, ca.vertcat(e, s))[0])
+    colind, row = H.sparsity().get_ccs()
+    row = np.asarray(row)
+    col = np.repeat(np.arange(2 * half), np.diff(colind))
+    # (material, position in its [e; s] block) of every Hessian row and column
+    (mr, br), (mc, bc) = (((i % half) // k, (i >= half) * k + i % k) for i in (row, col))
+    if np.any(mr != mc):
+        raise ValueError("the distance couples two material points")
+    blocks = np.zeros((nm, 2 * k, 2 * k))
+    np.add.at(blocks, (mr, br, bc), 0.5 * np.asarray(H.nonzeros()))
+    return block_diagonal(blocks[material] * np.asarray(model.volumes, float)[:, None, None])
+
+
+def _internal_force(model: ContactModel, s: dict, uh: ca.SX, stress: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """``(E(u), B(u)^T W stress, |B(u)|^T W |stress|)`` with ``u = s_d uh`` and ``B(u) = dE/du``
+    by automatic differentiation: the internal forces of a nonlinear strain measure, whose
+    virtual work is ``sum_i w_i stress_i . dE_i``."""
+    E = model.strain_expression(s["displacement"] * uh)
+    B = ca.jacobian(E, uh) / s["displacement"]
+    w = ca.DM(np.repeat(np.asarray(model.volumes, float), model.strain_components))
+    return E, ca.mtimes(B.T, w * stress), ca.mtimes(ca.fabs(B).T, w * ca.fabs(stress))
+
+
+def _build_nonlinear(model: ContactModel) -> ProblemPair:
+    """Both problems of a model with nonlinear kinematics, as CasADi expressions
+    (:class:`NonlinearMap`, :class:`NonlinearObjective`).
+
+    Classical: ``F = (B(u)^T W D E(u) - G^T a p - f) / s_f``. Projection: ``h = (B(u)^T W stress -
+    G^T a p - f) / s_f`` and ``f = d^T W d / (2 energy)`` with ``d = [E(u) - E*; stress - S*]`` point
+    by point. The gaps stay affine: a plane obstacle's gap ``n . (X + u) - d`` is exact at any
+    displacement.
+    """
+    n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
+    GtA = to_casadi((model.gap_operator.T @ sp.diags(model.contact_area)).tocsr())
+    absGtA = ca.fabs(GtA)
+    classical = projection = None
+    if model.youngs_modulus is not None:
+        s = model.scales_for("classical")
+        P = Parameters(gap0=nc, f=n, **model.history_sizes())
+        z, Ps = ca.SX.sym("z", n + nc), ca.SX.sym("P", P.size)
+        uh, ph, f = z[:n], z[n:], Ps[P.slice("f")]
+        E = model.strain_expression(s["displacement"] * uh)
+        _, internal, size = _internal_force(model, s, uh, to_casadi(model.material_matrix()) @ E)
+        F = (internal - s["stress"] * ca.mtimes(GtA, ph) - f) / s["force"]
+        terms = (size + s["stress"] * ca.mtimes(absGtA, ca.fabs(ph)) + ca.fabs(f)) / s["force"]
+        classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),),
+                                           residual_map=NonlinearMap.of(F, z, Ps, terms, "residual"), distance=None,
+                                           **_common(model, s, 1.0 / s["modulus"], n + nc, P))
+    if model.dataset is not None:
+        s = model.scales_for("ddcm")
+        mk = m * k
+        P = Parameters(gap0=nc, f=n, strain_star=mk, stress_star=mk, **model.history_sizes())
+        z, Ps = ca.SX.sym("z", n + mk + nc), ca.SX.sym("P", P.size)
+        uh, stress, ph, f = z[:n], s["stress"] * z[n:n + mk], z[n + mk:], Ps[P.slice("f")]
+        E, internal, size = _internal_force(model, s, uh, stress)
+        h = (internal - s["stress"] * ca.mtimes(GtA, ph) - f) / s["force"]
+        terms = (size + s["stress"] * ca.mtimes(absGtA, ca.fabs(ph)) + ca.fabs(f)) / s["force"]
+        stacked = ca.vertcat(E - Ps[P.slice("strain_star")], stress - Ps[P.slice("stress_star")])
+        point, c = np.divmod(np.arange(2 * mk), 2 * k)
+        d = stacked[np.where(c < k, point * k + c, mk + point * k + c - k).tolist()]
+        W = to_casadi(distance_weight(model) / s["energy"])
+        objective = NonlinearObjective(ca.Function("distance", [z, Ps], [0.5 * ca.dot(d, ca.mtimes(W, d))]))
+        projection = ComplementarityProblem(
+            kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=NonlinearMap.of(h, z, Ps, terms, "h"),
+            distance=objective, **_common(model, s, 1.0 / s["metric"], n + mk + nc, P))
+    return ProblemPair(model=model, classical=classical, projection=projection)
+
+
+def build_problems(model: ContactModel) -> ProblemPair:
+    """Build the classical MCP and the DDCM projection MPCC of ``model`` once: as sparse matrices
+    for small kinematics, as CasADi expressions for finite ones (:func:`_build_nonlinear`)."""
+    if model.kinematics != "small":
+        return _build_nonlinear(model)
+    n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
+    GtA = (model.gap_operator.T @ sp.diags(model.contact_area)).tocsr()  # contact forces G^T (a p)
+
+    classical = None
+    if model.youngs_modulus is not None:
+        s = model.scales_for("classical")
+        P = Parameters(gap0=nc, f=n, **model.history_sizes())
+        # F = (K u - G^T a p - f) / s_f with u = s_d u_hat, p = s_s p_hat
+        # (scaled in the order the arithmetic of F does it: each term times its scale, over s_f)
+        F = Affine(sp.hstack([model.stiffness() * s["displacement"] / s["force"], GtA * -s["stress"] / s["force"]]),
+                   _selection(n, nc, P.size, -1.0 / s["force"]))
+        classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),), residual_map=F, distance=None,
+                                           **_common(model, s, 1.0 / s["modulus"], n + nc, P))
+
+    projection = None
+    if model.dataset is not None:
+        s = model.scales_for("ddcm")
+        P = Parameters(gap0=nc, f=n, strain_star=m * k, stress_star=m * k, **model.history_sizes())
+        nz, mk = n + m * k + nc, m * k
+        BtW = model.strain_operator.T @ sp.diags(np.repeat(model.volumes, k))
+        # h = (B^T W stress - G^T a p - f) / s_f with stress = s_s stress_hat
+        h = Affine(sp.hstack([sp.csr_matrix((n, n)), BtW * s["stress"] / s["force"], GtA * -s["stress"] / s["force"]]),
+                   _selection(n, nc, P.size, -1.0 / s["force"]))
+        # d = [B u - strain_star; stress - stress_star] point-major, f = d^T W d / (2 energy)
+        stacked = Affine(sp.vstack([sp.hstack([model.strain_operator * s["displacement"], sp.csr_matrix((mk, mk + nc))]),
+                                    _selection(mk, n, nz, s["stress"])]),
+                         sp.vstack([_selection(mk, nc + n, P.size, -1.0), _selection(mk, nc + n + mk, P.size, -1.0)]))
+        point, c = np.divmod(np.arange(2 * mk), 2 * k)
+        order = np.where(c < k, point * k + c, mk + point * k + c - k)
+        d = Affine(stacked.z[order], stacked.params[order])
+        projection = ComplementarityProblem(
+            kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=h,
+            distance=Distance(d, distance_weight(model) / s["energy"]),
+            **_common(model, s, 1.0 / s["metric"], nz, P))
+    return ProblemPair(model=model, classical=classical, projection=projection)

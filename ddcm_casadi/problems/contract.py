@@ -1,0 +1,243 @@
+"""Symbolic complementarity problems built from a :class:`~ddcm_casadi.models.base.ContactModel`.
+
+Two kinds arise from one model (``docs/maths.md`` states the maths):
+
+``mcp`` (classical)
+    Find ``x, p`` with ``F(x, p) = 0`` and ``g(x) >= 0, p >= 0, g p = 0``.
+``mpcc`` (DDCM projection onto ``Z_E``)
+    ``min_x f(x)`` subject to ``h(x, p) = 0`` and ``g(x) >= 0, p >= 0, g p = 0``.
+
+Everything is nondimensional: unknowns, residual rows, gaps, pressures and the objective are divided
+by reference scales derived from each problem (:meth:`ContactModel.scales_for`: a linear solve
+with ``E`` for the classical problem, with the data's modulus for the projection, never with the
+metric), so formulations and solvers see O(1) numbers for any units. A formulation only sees a
+:class:`ComplementarityProblem`; it never needs the mechanical model. Its parameters are named
+(:class:`Parameters`): a formulation extends them with its own (smoothing, multipliers, ...) and
+packs values by name, never by position.
+
+The models are linear (small strains, linearised gaps), so a problem is held as sparse matrices:
+the residual and the gaps are affine in the unknowns ``z = [x; p]`` and the parameters ``P``
+(:class:`Affine`), the objective is half a weighted squared distance of an affine map
+(:class:`Distance`). Formulations build their Newton systems from these matrices
+(:mod:`ddcm_casadi.formulations.pairs`): one symbolic expression per matrix nonzero, and its
+symbolic derivative, cost about 20 microseconds per nonzero (seconds at 1e5 unknowns) where a
+sparse product costs nanoseconds. The CasADi ``SX`` expressions (:attr:`ComplementarityProblem.residual`,
+``gap``, ``objective``, ...) are rendered from the same matrices on first use, for the consumers
+that differentiate them symbolically (IPOPT, the exact enumeration).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Literal
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.problems.maps import Affine, Distance
+from ddcm_casadi.problems.parameters import Parameters
+
+#: Up to this many unknowns :meth:`ComplementarityProblem.stability` is computed (dense).
+STABILITY_MAX_UNKNOWNS = 2000
+
+@dataclass(frozen=True, eq=False)
+class ComplementarityProblem:
+    """A nondimensional complementarity problem, the contract between models and formulations.
+
+    Attributes
+    ----------
+    kind : {"mcp", "mpcc"}
+    parameters : Parameters
+        Named parameters (load step; assigned data), in physical units.
+    unknowns : tuple of (str, int)
+        Names and sizes of the blocks of the smooth unknowns ``x`` (``u``; then ``stress``).
+    residual_map : Affine
+        ``mcp``: ``F(x, p)``, as many rows as ``x``. ``mpcc``: equality constraints ``h(x, p)``.
+    gap_map : Affine
+        Scaled gaps ``g(x)``.
+    distance : Distance or None
+        ``mpcc`` only: the scaled squared distance ``f`` (the objective).
+    gap_ref, pressure_ref : float
+        Physical size of one unit of scaled gap (m) and of scaled pressure (Pa).
+    contact_stiffness : float
+        Reference stiffness (Pa/m) in which penalty parameters are given.
+    fb_alpha, fb_beta : float
+        Default Fischer-Burmeister scalings (1/m and 1/Pa), as in the paper (``beta = 1/c`` for the
+        projection, ``1/E`` for the classical problem).
+    contact_law : str
+        What the pairs mean (:mod:`ddcm_casadi.models.contact_laws`; ``"signorini"``: one normal pair per
+        contact).
+    kinematics : {"small", "finite"}
+        The model's kinematics (finite: the nonlinear form, :attr:`affine` False).
+
+    The symbolic (``SX``) quantities :attr:`x`, :attr:`p`, :attr:`params`, :attr:`residual`,
+    :attr:`residual_terms` (per row of the residual, the size of the terms that cancel in it,
+    ``|K| |u| + |G^T a| |p| + |f|`` and the like: residual tests are relative to it,
+    :meth:`relative_residual`), :attr:`gap` and :attr:`objective` are rendered from the matrices
+    on first use.
+    """
+
+    kind: Literal["mcp", "mpcc"]
+    parameters: Parameters
+    unknowns: tuple
+    residual_map: Affine
+    gap_map: Affine
+    distance: Distance | None
+    gap_ref: float
+    pressure_ref: float
+    contact_stiffness: float
+    fb_alpha: float
+    fb_beta: float
+    contact_law: str = "signorini"
+    kinematics: str = "small"
+
+    @property
+    def affine(self) -> bool:
+        """Whether the residual and gaps are affine and the objective quadratic (held as sparse
+        matrices). Methods that need it (the exact enumeration, the greedy screen, the elastic
+        start) are skipped with a note otherwise."""
+        return isinstance(self.residual_map, Affine) and isinstance(self.gap_map, Affine) and (
+            self.distance is None or isinstance(self.distance, Distance))
+
+    @property
+    def n_x(self) -> int:
+        return sum(n for _, n in self.unknowns)
+
+    @property
+    def n_pairs(self) -> int:
+        return self.gap_map.rows
+
+    @property
+    def n_residual(self) -> int:
+        """Rows of the residual (``F`` or ``h``)."""
+        return self.residual_map.rows
+
+    @cached_property
+    def pressure_map(self) -> Affine:
+        """The scaled pressures ``p`` as an :class:`Affine`."""
+        nx, nc = self.n_x, self.n_pairs
+        return Affine(sp.hstack([sp.csr_matrix((nc, nx)), sp.identity(nc)]), sp.csr_matrix((nc, self.parameters.size)))
+
+    # ------------------------------------------------------------------ symbolic (SX), on first use
+    @cached_property
+    def x(self) -> ca.SX:
+        """Smooth unknowns (scaled)."""
+        return ca.vertcat(*[ca.SX.sym(name, n) for name, n in self.unknowns])
+
+    @cached_property
+    def p(self) -> ca.SX:
+        """One multiplier per pair: the scaled contact pressures."""
+        return ca.SX.sym("p", self.n_pairs)
+
+    @property
+    def params(self) -> ca.SX:
+        """All parameters as one symbolic vector (in the order of :attr:`parameters`)."""
+        return self.parameters.vector
+
+    @cached_property
+    def residual(self) -> ca.SX:
+        return self.residual_map.render(ca.vertcat(self.x, self.p), self.params)
+
+    @cached_property
+    def residual_terms(self) -> ca.SX:
+        return self.residual_map.terms(ca.vertcat(self.x, self.p), self.params)
+
+    @cached_property
+    def gap(self) -> ca.SX:
+        return self.gap_map.render(ca.vertcat(self.x, self.p), self.params)
+
+    @cached_property
+    def objective(self) -> ca.SX | None:
+        return None if self.distance is None else self.distance.render(ca.vertcat(self.x, self.p), self.params)
+
+    # ------------------------------------------------------------------ numeric, shared by formulations
+    @cached_property
+    def _shared(self) -> dict:
+        return {}
+
+    def shared(self, key, build):
+        """``build()``, once per problem and ``key``: what several formulations of one problem
+        build alike (a saddle point's matrices) is built once."""
+        if key not in self._shared:
+            self._shared[key] = build()
+        return self._shared[key]
+
+    @cached_property
+    def _stacked(self) -> tuple[sp.csr_matrix, sp.csr_matrix, tuple[int, int]]:
+        """``[residual; gap; d]`` and ``|residual|`` as matrices of ``[z; P]`` (three sparse products
+        per evaluation: scipy's overhead per product, not the arithmetic, is what small problems pay)."""
+        maps = [self.residual_map, self.gap_map] + ([self.distance.d] if self.distance is not None else [])
+        stacked = sp.vstack([sp.hstack([a.z, a.params]) for a in maps]).tocsr()
+        R = self.residual_map
+        return stacked, abs(sp.hstack([R.z, R.params]).tocsr()), (R.rows, R.rows + self.gap_map.rows)
+
+    def evaluate(self, x, p, params) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """``(residual, residual_terms, gap, objective)`` at scaled ``(x, p)`` and the parameter
+        values (objective 0 for ``mcp``): sparse products with the problem's matrices (those of
+        :attr:`residual`, :attr:`residual_terms`, :attr:`gap`, :attr:`objective`), nothing to build."""
+        if not self.affine:
+            z, P = np.concatenate([np.ravel(x), np.ravel(p)]), np.ravel(params)
+            values = self._nonlinear_values(z, P)
+            return values[0], values[1], values[2], float(values[3][0]) if self.distance is not None else 0.0
+        w = np.concatenate([np.ravel(x), np.ravel(p), np.ravel(params)]).astype(float, copy=False)
+        stacked, size, (ne, ng) = self._stacked
+        v = stacked @ w
+        objective = 0.0 if self.distance is None else 0.5 * float(v[ng:] @ (self.distance.weight @ v[ng:]))
+        return v[:ne], size @ np.abs(w), v[ne:ng], objective
+
+    @cached_property
+    def _nonlinear_values(self):
+        """``(z, P) -> (residual, residual terms, gap, objective)`` in one Function (nonlinear form)."""
+        z, P = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
+        objective = ca.SX(1, 1) if self.distance is None else self.distance.render(z, P)
+        return NumericFunction(ca.Function("evaluate", [z, P], [
+            self.residual_map.render(z, P), self.residual_map.terms(z, P), self.gap_map.render(z, P), objective]))
+
+    @cached_property
+    def _tangent(self):
+        """``(z, P) -> (dF/dx, gap)``: the tangent stiffness of a classical problem (scaled)."""
+        z, P = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
+        F = self.residual_map.render(z, P)
+        return NumericFunction(ca.Function("tangent", [z, P], [ca.densify(ca.jacobian(F, z[:self.n_x])),
+                                                                  ca.densify(ca.jacobian(self.gap_map.render(z, P), z[:self.n_x]))]))
+
+    def stability(self, x, p, params, *, contact_tol: float = 1e-9) -> float:
+        """The smallest eigenvalue of the classical tangent stiffness ``dF/dx`` on the directions
+        that keep every touching pair closed (``g <= contact_tol``), relative to the largest
+        ``|dF/dx|``: negative at an unstable equilibrium (a snap-through truss's horizontal
+        members). Dense, for the few unknowns of a nonlinear structure; ``nan`` above
+        :data:`STABILITY_MAX_UNKNOWNS` unknowns or for an affine problem (unique, stable solutions
+        of a positive definite stiffness)."""
+        if self.kind != "mcp" or self.affine or self.n_x > STABILITY_MAX_UNKNOWNS:
+            return float("nan")
+        z = np.concatenate([np.ravel(x), np.ravel(p)])
+        K, dg = (np.asarray(a, float) for a in self._tangent(z, np.ravel(params)))
+        K, dg = K.reshape(self.n_x, self.n_x, order="F"), dg.reshape(self.n_pairs, self.n_x, order="F")
+        gap = self.gap_map.value(z, np.ravel(params))
+        touching = dg[gap <= contact_tol]
+        if touching.size:
+            _, sv, vt = np.linalg.svd(touching)
+            rank = int(np.sum(sv > 1e-12 * max(sv.max(), 1.0)))
+            basis = vt[rank:].T
+        else:
+            basis = np.eye(self.n_x)
+        if not basis.size:
+            return 1.0  # every direction is held by a contact
+        H = basis.T @ (0.5 * (K + K.T)) @ basis
+        scale = max(float(np.max(np.abs(K))), np.finfo(float).tiny)
+        return float(np.linalg.eigvalsh(H)[0]) / scale
+
+    def scaled_penalty(self, gamma: float) -> float:
+        """A physical contact stiffness (Pa/m) in the problem's scaled units."""
+        return gamma * self.gap_ref / self.pressure_ref
+
+    def relative_residual(self, residual: np.ndarray, terms: np.ndarray) -> float:
+        """``max_i |r_i| / max(1, max_j t_j)``: relative to the terms that cancel when they are
+        larger than the scale unit (a stiff, heavily loaded structure), scaled-absolute else."""
+        r = np.abs(np.asarray(residual, float))
+        if not r.size:
+            return 0.0
+        return float(np.max(r)) / max(1.0, float(np.max(np.abs(terms), initial=0.0)))
