@@ -320,11 +320,11 @@ def test_data_file_accepted(tmp_path: Path, capsys, content: str) -> None:
 
 def test_huge_data_file_is_rejected_before_reading(tmp_path, capsys, monkeypatch):
     """A file over the size cap is refused with one line, without reading it."""
-    import ddcm_casadi.data.dataset as data_module
+    import ddcm_casadi.data.limits as limits
 
     data = tmp_path / "big.csv"
     data.write_text("strain,stress\n" + "0.0,0.0\n" * 1000)
-    monkeypatch.setattr(data_module, "MAX_DATA_FILE_BYTES", 100)
+    monkeypatch.setattr(limits, "MAX_DATA_FILE_BYTES", 100)
     case = tmp_path / "case.toml"
     case.write_text('[bar]\nlength = 1.0\nyoungs_modulus = 2e11\n[obstacle]\npositions = [1.0]\n'
                     '[data]\npath = "big.csv"\n[ddcm]\nc = 3e11\n')

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import ddcm_casadi.data.dataset as data_module
+import ddcm_casadi.data.limits as limits
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import Metric, isotropic_elasticity
@@ -143,7 +144,7 @@ def test_npy_file_limits_and_paths(tmp_path, monkeypatch):
     with pytest.raises(InputError, match=r"needs \(N, 2\)"):
         MaterialDataset.from_npy(tmp_path / "d.npy", c=200e9)
     assert len(MaterialDataset.from_npy(tmp_path / "d.npy", c=Metric(D3))) == 50
-    monkeypatch.setattr(data_module, "MAX_DATA_POINTS", 49)
+    monkeypatch.setattr(limits, "MAX_DATA_POINTS", 49)
     with pytest.raises(InputError, match="50 points, more than 49"):
         MaterialDataset.from_npy(tmp_path / "d.npy", c=D3)
     with pytest.raises(InputError, match="directory"):

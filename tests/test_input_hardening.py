@@ -17,7 +17,8 @@ import pytest
 
 from ddcm_casadi import PhysicsWarning, compare
 from ddcm_casadi.casefiles.config import load_case
-from ddcm_casadi.data.dataset import METRIC_RATIO_LIMIT, MaterialDataset
+from ddcm_casadi.data.dataset import MaterialDataset
+from ddcm_casadi.data.limits import METRIC_RATIO_LIMIT
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.loops.ipopt_options import FAILED_TO_START, check_ipopt_options, iteration_count
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ddcm_casadi.casefiles import base as casefile
-from ddcm_casadi.casefiles.base import Case
+from ddcm_casadi.casefiles import common as casefile
+from ddcm_casadi.casefiles.base import Case, register_case_kind
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.models.bar import bar_model
 from ddcm_casadi.models.truss import bar_chain
@@ -113,7 +113,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     return Case(model=model, formulation_options=options, ddcm_max_outer=max_outer, source=source)
 
 
-casefile.register_case_kind(
+register_case_kind(
     "bar",
     sections={"bar": {"length", "area", "youngs_modulus", "elements"}, "obstacle": {"positions"},
               "stops": {"node", "clearance"}},

@@ -10,8 +10,9 @@ Each model kind's sections are parsed by a case module of its own, in the case l
 ``ddcm_casadi.casefiles.truss.CASE_FORMAT``, the ``[mesh]`` format
 ``ddcm_casadi.casefiles.continuum.CASE_FORMAT``; all are appended to this documentation below), behind
 one registry of case kinds keyed by section (:func:`ddcm_casadi.casefiles.base.register_case_kind`); the
-shared machinery (reading files, section and key checks, validators, ``[data]``, ``[ddcm]``,
-``[formulations]``) is :mod:`ddcm_casadi.casefiles.base`. The model modules never import a case module.
+shared machinery is :mod:`ddcm_casadi.casefiles.base` (reading files, section and key checks, ``[ddcm]``)
+and :mod:`ddcm_casadi.casefiles.common` (validators, ``[data]``, ``[formulations]``). The model modules
+never import a case module.
 This module is the public entry point: it imports the case modules, so that they are registered,
 and exports :func:`load_case`, :func:`load_case_with_overrides`, :func:`case_from_dict`,
 :func:`default_case` and :class:`Case`. A new model kind's case files are one module that calls

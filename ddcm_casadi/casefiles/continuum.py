@@ -7,8 +7,9 @@ from typing import Any
 
 import numpy as np
 
-from ddcm_casadi.casefiles import base as casefile
-from ddcm_casadi.casefiles.base import Case, integer, nonempty_list, number, positive, show, vector
+from ddcm_casadi.casefiles import common as casefile
+from ddcm_casadi.casefiles.base import Case, register_case_kind
+from ddcm_casadi.casefiles.common import integer, nonempty_list, number, positive, show, vector
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import COMPONENTS, Metric, isotropic_elasticity
@@ -332,7 +333,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     return Case(model=model, formulation_options=options, ddcm_max_outer=max_outer, source=source)
 
 
-casefile.register_case_kind(
+register_case_kind(
     "mesh",
     sections={"mesh": _MESH, "material": {"region", "youngs_modulus", "poisson_ratio", "data"},
               "supports": {"boundary", "fix"}, "loads": {"boundary", "traction", "body_force", "region"},

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ddcm_casadi.casefiles import base as casefile
-from ddcm_casadi.casefiles.base import Case
+from ddcm_casadi.casefiles import common as casefile
+from ddcm_casadi.casefiles.base import Case, register_case_kind
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.models.truss import AXES, Obstacle, member_data, truss_model
 
@@ -241,7 +241,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     return Case(model=model, formulation_options=options, ddcm_max_outer=max_outer, source=source)
 
 
-casefile.register_case_kind(
+register_case_kind(
     "structure",
     sections={"structure": {"nodes", "members", "area", "youngs_modulus", "material", "supports", "loads",
                             "distributed_loads"},

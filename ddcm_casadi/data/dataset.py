@@ -1,25 +1,25 @@
-"""Material data sets and the projection onto them (nearest neighbour under the DDCM metric)."""
+"""Material data sets and the projection onto them (nearest neighbour under the DDCM metric).
+
+The data files are read by :mod:`ddcm_casadi.data.files`; what a data set may hold (its size, the
+range of its search coordinates, the balance of its metric) is :mod:`ddcm_casadi.data.limits`.
+"""
 
 from __future__ import annotations
 
-import csv
 import math
-import re
 import os
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.inputs import input_file, positive
+from ddcm_casadi.inputs import positive
+from ddcm_casadi.data.files import is_npy, read_csv, read_npy
+from ddcm_casadi.data import limits
+from ddcm_casadi.data.limits import searchable_coordinates
 from ddcm_casadi.data.metric import Metric
 from ddcm_casadi.data.search import KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
 
-#: Data files larger than this are rejected before reading (bytes).
-MAX_DATA_FILE_BYTES = 2 * 1024**3
-#: Generated (Hookean) data sets larger than this are rejected before allocating them.
-MAX_DATA_POINTS = 10**8
 #: Rows per block where a pass over the data would otherwise allocate a full-size temporary.
 _CHUNK = 1 << 16
 
@@ -28,53 +28,6 @@ def check_positive(name: str, value: float) -> float:
     """Return ``value`` as a float, or raise :class:`InputError` unless it is a finite number > 0
     (:func:`ddcm_casadi.inputs.positive`; ``name`` says where it came from)."""
     return positive(value, name)
-
-
-#: Largest scaled coordinate the search accepts: squared distances (sums of squares) stay below
-#: the largest double, 1.8e308, with room for a sum over 12 components.
-MAX_COORDINATE = 1e150
-#: The metric must balance strain and stress: ``d^2 = c de^2 + ds^2 / c`` keeps both terms only while
-#: their ratio ``(E / c)^2`` (``E`` the data's own modulus) is within ``[eps, 1 / eps]``, i.e. ``c / E``
-#: within ``[sqrt(eps), 1 / sqrt(eps)]`` = ``[1.5e-8, 6.7e7]``; beyond, one term is below the other's
-#: roundoff and the search ignores stress (or strain) altogether.
-METRIC_RATIO_LIMIT = 1.0 / math.sqrt(np.finfo(float).eps)
-
-
-def _searchable_coordinates(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> np.ndarray:
-    """The data's scaled coordinates (:meth:`Metric.coordinates`), refused where the search would
-    overflow or where the metric drowns stress in strain (or the reverse).
-
-    Raises
-    ------
-    InputError
-        A coordinate beyond :data:`MAX_COORDINATE` (e.g. a stress of 1e300 Pa in a CSV file, or a
-        metric ``c`` of 1e300), or a metric out of balance with the data (:data:`METRIC_RATIO_LIMIT`).
-    """
-    with np.errstate(over="ignore", invalid="ignore"):
-        X = metric.coordinates(strain, stress)
-    k = metric.k
-    label = f"c = {metric.c:.3g} Pa" if k == 1 else f"C (norm {np.linalg.norm(metric.matrix, 2):.3g} Pa)"
-    # Column ranges by reductions (NaN propagates): no temporary the size of the data.
-    lo, hi = X.min(axis=0), X.max(axis=0)
-    if not np.all(np.maximum(-lo, hi) <= MAX_COORDINATE):
-        big = ~(np.abs(X) <= MAX_COORDINATE)
-        row = int(np.argmax(big.any(axis=1)))
-        which, value = ("strain", strain) if big[row, :k].any() else ("stress", stress)
-        raise InputError(f"material data set: {which} {np.ravel(value[row])[0]:.3g} of data point {row} is out of "
-                         f"range for the metric {label} (the scaled coordinates must stay below "
-                         f"{MAX_COORDINATE:.0e} so that squared distances do not overflow)")
-    # Ranges, not variances: squares of tiny spreads would underflow to zero.
-    spread_e = float(np.max(hi[:k] - lo[:k]))
-    spread_s = float(np.max(hi[k:] - lo[k:]))
-    if spread_e > 0 and spread_s > 0:
-        ratio = spread_s / spread_e  # E / c for one component
-        if not 1.0 / METRIC_RATIO_LIMIT <= ratio <= METRIC_RATIO_LIMIT:
-            times = f"about 1e{math.log10(spread_e) - math.log10(spread_s):+.0f}"  # may overflow as a ratio
-            raise InputError(f"material data set: the metric {label} is {times} times the data's "
-                             f"own modulus; it must be within {1 / METRIC_RATIO_LIMIT:.1e} to "
-                             f"{METRIC_RATIO_LIMIT:.1e} times it, else one term of the distance is below "
-                             f"the other's roundoff")
-    return X
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,7 +96,7 @@ class MaterialDataset:
         # ball crosses: measured at 1e6 points, 1.9 s -> 6 ms for 9 000 states 1e4 spacings away.
         # The one array of coordinates is centred and rotated in place, and the tree keeps it
         # (no copy): at 1e8 points each float64 temporary would be another 1.6 GB.
-        X = _searchable_coordinates(metric, strain, stress)
+        X = searchable_coordinates(metric, strain, stress)
         mean = X.mean(axis=0)
         X -= mean
         _, axes = np.linalg.eigh(X.T @ X)
@@ -237,8 +190,8 @@ class MaterialDataset:
         """Equally spaced points on ``stress = E strain``, as in the paper."""
         e = check_positive("youngs_modulus", youngs_modulus)
         n = int(n_points)
-        if n < 1 or n > MAX_DATA_POINTS:
-            raise InputError(f"number of data points must be between 1 and {MAX_DATA_POINTS}, got {n_points!r}")
+        if n < 1 or n > limits.MAX_DATA_POINTS:
+            raise InputError(f"number of data points must be between 1 and {limits.MAX_DATA_POINTS}, got {n_points!r}")
         if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
             raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
         strain = np.linspace(strain_min, strain_max, n)
@@ -263,9 +216,9 @@ class MaterialDataset:
         """Any law ``stress = law(strain)`` (``(n, k) -> (n, k)``, Mandel components) sampled on a
         regular grid of ``points_per_axis^k`` strain states in ``[strain_min, strain_max]^k``."""
         k, n = int(components), int(points_per_axis)
-        if n < 1 or float(n) ** k > MAX_DATA_POINTS:
-            raise InputError(f"points per axis must be between 1 and {int(MAX_DATA_POINTS ** (1 / k))} "
-                             f"for {k} components (at most {MAX_DATA_POINTS} points), got {points_per_axis!r}")
+        if n < 1 or float(n) ** k > limits.MAX_DATA_POINTS:
+            raise InputError(f"points per axis must be between 1 and {int(limits.MAX_DATA_POINTS ** (1 / k))} "
+                             f"for {k} components (at most {limits.MAX_DATA_POINTS} points), got {points_per_axis!r}")
         if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
             raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
         axis = np.linspace(strain_min, strain_max, n)
@@ -278,55 +231,16 @@ class MaterialDataset:
         ``strain_1,...,strain_k,stress_1,...,stress_k`` (``k`` Mandel components; ``c`` then a
         ``k x k`` SPD matrix). Other columns are ignored.
 
-        A UTF-8 byte-order mark (as written by spreadsheets) is accepted.
+        A UTF-8 byte-order mark (as written by spreadsheets) is accepted. Read by
+        :func:`ddcm_casadi.data.files.read_csv`.
 
         Raises
         ------
         InputError
             Missing, unreadable, empty, huge, non-UTF-8, one-column or non-numeric file.
         """
-        path = input_file(path, "data file")
-        size = path.stat().st_size
-        if size == 0:
-            raise InputError(f"data file is empty: {path}")
-        if size > MAX_DATA_FILE_BYTES:
-            raise InputError(f"data file is too large ({size} bytes > {MAX_DATA_FILE_BYTES}): {path}")
-        try:
-            with path.open(newline="", encoding="utf-8-sig") as fh:
-                header = next(csv.reader(fh), None)
-        except UnicodeDecodeError:
-            raise InputError(f"data file is not UTF-8 text: {path}") from None
-        except (OSError, csv.Error) as exc:
-            raise InputError(f"cannot read data file {path}: {getattr(exc, 'strerror', None) or exc}") from None
-        if header is None or not any(h.strip() for h in header):
-            raise InputError(f"data file is empty: {path}")
-        names = [h.strip().lower() for h in header]
-        k = _components(c)
-        wanted = (["strain"], ["stress"]) if k == 1 else ([f"strain_{i}" for i in range(1, k + 1)],
-                                                         [f"stress_{i}" for i in range(1, k + 1)])
-        missing = [w for w in wanted[0] + wanted[1] if w not in names]
-        if missing and k == 1:
-            raise InputError(f"data file {path} needs a header with columns 'strain' and 'stress', got {header!r}")
-        if missing:
-            cols = ",".join(wanted[0] + wanted[1])
-            raise InputError(f"data file {path} needs a header with columns {cols!r} ({k} strain and {k} stress "
-                             f"components for this metric), got {header!r}")
-        usecols = tuple(names.index(w) for w in wanted[0] + wanted[1])
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
-                table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, usecols=usecols, encoding="utf-8")
-        except UnicodeDecodeError:
-            raise InputError(f"data file is not UTF-8 text: {path}") from None
-        except ValueError as exc:
-            raise InputError(f"data file {path} is not numeric: {_csv_position(str(exc), header)}") from None
-        except OSError as exc:
-            raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
-        if table.size == 0:
-            raise InputError(f"data file has a header but no data rows: {path}")
-        if k == 1:
-            return cls(table[:, 0], table[:, 1], c)
-        return cls(table[:, :k], table[:, k:], c)
+        strain, stress = read_csv(path, c=c)
+        return cls(strain, stress, c)
 
     @classmethod
     def from_npy(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
@@ -338,69 +252,24 @@ class MaterialDataset:
         system's page cache (shared between processes, dropped and re-read under memory pressure
         instead of swapped) and are never copied; the process itself holds only the search's
         coordinates and tree (``16 k + 16`` bytes per point). Other real and integer types are
-        converted (a copy). The file must not change while the data set is in use.
+        converted (a copy). The file must not change while the data set is in use. Read by
+        :func:`ddcm_casadi.data.files.read_npy`.
 
         Raises
         ------
         InputError
             Missing, unreadable, empty, not ``.npy``, truncated, not real-valued, of another
-            shape, or with more than :data:`MAX_DATA_POINTS` points.
+            shape, or with more than :data:`~ddcm_casadi.data.limits.MAX_DATA_POINTS` points.
         """
-        path = input_file(path, "data file")
-        k = _components(c)
-        try:
-            with path.open("rb") as fh:
-                magic = fh.read(len(_NPY_MAGIC))
-        except OSError as exc:
-            raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
-        if not magic:
-            raise InputError(f"data file is empty: {path}")
-        if magic != _NPY_MAGIC:
-            raise InputError(f"data file {path} is not a .npy file (numpy.save format)")
-        try:
-            table = np.load(path, mmap_mode="r", allow_pickle=False)
-        except (ValueError, EOFError, SyntaxError) as exc:  # a damaged header, truncated data, objects
-            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise InputError(f"data file {path} is a damaged or unsupported .npy file: {first}") from None
-        except OSError as exc:
-            raise InputError(f"cannot read data file {path}: {exc.strerror or exc}") from None
-        if table.dtype.kind not in "fiu":
-            raise InputError(f"data file {path} holds {table.dtype} values; the data must be real numbers")
-        if table.ndim != 2 or table.shape[1] != 2 * k or table.shape[0] == 0:
-            cols = "strain, stress" if k == 1 else f"strain_1..{k}, stress_1..{k}"
-            raise InputError(f"data file {path} holds an array of shape {table.shape}; it needs (N, {2 * k}) "
-                             f"with N >= 1 and the columns {cols}")
-        if table.shape[0] > MAX_DATA_POINTS:
-            raise InputError(f"data file {path} holds {table.shape[0]} points, more than {MAX_DATA_POINTS}")
-        return cls(table[:, :k], table[:, k:], c)
+        strain, stress = read_npy(path, c=c)
+        return cls(strain, stress, c)
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
         """Read a data file by its suffix: ``.npy`` with :meth:`from_npy`, any other as CSV
         (:meth:`from_csv`)."""
-        reader = cls.from_npy if str(path).lower().endswith(".npy") else cls.from_csv
+        reader = cls.from_npy if is_npy(path) else cls.from_csv
         return reader(path, c=c)
-
-
-#: The first bytes of every ``.npy`` file.
-_NPY_MAGIC = b"\x93NUMPY"
-
-
-def _components(c) -> int:
-    """Strain components per point of a metric given as a number (1), a matrix or a Metric."""
-    return 1 if np.ndim(c) == 0 and not isinstance(c, Metric) else Metric(c).k
-
-
-def _csv_position(message: str, header: list[str]) -> str:
-    """numpy's parse error with its position in the file's own terms: numpy counts data rows from
-    0 after the header and columns from 1; a user's editor counts lines from 1, header included."""
-    first = message.splitlines()[0] if message else "parse error"
-    m = re.search(r"(.*?) at row (\d+), column (\d+)\.?$", first)
-    if not m:
-        return first
-    line, col = int(m.group(2)) + 2, int(m.group(3))
-    name = f" ({header[col - 1].strip()!r})" if 0 < col <= len(header) else ""
-    return f"{m.group(1)} on line {line}, column {col}{name}"
 
 
 class PointData:

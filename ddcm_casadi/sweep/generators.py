@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from ddcm_casadi.casefiles.base import _HOOKEAN, integer, number, positive
-from ddcm_casadi.data.dataset import MAX_DATA_POINTS
+from ddcm_casadi.casefiles.common import HOOKEAN_KEYS, integer, number, positive
+from ddcm_casadi.data.limits import MAX_DATA_POINTS
 from ddcm_casadi.errors import InputError
 
 LAWS = ("hookean", "tanh", "cubic")
@@ -42,7 +42,7 @@ NOISE_ON = ("stress", "both")
 #: Keys of ``[generate]``.
 KEYS = ("law", "youngs_modulus", "strain_min", "strain_max", "points", "sampling", "noise", "noise_kind",
         "noise_on", "seed", "stress_scale", "beta", "table")
-_FROM_HOOKEAN = tuple(sorted(_HOOKEAN))
+_FROM_HOOKEAN = tuple(sorted(HOOKEAN_KEYS))
 
 
 @dataclass(frozen=True)
