@@ -24,16 +24,17 @@ import scipy.sparse as sp
 from ddcm_casadi.models.contact_laws import get_contact_law
 from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.linalg import SingularMatrix, factorize, to_casadi
+from ddcm_casadi.linalg import to_casadi
+from ddcm_casadi.models.scales import LARGE_STRAIN, load_path_warnings, reference_scales
 
 
 #: Kinematics a model may declare: ``small`` (linear strains and gaps: the problems are affine) or
 #: ``finite`` (a nonlinear strain measure; the problems are nonlinear).
 KINEMATICS = ("small", "finite")
 
-#: Imposed strain beyond which :meth:`ContactModel.path_warnings` warns: small-strain kinematics
-#: then differ from finite-strain ones by more than ~5 % (Green-Lagrange ``e + e^2/2`` vs ``e``).
-LARGE_STRAIN = 0.1
+# LARGE_STRAIN (the imposed strain beyond which path_warnings warns) lives with the scales; kept
+# importable from here.
+__all__ = ["KINEMATICS", "LARGE_STRAIN", "ContactModel", "FigureSpec", "drawn_formulation"]
 
 
 @dataclass(frozen=True)
@@ -237,111 +238,23 @@ class ContactModel:
         """
         cached = self._cache.get(kind)
         if cached is None:
-            cached = self._reference_scales(kind)
+            cached = reference_scales(self, kind)
             self._cache[kind] = cached
         return dict(cached)
-
-    def _reference_scales(self, kind: str) -> dict:
-        D = self.point_stiffness(kind)
-        B, G, w, a = self.strain_operator, self.gap_operator, self.volumes, self.contact_area
-        k = self.strain_components
-        K = (B.T @ sp.diags(np.repeat(w * D, k)) @ B).tocsc()
-        k_max = float(np.max(K.diagonal())) if K.shape[0] else 1.0
-        load_step = int(np.argmax(np.max(np.abs(self.loads), axis=1))) if self.loads.size else 0
-        f = self.loads[load_step] if self.loads.size else np.zeros(self.n_dofs)
-        penetration = np.maximum(-self.gap_offsets, 0.0)
-        pen = float(np.max(penetration)) if penetration.size else 0.0
-        kappa = 1e3 * k_max / float(np.max(a)) if self.n_contacts else 0.0
-        GA = G.T @ sp.diags(a) if self.n_contacts else None
-        spring_lu = None
-
-        def spring():  # K with a stiff spring on every pair (bodies resting on obstacles only)
-            nonlocal spring_lu
-            if spring_lu is None:
-                spring_lu = factorize(K + kappa * (GA @ G) if self.n_contacts else K)
-            return spring_lu
-
-        u_f = np.zeros(self.n_dofs)
-        strain = 0.0
-        with np.errstate(over="ignore", invalid="ignore"):
-            if np.any(f):
-                try:
-                    lu = factorize(K)
-                except SingularMatrix:
-                    lu = spring()
-                u_f = lu.solve(f)
-                strain = float(np.max(np.abs(B @ u_f), initial=0.0))
-            if pen > 0:
-                worst = int(np.argmax(np.max(penetration, axis=1)))
-                u_g = spring().solve(kappa * (GA @ penetration[worst]))
-                normal = float(np.max(np.abs(G @ u_g), initial=0.0))
-                if normal > 0:
-                    imposed = float(np.max(np.abs(B @ u_g), initial=0.0)) * pen / normal
-                    self._cache[("imposed_strain", kind)] = imposed
-                    strain = max(strain, imposed)
-        U = max(float(np.max(np.abs(u_f), initial=0.0)), pen)
-        if not (U > 0 and strain > 0):
-            U, strain = 1e-3 * self.length_scale, 1e-3  # nothing moves: any unit will do
-        modulus = float(np.max(D))
-        rows = abs(B).max(axis=1).toarray().ravel() if B.nnz else np.zeros(0)
-        section = (float(np.mean(a)) if self.n_contacts else
-                   float(np.median(np.repeat(w, k)[rows > 0] * rows[rows > 0])) if np.any(rows > 0)
-                   else float(np.mean(w)) / self.length_scale)
-        stress = modulus * strain
-        if kind == "classical":
-            metric, energy = modulus, float(np.sum(w)) * modulus * strain ** 2
-        else:
-            metric = max(m.modulus for m in self.dataset.point_materials(self.n_points)[0])
-            energy = float(np.sum(w)) * 0.5 * (metric * strain ** 2 + stress ** 2 / metric)
-        scales = dict(length=self.length_scale, displacement=U, strain=strain, stress=stress,
-                      force=stress * section, energy=energy, modulus=modulus, metric=metric)
-        # Squares and products of scales (energies, d^2) must stay representable: each within 1e+-150.
-        bad = {k: v for k, v in scales.items() if not (np.isfinite(v) and 1e-150 <= v <= 1e150)}
-        if bad:
-            name, value = next(iter(bad.items()))
-            raise InputError(f"obstacle positions, loads or moduli are out of range: the {kind} problem's {name} "
-                             f"scale is {value:.3g}, outside 1e-150 to 1e150")
-        return scales
 
     def path_warnings(self) -> list[str]:
         """What is physically odd about the load path, one line each; refuses what is meaningless.
 
-        - The obstacles already penetrate the body at the first step: the body starts with
-          contact forces and no load (often an obstacle placed on the wrong side).
-        - The largest strain the obstacles impose (the penetration spread over the body as the
-          scales estimate it, :meth:`scales_for`) beyond :data:`LARGE_STRAIN`: far outside the
-          small-strain model.
+        Obstacles that penetrate the body at the first step, and (small kinematics only) an
+        imposed strain beyond :data:`LARGE_STRAIN` (:func:`~ddcm_casadi.models.scales.load_path_warnings`).
 
         Raises
         ------
         InputError
             An imposed strain of 1 or more (an obstacle pushed past a fixed end, through the
             body): a small-strain model is meaningless there.
-
-        The strain checks apply to small kinematics only.
         """
-        out = []
-        first = -np.min(self.gap_offsets[0], initial=0.0)
-        if first > 1e-12 * self.length_scale:
-            n = int(np.sum(self.gap_offsets[0] < 0))
-            out.append(f"the obstacles start inside the body: {n} contact pair(s) penetrate by up to {first:.3g} m "
-                       f"at the first step ({self.load_parameter_name}={self.load_parameter[0]:.6g}), so there are "
-                       f"contact forces before any load")
-        if self.kinematics != "small":  # large strains and rotations are what finite kinematics model
-            return out
-        self.scales_for("classical" if self.youngs_modulus is not None else "ddcm")
-        imposed = max((v for k, v in self._cache.items() if isinstance(k, tuple) and k[0] == "imposed_strain"),
-                      default=0.0)
-        worst = int(np.argmin(np.min(self.gap_offsets, axis=1))) if self.n_contacts else 0
-        where = f"{self.load_parameter_name}={self.load_parameter[worst]:.6g}"
-        if imposed >= 1.0:
-            raise InputError(f"the obstacles impose a strain of about {imposed:.3g} at {where} (penetration "
-                             f"{-np.min(self.gap_offsets):.3g} m): pushed past a fixed end or through the body; "
-                             f"a small-strain model is meaningless there")
-        if imposed > LARGE_STRAIN:
-            out.append(f"the obstacles impose a strain of about {imposed:.3g} at {where}: far beyond the "
-                       f"small-strain model (> {LARGE_STRAIN:g})")
-        return out
+        return load_path_warnings(self)
 
     @property
     def scales(self) -> dict:

@@ -14,7 +14,9 @@ members), so every formulation and both variants apply unchanged.
 
 A contact pair's pressure acts on the mean cross-section of the members at its node, so pressures
 are stress-like (well scaled); :meth:`TrussModel.contact_force` gives forces in newtons.
-A bar of N elements is a 1-D truss (:func:`bar_chain`).
+A bar of N elements is a 1-D truss (:func:`bar_chain`); :func:`warren_truss` builds a bridge.
+:func:`truss_model` puts together the checked pieces of :mod:`ddcm_casadi.models.truss_assembly`
+(geometry, supports, loads, contact pairs, the mechanism check).
 
 The model describes itself to the front ends (:meth:`TrussModel.describe`,
 :meth:`TrussModel.extra_fields`, :meth:`TrussModel.figures`); the ``[structure]`` case files are
@@ -29,15 +31,20 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
+from ddcm_casadi.data.dataset import MaterialDataset, check_positive
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import to_casadi
 from ddcm_casadi.models.base import ContactModel, FigureSpec, drawn_formulation
+from ddcm_casadi.models.truss_assembly import (AXES, check_not_mechanism, contact_areas,
+                                               contact_pairs, fixed_directions, gap_operator, load_path,
+                                               member_data, member_geometry, node_coordinates, per_member,
+                                               reference_loads, strain_operator)
 
-AXES = "xyz"
-
+#: The names importers use; the assembly pieces (supports' axis letters, the mechanism check, the
+#: member data) are re-exported from :mod:`ddcm_casadi.models.truss_assembly`.
+__all__ = ["AXES", "Obstacle", "StoppedBarModel", "TrussModel", "bar_chain",
+           "check_not_mechanism", "member_data", "truss_model", "warren_truss"]
 
 
 @dataclass(frozen=True)
@@ -57,17 +64,6 @@ class Obstacle:
     normal: Sequence[float]
     offset: float | Sequence[float]
     nodes: Sequence[int]
-
-
-def _as_per_member(name: str, value, ne: int) -> np.ndarray:
-    a = np.asarray(value, dtype=float)
-    if a.ndim == 0:
-        a = np.full(ne, float(a))
-    if a.shape != (ne,):
-        raise InputError(f"{name} must be one number or one per member ({ne}), got {a.size}")
-    if not np.all(np.isfinite(a)) or np.any(a <= 0):
-        raise InputError(f"{name} must be finite and positive for every member")
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,101 +191,21 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
         ``"finite"``: large displacements and rotations, Green-Lagrange member strains
         (:meth:`TrussModel.strain`); data and stresses are then ``(E, S)`` pairs.
     """
-    X = np.asarray(nodes, dtype=float)
-    if X.ndim == 1:
-        X = X[:, None]
-    if X.ndim != 2 or X.shape[1] not in (1, 2, 3) or X.shape[0] < 2:
-        raise InputError("nodes must be a list of at least two points with 1, 2 or 3 coordinates each")
-    if not np.all(np.isfinite(X)):
-        raise InputError("node coordinates must be finite")
+    X = node_coordinates(nodes)
     nn, d = X.shape
-    M = np.asarray(members)
-    if M.ndim != 2 or M.shape[1] != 2 or M.shape[0] == 0 or not np.issubdtype(M.dtype, np.integer):
-        raise InputError("members must be a non-empty list of [node_i, node_j] integer pairs")
-    if M.min() < 0 or M.max() >= nn:
-        raise InputError(f"member refers to a node outside 0..{nn - 1}")
+    M, length, unit = member_geometry(members, X)
     ne = M.shape[0]
-    vec = X[M[:, 1]] - X[M[:, 0]]
-    length = np.linalg.norm(vec, axis=1)
-    if np.any(length <= 0):
-        raise InputError(f"member {int(np.argmin(length))} has zero length")
-    e = vec / length[:, None]
-    A = _as_per_member("area", area, ne)
-    E = None if youngs_modulus is None else _as_per_member("youngs_modulus", youngs_modulus, ne)
-
-    fixed = _supports(supports, nn, d)
-    free = np.flatnonzero(~fixed.ravel())
+    A = per_member("area", area, ne)
+    E = None if youngs_modulus is None else per_member("youngs_modulus", youngs_modulus, ne)
+    free = np.flatnonzero(~fixed_directions(supports, nn, d).ravel())
     if free.size == 0:
         raise InputError("every degree of freedom is fixed")
-    # B (ne x nn d): -e/L at node i, +e/L at node j; then keep the free columns.
-    rows = np.repeat(np.arange(ne), 2 * d)
-    cols = np.concatenate([M[:, [0]] * d + np.arange(d), M[:, [1]] * d + np.arange(d)], axis=1).ravel()
-    vals = np.concatenate([-e / length[:, None], e / length[:, None]], axis=1).ravel()
-    B = sp.csr_matrix((vals, (rows, cols)), shape=(ne, nn * d))[:, free]
-
-    f_ref = np.zeros((nn, d))
-    if loads is not None:
-        f_ref += _nodal_array("loads", loads, nn, d)
-    if distributed_loads is not None:
-        q = np.asarray(distributed_loads, dtype=float)
-        if q.shape != (ne, d) or not np.all(np.isfinite(q)):
-            raise InputError(f"distributed_loads must be finite, one {d}-vector per member")
-        half = 0.5 * q * length[:, None]
-        np.add.at(f_ref, M[:, 0], half)
-        np.add.at(f_ref, M[:, 1], half)
-
-    # Contact pairs: one per (obstacle, node).
-    normals, pair_nodes, offsets = [], [], []
-    steps_from_obstacles = None
-    for k, ob in enumerate(obstacles):
-        n = np.asarray(ob.normal, dtype=float).ravel()
-        if n.size != d or not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
-            raise InputError(f"obstacle {k}: normal must be a non-zero {d}-vector")
-        n = n / np.linalg.norm(n)
-        nodes_k = np.asarray(ob.nodes).ravel()
-        if nodes_k.size == 0 or not np.issubdtype(nodes_k.dtype, np.integer) or nodes_k.min() < 0 or nodes_k.max() >= nn:
-            raise InputError(f"obstacle {k}: nodes must be a non-empty list of node indices 0..{nn - 1}")
-        if np.unique(nodes_k).size != nodes_k.size:
-            raise InputError(f"obstacle {k}: a node is listed twice")
-        off = np.asarray(ob.offset, dtype=float).ravel()
-        if not np.all(np.isfinite(off)) or off.size == 0:
-            raise InputError(f"obstacle {k}: offset must be finite")
-        if off.size > 1:
-            if steps_from_obstacles not in (None, off.size):
-                raise InputError("obstacles with offsets per step must all have the same number of steps")
-            steps_from_obstacles = off.size
-        for node in nodes_k:
-            normals.append(n)
-            pair_nodes.append(int(node))
-            offsets.append(off)
-    nc = len(pair_nodes)
-    lf = None if load_factors is None else np.asarray(load_factors, dtype=float).ravel()
-    if lf is not None and (lf.size == 0 or not np.all(np.isfinite(lf))):
-        raise InputError("load_factors must be a non-empty list of finite numbers")
-    n_steps = lf.size if lf is not None else (steps_from_obstacles or 1)
-    if steps_from_obstacles is not None and steps_from_obstacles != n_steps:
-        raise InputError(f"{n_steps} load factors but obstacle offsets for {steps_from_obstacles} steps")
-    if lf is None:
-        lf = np.ones(n_steps)
-    dof = (np.asarray(pair_nodes, dtype=np.intp)[:, None] * d + np.arange(d)).ravel() if nc else np.zeros(0, np.intp)
-    G_full = sp.csr_matrix((np.asarray(normals).ravel() if nc else np.zeros(0),
-                            (np.repeat(np.arange(nc), d), dof)), shape=(nc, nn * d))
-    G = G_full[:, free]
-    if nc:
-        base = np.einsum("ij,ij->i", np.asarray(normals), X[np.asarray(pair_nodes)])
-        off = np.column_stack([np.broadcast_to(o, (n_steps,)) for o in offsets])
-        gap0 = base[None, :] - off
-    else:
-        gap0 = np.zeros((n_steps, 0))
-    # Contact area: mean section of the members at the node (pressures stay stress-like).
-    section_sum = np.bincount(M.ravel(), weights=np.repeat(A, 2), minlength=nn)
-    member_count = np.bincount(M.ravel(), minlength=nn)
-    loose = [node for node in pair_nodes if member_count[node] == 0]
-    if loose:
-        raise InputError(f"contact node {loose[0]} belongs to no member")
-    node_area = section_sum / np.maximum(member_count, 1)
-    contact_area = node_area[np.asarray(pair_nodes, dtype=np.intp)] if nc else np.zeros(0)
-
+    B = strain_operator(M, unit, length, nn, free)
+    f_ref = reference_loads(loads, distributed_loads, M, length, nn, d)
+    pairs = contact_pairs(obstacles, nn, d)
+    lf, n_steps = load_path(load_factors, pairs.n_steps)
+    G, gap0 = gap_operator(pairs, X, free, n_steps)
+    contact_area = contact_areas(M, A, nn, pairs)
     check_not_mechanism(B, A * length)
     data = member_data(dataset, material)
     size = float(np.max(np.ptp(X, axis=0))) or float(np.max(length))
@@ -298,84 +214,8 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
         gap_offsets=gap0, loads=lf[:, None] * f_ref.ravel()[free][None, :], load_parameter=np.arange(n_steps, dtype=float)
         if load_factors is None else lf, youngs_modulus=E, dataset=data, length_scale=size, name=name,
         load_parameter_name="load step" if load_factors is None else "load factor",
-        nodes=X, members=M.astype(np.intp), free_dofs=free, contact_nodes=np.asarray(pair_nodes, dtype=np.intp),
-        contact_normals=np.asarray(normals).reshape(nc, d), member_area=A, kinematics=kinematics)
-
-
-#: Up to this many unknowns the mechanism check is an exact eigenvalue count (dense, n x n).
-EXACT_RANK_LIMIT = 1000
-
-
-def check_not_mechanism(B: sp.spmatrix, volumes: np.ndarray) -> None:
-    """Raise :class:`InputError` if members and supports leave a free degree of freedom
-    unrestrained (``K = B^T W B`` singular).
-
-    Small models: eigenvalues of ``K`` below ``1e-12 max`` (roundoff is ``n eps ||K||``, below
-    that for ``n <= 1000``, while a slender real structure stays above ``1/n^2``). Larger ones:
-    the same test on the pivots of a sparse LU of ``K``.
-    """
-    n = B.shape[1]
-    K = (B.T @ sp.diags(volumes) @ B).tocsc()
-    if n <= EXACT_RANK_LIMIT:
-        ev = np.linalg.eigvalsh(K.toarray())
-        free = int(np.sum(ev <= 1e-12 * max(float(ev[-1]), 1e-300)))
-    else:
-        try:
-            pivots = np.abs(spla.splu(K).U.diagonal())
-            free = int(np.sum(pivots <= 1e-12 * pivots.max()))
-        except RuntimeError:  # exactly singular
-            free = 1
-    if free:
-        raise InputError(f"the structure is a mechanism: members and supports leave {free} of its {n} free "
-                         "degrees of freedom unrestrained (add supports or members)")
-
-
-def _supports(supports, nn: int, d: int) -> np.ndarray:
-    arr = np.asarray(supports, dtype=object)
-    if arr.shape == (nn, d) and all(isinstance(v, (bool, np.bool_)) for v in arr.ravel()):
-        return arr.astype(bool)
-    fixed = np.zeros((nn, d), dtype=bool)
-    for entry in supports:
-        try:
-            node, axes = entry
-            node = int(node)
-        except (TypeError, ValueError):
-            raise InputError(f"support {entry!r} must be (node, axes) such as (0, 'xy')") from None
-        if not 0 <= node < nn:
-            raise InputError(f"support at node {node}: nodes are numbered 0..{nn - 1}")
-        axes = str(axes).lower()
-        bad = [a for a in axes if a not in AXES[:d]]
-        if bad or not axes:
-            raise InputError(f"support at node {node}: axes must be letters from {AXES[:d]!r}, got {axes!r}")
-        for a in axes:
-            fixed[node, AXES.index(a)] = True
-    return fixed
-
-
-def _nodal_array(name: str, value, nn: int, d: int) -> np.ndarray:
-    a = np.asarray(value, dtype=float)
-    if a.ndim == 1 and d == 1:
-        a = a[:, None]
-    if a.shape != (nn, d) or not np.all(np.isfinite(a)):
-        raise InputError(f"{name} must be finite, one {d}-vector per node")
-    return a
-
-
-def member_data(dataset, material):
-    """The data of a truss's members: one set (shared), a list of sets with a ``material`` index
-    per member (:class:`PointData`), or ``None``."""
-    if dataset is None:
-        return None
-    if isinstance(dataset, (MaterialDataset, PointData)):
-        if material is not None and not isinstance(dataset, PointData):
-            return PointData([dataset], material)
-        return dataset
-    sets = list(dataset)
-    if len(sets) == 1 and material is None:
-        return sets[0]
-    if material is None:
-        raise InputError("several data sets need a 'material' index per member")
-    return PointData(sets, material)
+        nodes=X, members=M.astype(np.intp), free_dofs=free, contact_nodes=pairs.node_indices(),
+        contact_normals=np.asarray(pairs.normals).reshape(pairs.count, d), member_area=A, kinematics=kinematics)
 
 
 class StoppedBarModel(TrussModel):

@@ -8,8 +8,10 @@
 >>> model.n_contacts
 9
 
-Modules: :mod:`.mesh` (shapes, refinement, files), :mod:`.fem` (operators from scikit-fem),
-:mod:`.obstacles`, :mod:`.model` (:func:`continuum_model`), :mod:`.hertz` (the reference),
+Modules: :mod:`.mesh` (shapes; it re-exports the checks of :mod:`.mesh_checks`, the grading of
+:mod:`.mesh_refinement` and the file reader of :mod:`.mesh_files`), :mod:`.fem` (operators from
+scikit-fem), :mod:`.obstacles`, :mod:`.model` (:func:`continuum_model`, put together from the
+pieces of :mod:`.assembly`), :mod:`.hertz` (the reference),
 :mod:`.output` and :mod:`.results` (VTU series, figures), :mod:`.case` (``[mesh]`` case files).
 The names below are imported on first use, so that importing the package (as the case-file
 registry does) costs nothing until a continuum is built.

@@ -14,7 +14,9 @@ components per material point, so that every formulation and both variants apply
 - supports fix displacement components on boundaries; body forces and surface tractions are scaled
   by one load factor per step, obstacles move by their own travel per step.
 
-Displacements of fixed dofs are zero; the unknowns ``u`` are the free dofs.
+Displacements of fixed dofs are zero; the unknowns ``u`` are the free dofs. The checked pieces
+the builder puts together (materials, supports, loads, contact pairs) are in
+:mod:`ddcm_casadi.models.continuum.assembly`.
 """
 
 from __future__ import annotations
@@ -27,15 +29,16 @@ import numpy as np
 import scipy.sparse as sp
 import skfem
 
-from ddcm_casadi.data.dataset import MaterialDataset, PointData
+from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import block_diagonal, isotropic_elasticity
 from ddcm_casadi.models.base import ContactModel, FigureSpec, drawn_formulation
 from ddcm_casadi.models.continuum import fem
-from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh, select_facets
+from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, isotropic_law,
+                                                   point_data, reference_loads, step_count)
+from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
 from ddcm_casadi.models.continuum.obstacles import Obstacle
 
-AXES = "xyz"
 #: A boundary: its name in ``mesh.boundaries``, or a predicate on facet midpoints ``(d, nf)``.
 Where = str | Callable[[np.ndarray], np.ndarray]
 
@@ -197,27 +200,6 @@ class ContinuumModel(ContactModel):
 
 
 # ------------------------------------------------------------------------------------ builder
-def _components(spec: str, d: int) -> list[int]:
-    if not isinstance(spec, str) or not spec or any(c not in AXES[:d] for c in spec.lower()):
-        raise InputError(f"support components must be letters from {AXES[:d]!r}, got {spec!r}")
-    return sorted({AXES.index(c) for c in spec.lower()})
-
-
-def _elements_of(mesh: skfem.Mesh, region: str) -> np.ndarray:
-    subs = getattr(mesh, "subdomains", None) or {}
-    if region not in subs:
-        known = ", ".join(sorted(subs)) or "none"
-        raise InputError(f"unknown region {region!r}; the mesh's regions: {known}")
-    return np.asarray(subs[region], dtype=np.int64)
-
-
-def _vector(name: str, value, d: int) -> np.ndarray:
-    v = np.asarray(value, dtype=float).ravel()
-    if v.size != d or not np.all(np.isfinite(v)):
-        raise InputError(f"{name} must be {d} finite numbers, got {value!r}")
-    return v
-
-
 def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports: Sequence[Support],
                     contacts: Sequence[Contact] = (), degree: int = 1, tractions: Sequence[Traction] = (),
                     body_forces: Sequence[BodyForce] = (), load_factors: Sequence[float] | None = None,
@@ -252,139 +234,27 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
     check_mesh(mesh)
     disc = fem.Discretisation.create(mesh, int(degree) if degree in (1, 2) else _bad_degree(degree))
     d, k = disc.dimension, disc.components
-    ne, nq = mesh.t.shape[1], disc.points_per_element
-
-    # --- regions and materials
-    if not materials:
-        raise InputError("a continuum needs at least one material")
-    element_material = np.full(ne, -1, dtype=np.int64)
-    rest = [i for i, mat in enumerate(materials) if mat.region is None]
-    if len(rest) > 1:
-        raise InputError("only one material may leave its region unnamed (the rest of the mesh)")
-    for i, mat in enumerate(materials):
-        if mat.region is not None:
-            els = _elements_of(mesh, mat.region)
-            if np.any(element_material[els] >= 0):
-                raise InputError(f"region {mat.region!r} overlaps another material's region")
-            element_material[els] = i
-    if rest:
-        element_material[element_material < 0] = rest[0]
-    if np.any(element_material < 0):
-        raise InputError(f"{int(np.sum(element_material < 0))} elements have no material; "
-                         "add a material without a region for the rest of the mesh")
-    point_region = np.repeat(element_material, nq)
-    has_law = [m.youngs_modulus is not None for m in materials]
-    has_data = [m.data is not None for m in materials]
-    E = nu = None
-    if all(has_law):
-        for mat in materials:  # checks each law, with the values the user gave
-            isotropic_elasticity(mat.youngs_modulus, mat.poisson_ratio, d)
-        E = np.array([m.youngs_modulus for m in materials], dtype=float)[point_region]
-        nu = np.array([m.poisson_ratio for m in materials], dtype=float)[point_region]
-    elif any(has_law):
-        raise InputError("give youngs_modulus and poisson_ratio for every material, or for none (DDCM only)")
-    dataset = None
-    if any(has_data):
-        if not all(has_data):
-            raise InputError("give a data set for every material, or for none (classical only)")
-        sets = list(datasets)
-        for mat in materials:
-            if not 0 <= int(mat.data) < len(sets):
-                raise InputError(f"material data index {mat.data!r} out of range: {len(sets)} data sets")
-        for s in sets:
-            if s.k != k:
-                raise InputError(f"a data set has {s.k} strain components per point; a {d}-D continuum "
-                                 f"needs {k} (Mandel: {'e11,e22,sqrt2 e12' if d == 2 else 'e11,e22,e33,sqrt2 e23,sqrt2 e13,sqrt2 e12'})")
-        per_point = np.array([materials[i].data for i in range(len(materials))])[point_region]
-        if len(sets) == 1:
-            dataset = sets[0]
-        else:
-            dataset = PointData(sets, per_point)
+    point_region = np.repeat(element_materials(mesh, materials), disc.points_per_element)
+    E, nu = isotropic_law(materials, point_region, d)
+    dataset = point_data(materials, datasets, point_region, d, k)
     if E is None and dataset is None:
         raise InputError("a continuum needs an isotropic law (youngs_modulus, poisson_ratio) or data")
-
-    # --- operators and supports
     B_all, w = fem.strain_operator(disc)
-    vdofs = disc.vector_dofs()
-    fixed = np.zeros(disc.n_dofs, dtype=bool)
-    for s in supports:
-        comps = _components(s.components, d)
-        dofs = fem.boundary_dofs(disc, select_facets(mesh, s.where))
-        for c in comps:
-            fixed[vdofs[c, dofs]] = True
-    free = np.flatnonzero(~fixed)
-    if free.size == 0:
-        raise InputError("the supports fix every degree of freedom")
-    index_of = np.full(disc.n_dofs, -1, dtype=np.int64)
-    index_of[free] = np.arange(free.size)
-    B = B_all[:, free].tocsr()
-
-    # --- loads
-    f_ref = np.zeros(disc.n_dofs)
-    for t in tractions:
-        f_ref += fem.surface_load(disc, select_facets(mesh, t.where), _vector("traction", t.traction, d))
-    for b in body_forces:
-        els = None if b.region is None else _elements_of(mesh, b.region)
-        f_ref += fem.body_load(disc, _vector("body force", b.force_density, d), els)
-
-    # --- contact pairs
-    n_steps = None
-    if load_factors is not None:
-        n_steps = len(load_factors)
-    for c in contacts:
-        trav = np.asarray(c.obstacle.travel)
-        if trav.ndim == 1 and n_steps is None:
-            n_steps = trav.size
-    n_steps = n_steps or 1
+    free = free_dofs(disc, supports)
+    f_ref = reference_loads(disc, tractions, body_forces)
+    n_steps = step_count(load_factors, contacts)
     factors = np.ones(n_steps) if load_factors is None else np.asarray(load_factors, dtype=float)
-    obstacles, rows_dofs, points, normals, areas, owner, g0 = [], [], [], [], [], [], []
     size = float(np.max(np.ptp(mesh.p, axis=1)))
-    if contacts and d == 3 and disc.degree == 2:
-        # int_f phi_vertex = 0 on a quadratic triangle: a uniform pressure puts no force on the
-        # vertices, so nodal contact would leave them biactive and their pressures meaningless.
-        raise InputError("contact on quadratic tetrahedra is not supported (a quadratic triangle's vertices "
-                         "carry no share of a pressure); use degree = 1 in 3-D")
-    for i, c in enumerate(contacts):
-        ob = c.obstacle
-        if ob.dimension != d:
-            raise InputError(f"obstacle {ob.name!r} is {ob.dimension}-D, the mesh {d}-D")
-        dofs, area = fem.tributary_areas(disc, select_facets(mesh, c.where))
-        X = disc.dof_locations()[dofs]
-        gaps = ob.gap_offsets(X, n_steps)
-        if float(np.min(gaps)) > size:
-            raise InputError(f"obstacle {ob.name!r} cannot touch the body: it comes no closer than "
-                             f"{float(np.min(gaps)):.3g} m along the path, more than the body's size {size:.3g} m")
-        obstacles.append(ob)
-        rows_dofs.append(dofs)
-        points.append(X)
-        normals.append(ob.normals(X, n_steps))
-        areas.append(area)
-        owner.append(np.full(dofs.size, i))
-        g0.append(gaps)
-    nc = int(sum(r.size for r in rows_dofs))
-    if nc:
-        cdofs = np.concatenate(rows_dofs)
-        N = np.concatenate(normals)
-        cols = index_of[vdofs[:, cdofs]].T  # (nc, d)
-        keep = cols >= 0  # a fixed component moves no gap
-        G = sp.csr_matrix((N[keep], (np.nonzero(keep)[0], cols[keep])), shape=(nc, free.size))
-        contact = dict(contact_dofs=cdofs, contact_points=np.concatenate(points), contact_normals=N,
-                       contact_obstacle=np.concatenate(owner))
-        area_all, gap0 = np.concatenate(areas), np.concatenate(g0, axis=1)
-    else:
-        G = sp.csr_matrix((0, free.size))
-        contact = dict(contact_dofs=np.zeros(0, np.int64), contact_points=np.zeros((0, d)),
-                       contact_normals=np.zeros((0, d)), contact_obstacle=np.zeros(0, np.int64))
-        area_all, gap0 = np.zeros(0), np.zeros((n_steps, 0))
+    G, area_all, gap0, obstacles, contact = contact_pairs(disc, contacts, free, n_steps, size)
     loads = factors[:, None] * f_ref[free][None, :]
     load_parameter = (contacts[0].obstacle.travels(n_steps) if contacts and load_factors is None else factors)
     lp_name = "obstacle travel (m)" if contacts and load_factors is None else "load factor"
 
     model = ContinuumModel(
-        strain_operator=B, volumes=w, gap_operator=G, contact_area=area_all, gap_offsets=gap0, loads=loads,
-        load_parameter=load_parameter, youngs_modulus=E, dataset=dataset, length_scale=size, name=name,
-        load_parameter_name=lp_name, strain_components=k, discretisation=disc, poisson_ratio=nu,
-        free_dofs=free, point_region=point_region,
+        strain_operator=B_all[:, free].tocsr(), volumes=w, gap_operator=G, contact_area=area_all,
+        gap_offsets=gap0, loads=loads, load_parameter=load_parameter, youngs_modulus=E, dataset=dataset,
+        length_scale=size, name=name, load_parameter_name=lp_name, strain_components=k, discretisation=disc,
+        poisson_ratio=nu, free_dofs=free, point_region=point_region,
         region_names=tuple(m.region or "(rest)" for m in materials), obstacles=tuple(obstacles),
         reference=reference, **contact)
     _check_held(model)

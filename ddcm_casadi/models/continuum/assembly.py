@@ -1,0 +1,219 @@
+"""Assembling a continuum: the checked pieces :func:`~ddcm_casadi.models.continuum.model.continuum_model`
+is built from.
+
+- materials: :func:`element_materials` (regions), :func:`isotropic_law` (``E``, ``nu`` per point),
+  :func:`point_data` (the data sets of the points);
+- supports and loads: :func:`free_dofs`, :func:`reference_loads` (tractions, body forces);
+- load path and contact: :func:`step_count`, :func:`contact_pairs` (one pair per boundary dof of
+  each contact surface, with its gap operator row, tributary area and reference gaps).
+
+Each checks its own input with a one-line :class:`~ddcm_casadi.errors.InputError`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+import skfem
+
+from ddcm_casadi.data.dataset import MaterialDataset, PointData
+from ddcm_casadi.data.metric import isotropic_elasticity
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.models.continuum import fem
+from ddcm_casadi.models.continuum.mesh import select_facets
+
+if TYPE_CHECKING:
+    from ddcm_casadi.models.continuum.model import BodyForce, Contact, Material, Support, Traction
+    from ddcm_casadi.models.continuum.obstacles import Obstacle
+
+#: Axis letters of support components.
+AXES = "xyz"
+
+
+# --- small checks
+def _components(spec: str, d: int) -> list[int]:
+    """The axes (0, 1, 2) of a support's components such as ``"xy"``."""
+    if not isinstance(spec, str) or not spec or any(c not in AXES[:d] for c in spec.lower()):
+        raise InputError(f"support components must be letters from {AXES[:d]!r}, got {spec!r}")
+    return sorted({AXES.index(c) for c in spec.lower()})
+
+
+def elements_of(mesh: skfem.Mesh, region: str) -> np.ndarray:
+    """The elements of the named subdomain ``region``."""
+    subs = getattr(mesh, "subdomains", None) or {}
+    if region not in subs:
+        known = ", ".join(sorted(subs)) or "none"
+        raise InputError(f"unknown region {region!r}; the mesh's regions: {known}")
+    return np.asarray(subs[region], dtype=np.int64)
+
+
+def _vector(name: str, value, d: int) -> np.ndarray:
+    """``d`` finite numbers."""
+    v = np.asarray(value, dtype=float).ravel()
+    if v.size != d or not np.all(np.isfinite(v)):
+        raise InputError(f"{name} must be {d} finite numbers, got {value!r}")
+    return v
+
+
+# --- materials
+def element_materials(mesh: skfem.Mesh, materials: Sequence[Material]) -> np.ndarray:
+    """The index in ``materials`` of every element: its region's, else the unnamed material's."""
+    if not materials:
+        raise InputError("a continuum needs at least one material")
+    element_material = np.full(mesh.t.shape[1], -1, dtype=np.int64)
+    rest = [i for i, mat in enumerate(materials) if mat.region is None]
+    if len(rest) > 1:
+        raise InputError("only one material may leave its region unnamed (the rest of the mesh)")
+    for i, mat in enumerate(materials):
+        if mat.region is not None:
+            els = elements_of(mesh, mat.region)
+            if np.any(element_material[els] >= 0):
+                raise InputError(f"region {mat.region!r} overlaps another material's region")
+            element_material[els] = i
+    if rest:
+        element_material[element_material < 0] = rest[0]
+    if np.any(element_material < 0):
+        raise InputError(f"{int(np.sum(element_material < 0))} elements have no material; "
+                         "add a material without a region for the rest of the mesh")
+    return element_material
+
+
+def isotropic_law(materials: Sequence[Material], point_region: np.ndarray,
+                   d: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``E`` and ``nu`` per material point if every material has a law, ``(None, None)`` if none has."""
+    has_law = [m.youngs_modulus is not None for m in materials]
+    if all(has_law):
+        for mat in materials:  # checks each law, with the values the user gave
+            isotropic_elasticity(mat.youngs_modulus, mat.poisson_ratio, d)
+        E = np.array([m.youngs_modulus for m in materials], dtype=float)[point_region]
+        nu = np.array([m.poisson_ratio for m in materials], dtype=float)[point_region]
+        return E, nu
+    if any(has_law):
+        raise InputError("give youngs_modulus and poisson_ratio for every material, or for none (DDCM only)")
+    return None, None
+
+
+def point_data(materials: Sequence[Material], datasets: Sequence[MaterialDataset], point_region: np.ndarray,
+                d: int, k: int) -> MaterialDataset | PointData | None:
+    """The data of the material points: one shared set, one set per material (:class:`PointData`),
+    or ``None`` if no material names a data set."""
+    has_data = [m.data is not None for m in materials]
+    if not any(has_data):
+        return None
+    if not all(has_data):
+        raise InputError("give a data set for every material, or for none (classical only)")
+    sets = list(datasets)
+    for mat in materials:
+        if not 0 <= int(mat.data) < len(sets):
+            raise InputError(f"material data index {mat.data!r} out of range: {len(sets)} data sets")
+    for s in sets:
+        if s.k != k:
+            raise InputError(f"a data set has {s.k} strain components per point; a {d}-D continuum "
+                             f"needs {k} (Mandel: {'e11,e22,sqrt2 e12' if d == 2 else 'e11,e22,e33,sqrt2 e23,sqrt2 e13,sqrt2 e12'})")
+    per_point = np.array([materials[i].data for i in range(len(materials))])[point_region]
+    if len(sets) == 1:
+        return sets[0]
+    return PointData(sets, per_point)
+
+
+# --- supports and loads
+def free_dofs(disc: fem.Discretisation, supports: Sequence[Support]) -> np.ndarray:
+    """The dofs no support fixes (the unknowns), in order."""
+    vdofs = disc.vector_dofs()
+    fixed = np.zeros(disc.n_dofs, dtype=bool)
+    for s in supports:
+        comps = _components(s.components, disc.dimension)
+        dofs = fem.boundary_dofs(disc, select_facets(disc.mesh, s.where))
+        for c in comps:
+            fixed[vdofs[c, dofs]] = True
+    free = np.flatnonzero(~fixed)
+    if free.size == 0:
+        raise InputError("the supports fix every degree of freedom")
+    return free
+
+
+def reference_loads(disc: fem.Discretisation, tractions: Sequence[Traction],
+                     body_forces: Sequence[BodyForce]) -> np.ndarray:
+    """The load vector over all dofs at load factor 1: surface tractions plus body forces."""
+    mesh, d = disc.mesh, disc.dimension
+    f_ref = np.zeros(disc.n_dofs)
+    for t in tractions:
+        f_ref += fem.surface_load(disc, select_facets(mesh, t.where), _vector("traction", t.traction, d))
+    for b in body_forces:
+        els = None if b.region is None else elements_of(mesh, b.region)
+        f_ref += fem.body_load(disc, _vector("body force", b.force_density, d), els)
+    return f_ref
+
+
+# --- load path and contact pairs
+def step_count(load_factors: Sequence[float] | None, contacts: Sequence[Contact]) -> int:
+    """Steps: one per load factor, else one per value of the first travel given per step, else one."""
+    n_steps = None
+    if load_factors is not None:
+        n_steps = len(load_factors)
+    for c in contacts:
+        trav = np.asarray(c.obstacle.travel)
+        if trav.ndim == 1 and n_steps is None:
+            n_steps = trav.size
+    return n_steps or 1
+
+
+def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: np.ndarray, n_steps: int,
+                   size: float) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, list[Obstacle], dict]:
+    """One pair per boundary dof of each contact surface.
+
+    Returns
+    -------
+    G : sparse (nc, n_free)
+        Gap operator: the obstacle normal on each pair's displacement (fixed components dropped).
+    area : (nc,) ndarray
+        Tributary boundary areas.
+    gap0 : (n_steps, nc) ndarray
+        Gaps of the reference configuration per step.
+    obstacles : list of Obstacle
+        The obstacles, in the order of ``contacts``.
+    contact : dict
+        The :class:`ContinuumModel` fields ``contact_dofs``, ``contact_points``,
+        ``contact_normals`` and ``contact_obstacle``.
+    """
+    d = disc.dimension
+    if contacts and d == 3 and disc.degree == 2:
+        # int_f phi_vertex = 0 on a quadratic triangle: a uniform pressure puts no force on the
+        # vertices, so nodal contact would leave them biactive and their pressures meaningless.
+        raise InputError("contact on quadratic tetrahedra is not supported (a quadratic triangle's vertices "
+                         "carry no share of a pressure); use degree = 1 in 3-D")
+    obstacles, rows_dofs, points, normals, areas, owner, g0 = [], [], [], [], [], [], []
+    for i, c in enumerate(contacts):
+        ob = c.obstacle
+        if ob.dimension != d:
+            raise InputError(f"obstacle {ob.name!r} is {ob.dimension}-D, the mesh {d}-D")
+        dofs, area = fem.tributary_areas(disc, select_facets(disc.mesh, c.where))
+        X = disc.dof_locations()[dofs]
+        gaps = ob.gap_offsets(X, n_steps)
+        if float(np.min(gaps)) > size:
+            raise InputError(f"obstacle {ob.name!r} cannot touch the body: it comes no closer than "
+                             f"{float(np.min(gaps)):.3g} m along the path, more than the body's size {size:.3g} m")
+        obstacles.append(ob)
+        rows_dofs.append(dofs)
+        points.append(X)
+        normals.append(ob.normals(X, n_steps))
+        areas.append(area)
+        owner.append(np.full(dofs.size, i))
+        g0.append(gaps)
+    nc = int(sum(r.size for r in rows_dofs))
+    if not nc:
+        contact = dict(contact_dofs=np.zeros(0, np.int64), contact_points=np.zeros((0, d)),
+                       contact_normals=np.zeros((0, d)), contact_obstacle=np.zeros(0, np.int64))
+        return sp.csr_matrix((0, free.size)), np.zeros(0), np.zeros((n_steps, 0)), obstacles, contact
+    index_of = np.full(disc.n_dofs, -1, dtype=np.int64)
+    index_of[free] = np.arange(free.size)
+    cdofs = np.concatenate(rows_dofs)
+    N = np.concatenate(normals)
+    cols = index_of[disc.vector_dofs()[:, cdofs]].T  # (nc, d)
+    keep = cols >= 0  # a fixed component moves no gap
+    G = sp.csr_matrix((N[keep], (np.nonzero(keep)[0], cols[keep])), shape=(nc, free.size))
+    contact = dict(contact_dofs=cdofs, contact_points=np.concatenate(points), contact_normals=N,
+                   contact_obstacle=np.concatenate(owner))
+    return G, np.concatenate(areas), np.concatenate(g0, axis=1), obstacles, contact
