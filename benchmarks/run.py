@@ -42,6 +42,7 @@ import scipy.sparse.linalg as spla
 from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi import formulations as registry
 from ddcm_casadi import linalg
+from ddcm_casadi.factor_updates import ReferenceFactor
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.linalg import factorize, solver_name
 from ddcm_casadi.problems.build import build_problems
@@ -304,7 +305,7 @@ def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]
             linalg.use_solver(name)
             linalg.factorize(2.0 * sp.identity(4, format="csc"))  # untimed: loads the library (MKL)
             times[name] = median_time(lambda: linalg.factorize(A).solve(b), repeats)
-            reference = linalg.ReferenceFactor(A)
+            reference = ReferenceFactor(A)
             times[name + ", solve with a kept factor"] = median_time(lambda: reference.solve(b), max(3, repeats))
             up = reference.update(A1)
             if up is not None:

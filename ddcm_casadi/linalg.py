@@ -23,10 +23,14 @@ registered when ``pypardiso`` imports. A symmetric matrix is factorised as symme
 (``mtype = -2``, Bunch-Kaufman pivots within supernodes, one factor of the upper triangle), other
 matrices as general (``mtype = 11``). Others can be registered with :func:`register_solver` (a
 CHOLMOD or MUMPS wrapper, say) and selected with :func:`use_solver`.
+
+Low-rank updates of a factor (the active-set solver's, when a few pairs switch piece) are
+:mod:`ddcm_casadi.factor_updates`'.
 """
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 from typing import Callable, Protocol
 
@@ -162,6 +166,34 @@ def _pattern_key(A: sp.csc_matrix) -> bytes:
 CHAIN_ENVELOPE = 8.0
 
 
+def _suits_minimum_degree(A: sp.csc_matrix) -> bool:
+    """Whether ``A``'s pattern is symmetric enough and not chain-like (:func:`_symmetric_mode`),
+    remembered per pattern."""
+    key = _pattern_key(A)
+    suits = _MINIMUM_DEGREE.get(key)
+    if suits is None:
+        suits = pattern_symmetry(A) >= SYMMETRIC_PATTERN and _envelope(A) > CHAIN_ENVELOPE * A.nnz
+        if len(_MINIMUM_DEGREE) < _PATTERNS_KEPT:
+            _MINIMUM_DEGREE[key] = suits
+    return suits
+
+
+def ordering_of(A: sp.spmatrix) -> str:
+    """The column ordering the ``"superlu"`` solver tries first for the square ``A``.
+
+    Returns
+    -------
+    str
+        ``"minimum_degree"``: the minimum-degree order of ``A + A^T`` with diagonal pivots
+        (SuperLU's symmetric mode), for a matrix of at least :data:`ORDERING_MIN_SIZE` unknowns
+        whose pattern is symmetric (:data:`SYMMETRIC_PATTERN`) and not chain-like
+        (:data:`CHAIN_ENVELOPE`); a factor in that order that misses its backward-error check, even
+        refined, falls back to the other. ``"colamd"``: SuperLU's default, with partial pivoting.
+    """
+    A = sp.csc_matrix(A)
+    return "minimum_degree" if A.shape[0] >= ORDERING_MIN_SIZE and _suits_minimum_degree(A) else "colamd"
+
+
 def _symmetric_mode(A: sp.csc_matrix) -> Factor | None:
     """A diagonal-pivot factor in SuperLU's minimum-degree order of ``A + A^T``, or ``None``
     (a zero pivot, an unsymmetric or a chain-like pattern: then SuperLU's default is used).
@@ -172,13 +204,7 @@ def _symmetric_mode(A: sp.csc_matrix) -> Factor | None:
     unknowns), while any order near a band is cheap. So a pattern whose profile factor
     (:func:`_envelope`) stays within :data:`CHAIN_ENVELOPE` nonzeros per matrix nonzero goes to
     the default; the verdict is remembered per pattern."""
-    key = _pattern_key(A)
-    suits = _MINIMUM_DEGREE.get(key)
-    if suits is None:
-        suits = pattern_symmetry(A) >= SYMMETRIC_PATTERN and _envelope(A) > CHAIN_ENVELOPE * A.nnz
-        if len(_MINIMUM_DEGREE) < _PATTERNS_KEPT:
-            _MINIMUM_DEGREE[key] = suits
-    if not suits:
+    if not _suits_minimum_degree(A):
         return None
     try:
         return _splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
@@ -259,30 +285,70 @@ def _pardiso(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
 
 
 _SOLVERS: dict[str, Callable[[sp.csc_matrix], Factor]] = {"superlu": _superlu}
-if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on first use (it loads MKL)
-    _SOLVERS["pardiso"] = _pardiso
+#: The library each registered solver loads on first use, by name (none for SuperLU).
+_LIBRARIES: dict[str, str] = {}
 _ACTIVE = ["superlu"]
 #: Why a registered optional solver cannot run here (its library failed to load), by name.
 _UNUSABLE: dict[str, str] = {}
 
 
 def _check_loads(name: str) -> str | None:
-    """Why solver ``name`` cannot run here, or ``None``. PARDISO is registered when ``pypardiso``
-    is installed, without loading MKL at import; here it is loaded (pypardiso installed without
-    a findable MKL runtime raises ImportError)."""
-    if name == "pardiso" and name not in _UNUSABLE:
+    """Why solver ``name`` cannot run here, or ``None``: its library is imported here, once it is
+    asked for, not at registration (PARDISO is registered when ``pypardiso`` is installed, without
+    loading MKL; pypardiso installed without a findable MKL runtime raises ImportError)."""
+    library = _LIBRARIES.get(name)
+    if library is not None and name not in _UNUSABLE:
         try:
-            import pypardiso  # noqa: F401
+            importlib.import_module(library)
         except (ImportError, OSError) as exc:
             _UNUSABLE[name] = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     return _UNUSABLE.get(name)
 
 
-def register_solver(name: str, factorize_fn: Callable[[sp.csc_matrix], Factor]) -> None:
-    """Register a sparse direct solver: ``factorize_fn(A_csc, *, tolerance)`` returns an object
-    with ``solve`` whose backward error stays within ``tolerance``, and raises
-    :class:`SingularMatrix` for a singular matrix."""
+def register_solver(name: str, factorize_fn: Callable[[sp.csc_matrix], Factor], *,
+                    library: str | None = None) -> None:
+    """Register a sparse direct solver (again: replace it).
+
+    Parameters
+    ----------
+    name : str
+        The name :func:`use_solver` selects it by.
+    factorize_fn : callable
+        ``factorize_fn(A_csc, *, tolerance)`` returns an object with ``solve`` whose backward error
+        stays within ``tolerance``, and raises :class:`SingularMatrix` for a singular matrix.
+    library : str, optional
+        The module the solver needs, imported when the solver is first listed or selected, not
+        now: where it does not import the solver is neither listed by :func:`available_solvers`
+        nor selectable, and :func:`unavailable_solvers` says why.
+    """
     _SOLVERS[name] = factorize_fn
+    _UNUSABLE.pop(name, None)
+    if library is None:
+        _LIBRARIES.pop(name, None)
+    else:
+        _LIBRARIES[name] = library
+
+
+def unregister_solver(name: str) -> None:
+    """Remove the solver ``name`` registered with :func:`register_solver` (if it is selected,
+    ``"superlu"`` is selected instead).
+
+    Raises
+    ------
+    ValueError
+        ``name`` is ``"superlu"``, the default, which stays.
+    """
+    if name == "superlu":
+        raise ValueError("the default linear solver 'superlu' cannot be unregistered")
+    _SOLVERS.pop(name, None)
+    _LIBRARIES.pop(name, None)
+    _UNUSABLE.pop(name, None)
+    if _ACTIVE[0] == name:
+        _ACTIVE[0] = "superlu"
+
+
+if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on first use (it loads MKL)
+    register_solver("pardiso", _pardiso, library="pypardiso")
 
 
 def use_solver(name: str) -> None:
@@ -293,108 +359,6 @@ def use_solver(name: str) -> None:
     if reason is not None:
         raise InputError(f"linear solver {name!r} cannot run here: {reason}")
     _ACTIVE[0] = name
-
-
-class UpdatedFactor:
-    """``A^{-1}`` from a factor of a nearby ``A0``: ``A = A0 + E_R D_R`` differs from ``A0`` in the
-    ``r`` rows ``R`` only (``E_R`` the identity's columns ``R``, ``D_R`` those rows of ``A - A0``),
-    so by the Sherman-Morrison-Woodbury formula
-
-    ``A^{-1} b = y - W C^{-1} D_R y``, with ``y = A0^{-1} b``, ``W = A0^{-1} E_R`` and the
-    capacitance matrix ``C = I_r + D_R W`` (dense ``r x r``).
-
-    Each solve costs one solve with ``A0`` and two thin products; ``C`` is singular exactly when
-    ``A`` is. Built by :meth:`ReferenceFactor.update`, which keeps the columns of ``W``.
-    """
-
-    def __init__(self, base: Factor, W: np.ndarray, D_rows: sp.csr_matrix) -> None:
-        import scipy.linalg as sla
-
-        r = W.shape[1]
-        C = np.eye(r) + D_rows @ W
-        if not np.all(np.isfinite(C)):
-            raise SingularMatrix("the capacitance matrix of the update is not finite")
-        lu, piv = sla.lu_factor(C, check_finite=False)
-        # A pivot at roundoff: C, hence A, is singular (with a merely ill-conditioned C the
-        # caller's solves miss their tolerance, and it factorises A itself).
-        if np.min(np.abs(np.diag(lu)), initial=np.inf) <= r * np.finfo(float).eps * max(1.0, np.max(np.abs(C), initial=0.0)):
-            raise SingularMatrix("the updated matrix is singular (a capacitance pivot at roundoff)")
-        self.base, self.rank = base, r
-        self._W, self._C, self._D = W, (lu, piv), D_rows
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        import scipy.linalg as sla
-
-        y = np.asarray(self.base.solve(rhs))
-        if not self.rank:
-            return y
-        return y - self._W @ sla.lu_solve(self._C, self._D @ y, check_finite=False)
-
-
-#: A factorisation costs about ``nnz(L+U) / (2 n)`` solves (flops ``~ sum_j c_j^2 >= nnz^2 / n``
-#: against ``2 nnz`` per solve, ``c_j`` the factor's column counts). An update may spend a quarter
-#: of that on new columns of ``W``, and its rank may reach ``nnz / (2 n)`` (then the product with
-#: ``W`` costs at most a quarter of a solve).
-UPDATE_COST_SHARE = 0.25
-#: Columns ``A0^{-1} e_i`` kept per unit of the largest rank (memory: ``n`` floats each, 8 MB at
-#: 1e6 unknowns); once full, the next change of rows is factorised, which starts afresh.
-KEPT_COLUMNS_PER_RANK = 4
-
-
-class ReferenceFactor:
-    """A factorisation of ``A0`` from which nearby matrices are solved by low-rank updates
-    (:class:`UpdatedFactor`), for the active-set solver: when a few contact pairs switch piece,
-    their rows of the KKT matrix change, and the symmetric entries in the rows of the unknowns
-    their gaps involve. The columns ``A0^{-1} e_i`` are kept, since the same pairs switch back
-    and forth: an update pays a solve only for rows not seen before.
-
-    Parameters
-    ----------
-    A0 : sparse matrix
-        Factorised with :func:`factorize`.
-    """
-
-    def __init__(self, A0: sp.spmatrix, *, iterated: bool = False) -> None:
-        self.matrix = sp.csc_matrix(A0)
-        self.factor = factorize(self.matrix, iterated=iterated)
-        n = self.matrix.shape[0]
-        nnz = getattr(self.factor, "nnz", None)
-        per_factorisation = nnz / (2 * n) if nnz and n else 0.0
-        #: most new columns of ``W`` per update, and the largest rank
-        self.new_columns, self.max_rank = int(UPDATE_COST_SHARE * per_factorisation), int(per_factorisation)
-        self._columns: dict[int, np.ndarray] = {}
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return self.factor.solve(rhs)
-
-    def _column(self, i: int) -> np.ndarray:
-        w = self._columns.get(i)
-        if w is None:
-            e = np.zeros(self.matrix.shape[0])
-            e[i] = 1.0
-            w = self._columns[i] = np.asarray(self.factor.solve(e)).ravel()
-        return w
-
-    def update(self, A: sp.spmatrix) -> UpdatedFactor | None:
-        """A factor of ``A`` (same shape as ``A0``) as a low-rank update, or ``None`` if ``A - A0``
-        has more nonzero rows than :attr:`max_rank`, needs more than :attr:`new_columns` new
-        columns or more kept columns than :data:`KEPT_COLUMNS_PER_RANK` ``* max_rank``: then
-        factorise ``A`` itself. Raises :class:`SingularMatrix` for a singular
-        ``A``. Not checked here: the caller verifies its solves (the active-set solver's
-        refinement step does) and factorises ``A`` itself if they miss."""
-        if not self.new_columns:
-            return None  # a small system: factorising costs no more than an update
-        D = sp.csr_matrix(A - self.matrix)
-        D.eliminate_zeros()
-        rows = np.flatnonzero(np.diff(D.indptr))
-        new = sum(int(i) not in self._columns for i in rows)
-        if (rows.size > self.max_rank or new > self.new_columns
-                or len(self._columns) + new > KEPT_COLUMNS_PER_RANK * self.max_rank):
-            return None
-        W = np.empty((D.shape[0], rows.size))
-        for j, i in enumerate(rows):
-            W[:, j] = self._column(int(i))
-        return UpdatedFactor(self.factor, W, D[rows])
 
 
 def solver_name() -> str:

@@ -64,6 +64,34 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
     jobs = max(1, min(int(jobs), len(items)))
     if jobs == 1 or not hasattr(os, "fork") or threading.active_count() > 1:
         return [function(x) for x in items]
+    take, stop = _counter(len(items))
+    sys.stdout.flush()  # else a worker inherits, and would repeat, what is still buffered
+    sys.stderr.flush()
+    workers: list[tuple[int, int | None]] = []  # (pid, read end of its pipe while open)
+    try:
+        for _ in range(jobs - 1):
+            workers.append(_fork_worker(function, items, take, stop))
+        done: dict[int, tuple[bool, object]] = {}
+        _run_items(function, items, take, stop, done)
+        caught = _collect(workers, done)
+    finally:
+        _kill(workers)
+    for message, category, filename, lineno in caught:
+        warnings.warn_explicit(message, category, filename, lineno)
+    out = []
+    for i in range(len(items)):
+        # An item nobody took lies after a failed one (every process stops at its failure): the
+        # first failure in order is raised before any gap is reached.
+        ok, value = done.get(i, (False, RuntimeError(f"run {i} was lost between the worker processes")))
+        if not ok:
+            raise value
+        out.append(value)
+    return out
+
+
+def _counter(n: int) -> tuple[Callable[[], int], Callable[[], None]]:
+    """``take()``, the next item's index, and ``stop()``, which ends the handing out of ``n`` items:
+    a counter shared by this process and the workers it forks."""
     import multiprocessing
 
     counter = multiprocessing.get_context("fork").Value("q", 0)
@@ -78,61 +106,63 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
         # After a failure no process starts another item (a serial loop would have stopped there);
         # items already taken finish, so every item before the failure has its outcome.
         with counter.get_lock():
-            counter.value = max(counter.value, len(items))
+            counter.value = max(counter.value, n)
 
-    sys.stdout.flush()  # else a worker inherits, and would repeat, what is still buffered
-    sys.stderr.flush()
-    workers: list[tuple[int, int | None]] = []  # (pid, read end of its pipe while open)
-    try:
-        for _ in range(jobs - 1):
-            read, write = os.pipe()
-            pid = os.fork()
-            if pid == 0:  # pragma: no cover - the worker (coverage does not follow forks)
-                os.close(read)
-                _worker(function, items, take, stop, write)
-            os.close(write)
-            workers.append((pid, read))
-        done: dict[int, tuple[bool, object]] = {}
-        while (i := take()) < len(items):
-            try:
-                done[i] = (True, function(items[i]))
-            except Exception as exc:  # re-raised below, after the workers are collected
-                done[i] = (False, exc)
-                stop()
-                break
-        caught: list = []
-        while workers:
-            pid, read = workers[0]
-            with os.fdopen(read, "rb") as pipe:  # until the worker's end: it writes once, then exits
-                workers[0] = (pid, None)
-                payload = pipe.read()
+    return take, stop
+
+
+def _run_items(function, items, take, stop, results: dict[int, tuple[bool, object]]) -> None:
+    """Run the items handed out by ``take`` into ``results`` (``(True, result)`` or ``(False,
+    exception)``) until none is left; the first exception stops the handing out and this loop."""
+    while (i := take()) < len(items):
+        try:
+            results[i] = (True, function(items[i]))
+        except Exception as exc:  # re-raised by map_forked, after the workers are collected
+            results[i] = (False, exc)
+            stop()
+            break
+
+
+def _fork_worker(function, items, take, stop) -> tuple[int, int]:
+    """Fork one worker (:func:`_worker`); its pid and the read end of its pipe."""
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the worker (coverage does not follow forks)
+        os.close(read)
+        _worker(function, items, take, stop, write)
+    os.close(write)
+    return pid, read
+
+
+def _collect(workers: list[tuple[int, int | None]], done: dict[int, tuple[bool, object]]) -> list:
+    """Read each worker's results into ``done`` and reap it, removing it from ``workers`` (which then
+    holds only those not yet reaped); the warnings they caught."""
+    caught: list = []
+    while workers:
+        pid, read = workers[0]
+        with os.fdopen(read, "rb") as pipe:  # until the worker's end: it writes once, then exits
+            workers[0] = (pid, None)
+            payload = pipe.read()
+        os.waitpid(pid, 0)
+        workers.pop(0)
+        if not payload:
+            raise RuntimeError(f"a worker process (pid {pid}) ended without a result")
+        results, worker_warnings = pickle.loads(payload)
+        done.update(results)
+        caught += worker_warnings
+    return caught
+
+
+def _kill(workers: list[tuple[int, int | None]]) -> None:
+    """Interrupted or failed: stop and reap the workers not yet reaped, and close their pipes."""
+    for pid, read in workers:
+        try:
+            os.kill(pid, signal.SIGKILL)
             os.waitpid(pid, 0)
-            workers.pop(0)
-            if not payload:
-                raise RuntimeError(f"a worker process (pid {pid}) ended without a result")
-            results, worker_warnings = pickle.loads(payload)
-            done.update(results)
-            caught += worker_warnings
-    finally:
-        for pid, read in workers:  # interrupted or failed: stop and reap the workers not yet reaped
-            try:
-                os.kill(pid, signal.SIGKILL)
-                os.waitpid(pid, 0)
-            except OSError:
-                pass
-            if read is not None:  # else closed by its reader
-                os.close(read)
-    for message, category, filename, lineno in caught:
-        warnings.warn_explicit(message, category, filename, lineno)
-    out = []
-    for i in range(len(items)):
-        # An item nobody took lies after a failed one (every process stops at its failure): the
-        # first failure in order is raised before any gap is reached.
-        ok, value = done.get(i, (False, RuntimeError(f"run {i} was lost between the worker processes")))
-        if not ok:
-            raise value
-        out.append(value)
-    return out
+        except OSError:
+            pass
+        if read is not None:  # else closed by its reader
+            os.close(read)
 
 
 def _worker(function, items, take, stop, write: int) -> None:  # pragma: no cover - runs in a fork
@@ -143,13 +173,7 @@ def _worker(function, items, take, stop, write: int) -> None:  # pragma: no cove
     status = 0
     with warnings.catch_warnings(record=True) as caught:
         try:
-            while (i := take()) < len(items):
-                try:
-                    results[i] = (True, function(items[i]))
-                except Exception as exc:
-                    results[i] = (False, exc)
-                    stop()
-                    break
+            _run_items(function, items, take, stop, results)
         except BaseException:  # noqa: BLE001 - the worker must always reach os._exit
             status = 1
     try:

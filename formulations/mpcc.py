@@ -35,26 +35,12 @@ from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, ident
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.loops.evaluate import NumericFunction
 from ddcm_casadi.loops.homotopy import scholtes_homotopy
-from ddcm_casadi.loops.ipopt_options import check_ipopt_options, iteration_count
+from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .registry import register
 
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
-# How IPOPT ends when Ctrl-C arrives during a solve: CasADi catches the KeyboardInterrupt that
-# Python's SIGINT handler raises inside IPOPT's callbacks and hands IPOPT an exception (from an
-# evaluation: NonIpopt_Exception_Thrown) or a stop request (User_Requested_Stop; this module sets
-# no iteration callback that could ask for one).
-_INTERRUPTED = frozenset({"User_Requested_Stop", "NonIpopt_Exception_Thrown"})
-
-
-def _stats(solver: ca.Function) -> dict:
-    """``solver.stats()`` after a solve; raises ``KeyboardInterrupt`` if IPOPT stopped on Ctrl-C
-    (read as one failed solve, the interrupt would be lost and the run would go on)."""
-    stats = solver.stats()
-    if stats.get("return_status") in _INTERRUPTED:
-        raise KeyboardInterrupt
-    return stats
 
 
 @register
@@ -176,7 +162,7 @@ class _BuiltMPCC(BuiltFormulation):
             if warm is not None:
                 args.update(lam_x0=warm[0], lam_g0=warm[1])
             sol = self._solver(**args)
-            stats = _stats(self._solver)
+            stats = ipopt_stats(self._solver)
             its = iteration_count(stats)
             if stats["return_status"] not in _OK:
                 return f"IPOPT: {stats['return_status']}", w, None, its
@@ -249,7 +235,7 @@ class _BuiltMPCC(BuiltFormulation):
             lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
             ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
             sol = self._bnlp(x0=w, p=values, lbg=lbg, ubg=ubg)
-            stats = _stats(self._bnlp)
+            stats = ipopt_stats(self._bnlp)
             iters += iteration_count(stats)
             if stats["return_status"] not in _OK:
                 continue

@@ -14,6 +14,7 @@ import scipy.sparse as sp
 
 from ddcm_casadi import formulations as registry
 from ddcm_casadi import InputError, linalg, paper_bar
+from ddcm_casadi.factor_updates import ReferenceFactor, UpdatedFactor
 from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.validation.ladder import warren_truss
 
@@ -83,21 +84,26 @@ def test_saddle_systems_use_the_symmetric_ordering():
 
     A = grid_kkt()
     assert A.shape[0] >= linalg.ORDERING_MIN_SIZE and linalg.pattern_symmetry(A) == 1.0
-    chosen = linalg._superlu(A)
+    assert linalg.ordering_of(A) == "minimum_degree"
+    previous = linalg.solver_name()
+    linalg.use_solver("superlu")
+    try:
+        chosen = linalg.factorize(A)
+    finally:
+        linalg.use_solver(previous)
     default = spla.splu(A)
     assert chosen.nnz < 0.6 * default.nnz  # measured: 40 181 against 77 788 nonzeros
 
 
 def test_chain_like_patterns_keep_the_default_ordering():
-    """A chain (a bar's graph) has a thin profile, within CHAIN_ENVELOPE nonzeros per matrix
-    nonzero, and goes to SuperLU's default; a 2-D grid's profile is far wider."""
+    """A chain (a bar's graph) has a symmetric pattern but a thin profile, within CHAIN_ENVELOPE
+    nonzeros per matrix nonzero, and goes to SuperLU's default; a 2-D grid's profile is far wider."""
     n = 2000
     chain = sp.diags([-np.ones(n - 1), 2 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csc")
-    assert linalg._envelope(chain) <= linalg.CHAIN_ENVELOPE * chain.nnz
-    assert linalg._symmetric_mode(chain) is None
-    grid = grid_kkt()
-    assert linalg._envelope(grid) > linalg.CHAIN_ENVELOPE * grid.nnz
-    assert linalg._symmetric_mode(grid) is not None
+    assert n >= linalg.ORDERING_MIN_SIZE and linalg.pattern_symmetry(chain) == 1.0
+    assert linalg.ordering_of(chain) == "colamd"
+    assert linalg.ordering_of(grid_kkt()) == "minimum_degree"
+    assert linalg.ordering_of(grid_kkt(5)) == "colamd"  # below ORDERING_MIN_SIZE unknowns
 
 
 def test_pattern_symmetry():
@@ -132,7 +138,7 @@ def _switched(A: sp.csc_matrix, rows) -> sp.csc_matrix:
 
 def test_update_solves_the_changed_matrix(solver):
     A0 = grid_kkt()
-    reference = linalg.ReferenceFactor(A0)
+    reference = ReferenceFactor(A0)
     assert reference.new_columns >= 2
     A = _switched(A0, [3])
     up = reference.update(A)
@@ -142,12 +148,12 @@ def test_update_solves_the_changed_matrix(solver):
     assert linalg.backward_error(A, up.solve(b), b) <= 3 * A.shape[0] * EPS
     # the same rows again: no new column is solved for
     again = reference.update(_switched(A0, [3]) * 1.0)
-    assert again is not None and len(reference._columns) == 2
+    assert again is not None and reference.kept_columns == 2
 
 
 def test_update_limits_and_no_change():
     A0 = grid_kkt()
-    reference = linalg.ReferenceFactor(A0)
+    reference = ReferenceFactor(A0)
     assert reference.update(A0).rank == 0
     too_many = _switched(A0, range(0, A0.shape[0], 2))
     assert sp.csr_matrix(too_many - A0).getnnz(axis=1).astype(bool).sum() > reference.max_rank
@@ -156,7 +162,7 @@ def test_update_limits_and_no_change():
 
 def test_update_to_a_singular_matrix_raises():
     A0 = grid_kkt()
-    reference = linalg.ReferenceFactor(A0)
+    reference = ReferenceFactor(A0)
     A = sp.lil_matrix(A0)
     A[2, :] = 0.0  # a zero row: singular
     A = sp.csc_matrix(A)
@@ -174,17 +180,17 @@ def test_low_rank_updates_give_the_factorised_path(monkeypatch):
     from ddcm_casadi.drivers.harness import compare
 
     model = hertz_block(2, degree=2, data=True)
-    update, used = linalg.ReferenceFactor.update, []
+    update, used = ReferenceFactor.update, []
 
     def counted(self, A):
         lu = update(self, A)
         used.append(lu is not None)
         return lu
 
-    monkeypatch.setattr(linalg.ReferenceFactor, "update", counted)
+    monkeypatch.setattr(ReferenceFactor, "update", counted)
     with_updates = compare(model, ["fischer_burmeister"], variants=["ddcm"])["ddcm", "fischer_burmeister"]
     assert sum(used) >= 10  # the comparison means something: the path did switch by updates
-    monkeypatch.setattr(linalg.ReferenceFactor, "update", lambda self, A: None)
+    monkeypatch.setattr(ReferenceFactor, "update", lambda self, A: None)
     factorised = compare(model, ["fischer_burmeister"], variants=["ddcm"])["ddcm", "fischer_burmeister"]
     assert with_updates.converged and factorised.converged
     for field in ("u", "p", "stress"):
@@ -196,37 +202,43 @@ def test_piece_factor_cache_keeps_few_full_factorisations():
     """The active-set solver's cache of piece factors holds at most ``FACTORS_KEPT`` full
     factorisations (an update holds its base's; GBs each at 1e6 unknowns), the least recently
     used going first."""
-    from collections import OrderedDict
-
-    from ddcm_casadi.loops.active_set import ActiveSetSolver
+    from ddcm_casadi.loops.active_set import ActiveSetSolver, PieceFactorCache
 
     assert ActiveSetSolver.FACTORS_KEPT == 2
-    solver = ActiveSetSolver.__new__(ActiveSetSolver)  # the cache alone, without a system
-    solver._lu = OrderedDict()
+    cache = PieceFactorCache(ActiveSetSolver.LU_CACHE, ActiveSetSolver.FACTORS_KEPT)  # the solver's sizes
     A = sp.csc_matrix(np.diag([2.0, 3.0, 4.0]))
     f1, f2, f3 = (linalg.factorize(A) for _ in range(3))
 
     def update(base):
-        return linalg.UpdatedFactor(base, np.zeros((3, 1)), sp.csr_matrix((1, 3)))
+        return UpdatedFactor(base, np.zeros((3, 1)), sp.csr_matrix((1, 3)))
 
     for key, lu in [(b"a", f1), (b"b", update(f1)), (b"c", f2), (b"d", update(f2)), (b"e", f3)]:
-        solver._lu[key] = lu
-        solver._trim_cache()
-    assert list(solver._lu) == [b"c", b"d", b"e"]  # f1 and the update resting on it went
+        cache.put(key, lu)
+    assert cache.keys() == [b"c", b"d", b"e"]  # f1 and the update resting on it went
     for key in (b"f", b"g"):
-        solver._lu[key] = update(f3)
-        solver._trim_cache()
-    assert list(solver._lu) == [b"d", b"e", b"f", b"g"]  # at most LU_CACHE pieces
+        cache.put(key, update(f3))
+    assert cache.keys() == [b"d", b"e", b"f", b"g"]  # at most LU_CACHE pieces
+    assert cache.take(b"e") is f3 and cache.take(b"e") is None
+    cache.put(b"e", f3)  # back, as the most recently used
+    assert cache.keys() == [b"d", b"f", b"g", b"e"]
 
 
 def test_an_optional_solver_whose_library_does_not_load_is_not_offered(monkeypatch):
-    """pypardiso installed without a findable MKL runtime raises ImportError on import: PARDISO is
-    then neither listed nor selectable, with the reason in one line."""
-    monkeypatch.setitem(linalg._SOLVERS, "pardiso", linalg._pardiso)
-    monkeypatch.setattr(linalg, "_UNUSABLE", {})
-    monkeypatch.setitem(sys.modules, "pypardiso", None)  # import pypardiso raises ImportError
-    assert "pardiso" not in linalg.available_solvers() and "superlu" in linalg.available_solvers()
-    assert list(linalg.unavailable_solvers()) == ["pardiso"]
-    with pytest.raises(InputError, match="linear solver 'pardiso' cannot run here: "):
-        linalg.use_solver("pardiso")
-    assert linalg.solver_name() == "superlu"
+    """A solver registered with the library it loads on first use, as PARDISO is with pypardiso
+    (which, installed without a findable MKL runtime, raises ImportError on import): where that
+    library does not import, the solver is neither listed nor selectable, with the reason in one
+    line."""
+    monkeypatch.setitem(sys.modules, "ddcm_test_solver_library", None)  # importing it raises ImportError
+    linalg.register_solver("test_solver", lambda A, *, tolerance: linalg.factorize(A),
+                           library="ddcm_test_solver_library")
+    try:
+        assert "test_solver" not in linalg.available_solvers() and "superlu" in linalg.available_solvers()
+        assert "test_solver" in linalg.unavailable_solvers()
+        with pytest.raises(InputError, match="linear solver 'test_solver' cannot run here: "):
+            linalg.use_solver("test_solver")
+        assert linalg.solver_name() == "superlu"
+    finally:
+        linalg.unregister_solver("test_solver")
+    assert "test_solver" not in linalg.unavailable_solvers()
+    with pytest.raises(InputError, match="unknown linear solver 'test_solver'"):
+        linalg.use_solver("test_solver")

@@ -239,7 +239,7 @@ def test_a_run_killed_while_moving_its_files_is_undone_by_the_next(tmp_path):
 
 # ------------------------------------------------------------------------------ Ctrl-C inside IPOPT
 def test_ipopt_reporting_a_user_stop_is_an_interrupt():
-    from ddcm_casadi.formulations import mpcc
+    from ddcm_casadi.loops.ipopt_options import ipopt_stats
 
     class Stopped:
         def __init__(self, status):
@@ -250,8 +250,8 @@ def test_ipopt_reporting_a_user_stop_is_an_interrupt():
 
     for status in ("User_Requested_Stop", "NonIpopt_Exception_Thrown"):
         with pytest.raises(KeyboardInterrupt):
-            mpcc._stats(Stopped(status))
-    assert mpcc._stats(Stopped("Infeasible_Problem_Detected"))["iter_count"] == 3
+            ipopt_stats(Stopped(status))
+    assert ipopt_stats(Stopped("Infeasible_Problem_Detected"))["iter_count"] == 3
 
 
 def test_ctrl_c_during_an_ipopt_solve_stops_the_run(tmp_path):

@@ -11,12 +11,82 @@ factorisations per active set and the counters.
 from __future__ import annotations
 
 from collections import OrderedDict
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ddcm_casadi.problems.complementarity import CONTACT, b_stationarity, free_sign, identify
-from ddcm_casadi.linalg import ReferenceFactor, SingularMatrix, UpdatedFactor
+from ddcm_casadi.factor_updates import ReferenceFactor, UpdatedFactor
+from ddcm_casadi.linalg import SingularMatrix
 from ddcm_casadi.loops.newton import NewtonResult, newton_solve, smoothed_newton_solve
+
+
+class PieceFactorCache:
+    """The factors of piece systems an :class:`ActiveSetSolver` keeps, one per active set (its key),
+    the least recently used going first.
+
+    At most ``size`` factors are kept, resting on at most ``bases`` full factorisations: an
+    :class:`~ddcm_casadi.factor_updates.UpdatedFactor` holds its base factor, and a full factorisation
+    takes a few GB at 1e6 unknowns.
+
+    Parameters
+    ----------
+    size : int
+        Factors kept.
+    bases : int
+        Full factorisations those may rest on.
+    """
+
+    def __init__(self, size: int, bases: int) -> None:
+        self.size, self.bases = int(size), int(bases)
+        self._factors: OrderedDict[bytes, object] = OrderedDict()
+
+    def take(self, key: bytes) -> object | None:
+        """The factor kept for ``key``, removed from the cache (:meth:`put` it back once used), or
+        ``None``."""
+        return self._factors.pop(key, None)
+
+    def put(self, key: bytes, factor: object) -> None:
+        """Keep ``factor`` for ``key`` as the most recently used, then drop the least recently used
+        beyond :attr:`size` factors or :attr:`bases` full factorisations."""
+        self._factors[key] = factor
+        bases: list[int] = []
+        for k in reversed(list(self._factors)):
+            lu = self._factors[k]
+            base = id(lu.base if isinstance(lu, UpdatedFactor) else lu)
+            if base not in bases:
+                bases.append(base)
+            if len(bases) > self.bases:
+                del self._factors[k]
+        while len(self._factors) > self.size:
+            self._factors.popitem(last=False)
+
+    def keys(self) -> list[bytes]:
+        """The keys kept, least recently used first."""
+        return list(self._factors)
+
+    def clear(self) -> None:
+        """Forget every factor."""
+        self._factors.clear()
+
+
+@dataclass
+class _Walk:
+    """The state of one primal-dual active-set iteration (:meth:`ActiveSetSolver._active_set`)."""
+
+    z: np.ndarray  # the point the next piece solve starts from
+    branch: np.ndarray  # 1.0 where a pair is on its contact piece
+    held: np.ndarray  # pairs held at the corner (a_i = b_i = 0)
+    releases: int  # holds and releases of corner pairs left
+    flips: np.ndarray  # switches of each pair since the last hold or release
+    seen: set = field(default_factory=set)  # the (branch, held) visited since then
+
+    def key(self) -> bytes:
+        return self.branch.tobytes() + self.held.tobytes()
+
+    def restart(self, z: np.ndarray) -> None:
+        """After pairs were held or released: from ``z``, with no piece seen and no flip counted."""
+        self.z, self.seen, self.flips[:] = z, set(), 0
 
 
 class ActiveSetSolver:
@@ -39,14 +109,14 @@ class ActiveSetSolver:
         self.system = system
         self.predictor = bool(predictor) and not system.proximal
         self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
-        self._lu: OrderedDict[bytes, object] = OrderedDict()
+        self._pieces = PieceFactorCache(self.LU_CACHE, self.FACTORS_KEPT)
         self._reference: ReferenceFactor | None = None  # the last piece matrix factorised itself
         if self.predictor:
             system.branch_system()  # part of the build, not of the first solve
 
     def reset(self) -> None:
         """Forget the cached factorisations and the counters (for cold-start measurements)."""
-        self._lu.clear()
+        self._pieces.clear()
         self._reference = None
         self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
 
@@ -109,7 +179,7 @@ class ActiveSetSolver:
         if not linear:
             return newton_solve(rj, r, z, Pb, **dict(kw, jacobian=jac))
         key = branch.tobytes() + held.tobytes()
-        lu = self._lu.pop(key, None)
+        lu = self._pieces.take(key)
         if lu is None:
             res, J = rj(z, Pb)
             try:
@@ -129,23 +199,8 @@ class ActiveSetSolver:
             result = self._refine(z, res, lu, r, Pb, kw)
         # A reference is cached by its factor only: its kept update columns (up to a few GB at
         # 1e6 unknowns) serve updates while it is the reference, and go with it.
-        self._lu[key] = lu.factor if isinstance(lu, ReferenceFactor) else lu
-        self._trim_cache()
+        self._pieces.put(key, lu.factor if isinstance(lu, ReferenceFactor) else lu)
         return result
-
-    def _trim_cache(self) -> None:
-        """Keep at most :attr:`LU_CACHE` piece factors, resting on at most :attr:`FACTORS_KEPT`
-        full factorisations (an update holds its base factor): the least recently used go."""
-        bases: list[int] = []
-        for key in reversed(list(self._lu)):
-            lu = self._lu[key]
-            base = id(lu.base if isinstance(lu, UpdatedFactor) else lu)
-            if base not in bases:
-                bases.append(base)
-            if len(bases) > self.FACTORS_KEPT:
-                del self._lu[key]
-        while len(self._lu) > self.LU_CACHE:
-            self._lu.popitem(last=False)
 
     @staticmethod
     def _refine(z, res, lu, r, Pb, kw) -> NewtonResult | None:
@@ -167,7 +222,7 @@ class ActiveSetSolver:
 
     def _factorize(self, A, *, update: bool = True):
         """A factor of the piece matrix ``A``: a low-rank update of the last full factorisation
-        when few rows differ (a few pairs switched piece; :class:`~ddcm_casadi.linalg.ReferenceFactor`),
+        when few rows differ (a few pairs switched piece; :class:`~ddcm_casadi.factor_updates.ReferenceFactor`),
         else a factorisation of its own, which becomes the reference."""
         if update and self._reference is not None:
             lu = self._reference.update(A)
@@ -226,65 +281,83 @@ class ActiveSetSolver:
         P = system.problem_values(base)
         kw = dict(tol=opts.tol, residual_tol=opts.residual_tol, max_iter=opts.max_iter)
         a, b = system.ab(z, P)
-        branch = (identify(a, b) == CONTACT).astype(float)
-        held = np.zeros(system.nc, dtype=bool)
         # Each release frees at least one held pair, so one per pair (plus a few re-holds) lets a
         # corner of many biactive pairs be unwound; max_switches still bounds the whole loop.
-        seen, total, flips, releases = set(), 0, np.zeros(system.nc, dtype=int), 3 + system.nc
+        w = _Walk(z=z, branch=(identify(a, b) == CONTACT).astype(float), held=np.zeros(system.nc, dtype=bool),
+                  releases=3 + system.nc, flips=np.zeros(system.nc, dtype=int))
+        total = 0
         for _ in range(max_switches):
-            seen.add(branch.tobytes() + held.tobytes())
-            res = self._solve_piece(z, P, branch, held, kw)
+            w.seen.add(w.key())
+            res = self._solve_piece(w.z, P, w.branch, w.held, kw)
             if res is None or not np.all(np.isfinite(res.z)):
                 return None, total
             total += res.iterations
-            other = np.where(held, np.inf, self._signs(res.z, P, branch))
-            roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other[~held]), initial=0.0)))
+            other = np.where(w.held, np.inf, self._signs(res.z, P, w.branch))
+            roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other[~w.held]), initial=0.0)))
             worst = -float(np.min(other, initial=np.inf))
             if not res.converged:
                 # An ill-conditioned piece (a far-off start) may miss residual_tol; its solution
                 # still says which pairs to switch, but it cannot be accepted.
                 if worst <= roundoff:
                     return None, total
-            elif np.all(other > 0):
-                if not held.any():
-                    res.iterations, res.message = total, "converged (active set)"
-                    return res, total
-                wrong_theta, wrong_nu = b_stationarity(*system.corner_multipliers(res.z), held)
-                if not (wrong_theta.any() or wrong_nu.any()):
-                    res.iterations, res.message = total, "converged (biactive corner)"
-                    return res, total
-                if releases == 0:
+            elif np.all(other > 0) or worst <= roundoff:
+                done, message = self._signs_hold(w, res, other, roundoff)
+                if not done:
+                    continue
+                if message is None:
                     return None, total
-                # Not B-stationary: leave the corner along the piece its multipliers point to.
-                releases -= 1
-                held &= ~(wrong_theta | wrong_nu)
-                branch = np.where(wrong_theta, 0.0, np.where(wrong_nu, 1.0, branch))
-                z, seen, flips[:] = res.z, set(), 0
-                continue
-            elif worst <= roundoff:
-                if not system.corner:  # mcp: signs hold to roundoff; the caller checks the residual
-                    res.iterations, res.message = total, "converged (active set)"
-                    return res, total
-                if releases == 0:
-                    return None, total
-                # Biactive to roundoff: hold those pairs at the corner (accepted if B-stationary).
-                releases -= 1
-                held |= np.abs(other) <= roundoff
-                z, seen, flips[:] = res.z, set(), 0
-                continue
-            z = res.z
+                res.iterations, res.message = total, message
+                return res, total
+            w.z = res.z
             switch = other < 0
-            flips += switch
-            branch = np.where(switch, 1.0 - branch, branch)
-            if branch.tobytes() + held.tobytes() in seen:
+            w.flips += switch
+            w.branch = np.where(switch, 1.0 - w.branch, w.branch)
+            if w.key() in w.seen:
                 # Cycling between pieces: the solution is at the corner of the pairs that switch
                 # back and forth, if anywhere.
-                if not system.corner or releases == 0:
+                if not system.corner or w.releases == 0:
                     return None, total
-                releases -= 1
-                held |= flips >= 2
-                seen, flips[:] = set(), 0
+                w.releases -= 1
+                w.held |= w.flips >= 2
+                w.seen, w.flips[:] = set(), 0
         return None, total
+
+    def _signs_hold(self, w: _Walk, res: NewtonResult, other: np.ndarray, roundoff: float) -> tuple[bool, str | None]:
+        """Every free sign of the piece solution ``res`` holds, strictly or to ``roundoff``: accept
+        it, or hold (biactive to roundoff) or release (not B-stationary) corner pairs and go on.
+
+        Returns
+        -------
+        done : bool
+            Whether the iteration ends here: accepted if ``message``, else failed (no release
+            left).
+        message : str or None
+            The accepted result's message.
+        """
+        system = self.system
+        if np.all(other > 0):
+            if not w.held.any():
+                return True, "converged (active set)"
+            wrong_theta, wrong_nu = b_stationarity(*system.corner_multipliers(res.z), w.held)
+            if not (wrong_theta.any() or wrong_nu.any()):
+                return True, "converged (biactive corner)"
+            if w.releases == 0:
+                return True, None
+            # Not B-stationary: leave the corner along the piece its multipliers point to.
+            w.releases -= 1
+            w.held &= ~(wrong_theta | wrong_nu)
+            w.branch = np.where(wrong_theta, 0.0, np.where(wrong_nu, 1.0, w.branch))
+            w.restart(res.z)
+            return False, None
+        if not system.corner:  # mcp: signs hold to roundoff; the caller checks the residual
+            return True, "converged (active set)"
+        if w.releases == 0:
+            return True, None
+        # Biactive to roundoff: hold those pairs at the corner (accepted if B-stationary).
+        w.releases -= 1
+        w.held |= np.abs(other) <= roundoff
+        w.restart(res.z)
+        return False, None
 
     def polish_corner(self, z, base, opts, *, corner_tol: float = 1e-3):
         """The biactive-branch solution near ``z`` if it is B-stationary, else ``None``."""

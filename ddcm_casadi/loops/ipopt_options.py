@@ -5,6 +5,9 @@ installed) only when the solver is created or first run, and then on the C-level
 with a generic exception in Python. :func:`check_ipopt_options` creates and runs a one-variable NLP
 with the options, captures that output and turns it into one line naming the option and, where
 IPOPT gives it, the valid range or settings.
+
+After a solve, :func:`ipopt_stats` reads IPOPT's statistics (turning a Ctrl-C caught inside IPOPT
+back into ``KeyboardInterrupt``) and :func:`iteration_count` its iterations.
 """
 
 from __future__ import annotations
@@ -146,3 +149,25 @@ def iteration_count(stats: Mapping[str, Any]) -> int:
     if stats.get("return_status") in FAILED_TO_START:
         return 0
     return int(stats.get("iter_count", 0))
+
+
+#: How IPOPT ends when Ctrl-C arrives during a solve: CasADi catches the KeyboardInterrupt that
+#: Python's SIGINT handler raises inside IPOPT's callbacks and hands IPOPT an exception (from an
+#: evaluation: NonIpopt_Exception_Thrown) or a stop request (User_Requested_Stop; the package sets
+#: no iteration callback that could ask for one).
+INTERRUPTED = frozenset({"User_Requested_Stop", "NonIpopt_Exception_Thrown"})
+
+
+def ipopt_stats(solver: Any) -> dict:
+    """``solver.stats()`` after an IPOPT solve (``solver`` a CasADi ``nlpsol`` Function).
+
+    Raises
+    ------
+    KeyboardInterrupt
+        IPOPT stopped on Ctrl-C (:data:`INTERRUPTED`): read as one failed solve, the interrupt
+        would be lost and the run would go on.
+    """
+    stats = solver.stats()
+    if stats.get("return_status") in INTERRUPTED:
+        raise KeyboardInterrupt
+    return stats
