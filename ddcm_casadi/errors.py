@@ -31,3 +31,14 @@ class ConvergenceError(DDCMError):
 class PhysicsWarning(UserWarning):
     """Input that runs but is physically odd: an obstacle that starts inside the body, strains far
     beyond the small-strain model (:meth:`~ddcm_casadi.models.base.ContactModel.path_warnings`)."""
+
+
+def one_line(message: object) -> str:
+    """``message`` as a single line (an error message must not spill over several lines).
+
+    Parameters
+    ----------
+    message : object
+        An exception or any text.
+    """
+    return " ".join(line.strip() for line in str(message).splitlines() if line.strip())

@@ -33,7 +33,7 @@ import numpy as np
 
 from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, identify, imposes_gap, imposes_pressure, signs_hold
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.homotopy import scholtes_homotopy
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
 

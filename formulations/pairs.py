@@ -38,7 +38,7 @@ from ddcm_casadi.linalg import to_casadi
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, sparse_matrix
 from ddcm_casadi.problems.parameters import Parameters
-from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.newton import SparseJacobian
 
 

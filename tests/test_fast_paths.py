@@ -19,7 +19,7 @@ from ddcm_casadi import formulations
 from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.problems.build import build_problems
-from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.drivers.path import DDCMSolver
 from ddcm_casadi.models.truss import bar_chain, warren_truss
 

@@ -7,7 +7,7 @@ import argparse
 import sys
 from typing import Callable, NoReturn
 
-from ddcm_casadi.errors import DDCMError
+from ddcm_casadi.errors import DDCMError, one_line
 
 #: Exit status of bad input (usage errors included): one line ``prog: error: ...`` on stderr.
 EXIT_INPUT = 2
@@ -15,17 +15,6 @@ EXIT_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 #: Exit status after Ctrl-C (128 + SIGINT, as a shell reports it).
 EXIT_INTERRUPTED = 130
-
-
-def one_line(message: object) -> str:
-    """``message`` as a single line (an error message must not spill over several lines).
-
-    Parameters
-    ----------
-    message : object
-        An exception or any text.
-    """
-    return " ".join(line.strip() for line in str(message).splitlines() if line.strip())
 
 
 class Parser(argparse.ArgumentParser):

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ddcm_casadi.linalg import SingularMatrix, factorize
-from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.evaluate import NumericFunction
 
 
 @dataclass

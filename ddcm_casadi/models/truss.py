@@ -1,4 +1,4 @@
-"""Pin-jointed trusses in 1-D, 2-D and 3-D with rigid planar obstacles (small strain).
+"""Pin-jointed trusses in 1-D, 2-D and 3-D with rigid planar obstacles, small or finite kinematics.
 
 A truss is ``nodes`` (nn x d), ``members`` (ne x 2 node indices) with a cross-section and a
 material each, ``supports`` (fixed nodal directions), nodal and distributed loads scaled by a load
@@ -8,7 +8,8 @@ factor per step, and rigid planes, each acting on chosen nodes with the gap
 
 ``n`` the unit normal pointing away from the obstacle and ``d`` its offset (possibly moving, one
 value per step). Every member is one material point with strain ``e . (u_j - u_i) / L`` (``e``
-the unit vector from node ``i`` to ``j``). The result is a plain
+the unit vector from node ``i`` to ``j``), or with ``kinematics = "finite"`` the Green-Lagrange
+strain ``(l^2 - L^2) / (2 L^2)`` of its current length ``l`` (:meth:`TrussModel.strain`). The result is a plain
 :class:`~ddcm_casadi.models.base.ContactModel` (sparse ``B`` and ``G``, built without a loop over
 members), so every formulation and both variants apply unchanged.
 

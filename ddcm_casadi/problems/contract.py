@@ -15,15 +15,22 @@ metric), so formulations and solvers see O(1) numbers for any units. A formulati
 (:class:`Parameters`): a formulation extends them with its own (smoothing, multipliers, ...) and
 packs values by name, never by position.
 
-The models are linear (small strains, linearised gaps), so a problem is held as sparse matrices:
-the residual and the gaps are affine in the unknowns ``z = [x; p]`` and the parameters ``P``
-(:class:`Affine`), the objective is half a weighted squared distance of an affine map
-(:class:`Distance`). Formulations build their Newton systems from these matrices
-(:mod:`ddcm_casadi.formulations.pairs`): one symbolic expression per matrix nonzero, and its
-symbolic derivative, cost about 20 microseconds per nonzero (seconds at 1e5 unknowns) where a
-sparse product costs nanoseconds. The CasADi ``SX`` expressions (:attr:`ComplementarityProblem.residual`,
-``gap``, ``objective``, ...) are rendered from the same matrices on first use, for the consumers
-that differentiate them symbolically (IPOPT, the exact enumeration).
+Two forms, one contract. Small kinematics (the fast path): the residual and the gaps are affine
+in the unknowns ``z = [x; p]`` and the parameters ``P`` (:class:`~ddcm_casadi.problems.maps.Affine`),
+the objective is half a weighted squared distance of an affine map
+(:class:`~ddcm_casadi.problems.maps.Distance`), all held as sparse matrices. Formulations build
+their Newton systems from these matrices (:mod:`ddcm_casadi.formulations.pairs`): one symbolic
+expression per matrix nonzero, and its symbolic derivative, cost about 20 microseconds per nonzero
+(seconds at 1e5 unknowns) where a sparse product costs nanoseconds. Finite kinematics: the
+residual, gaps and objective are CasADi Functions
+(:class:`~ddcm_casadi.problems.maps.NonlinearMap`,
+:class:`~ddcm_casadi.problems.maps.NonlinearObjective`) whose sparse Jacobians and Hessians come
+by automatic differentiation (:mod:`ddcm_casadi.formulations.systems`); :attr:`affine` tells the
+two apart. The CasADi ``SX`` expressions (:attr:`ComplementarityProblem.residual`, ``gap``,
+``objective``, ...) are rendered from either form on first use, for the consumers that
+differentiate them symbolically (IPOPT, the exact enumeration of affine problems). A problem also
+records its contact law (:mod:`ddcm_casadi.models.contact_laws`) and kinematics, which the
+formulations check before any work.
 """
 
 from __future__ import annotations
@@ -36,7 +43,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
 

@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.linalg import to_casadi
-from ddcm_casadi.loops.evaluate import NumericFunction
+from ddcm_casadi.evaluate import NumericFunction
 
 
 def sparse_matrix(A) -> sp.csr_matrix:

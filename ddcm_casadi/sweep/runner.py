@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
-from ddcm_casadi.commands.base import one_line
+from ddcm_casadi.errors import one_line
 from ddcm_casadi.errors import DDCMError, InputError
 from ddcm_casadi.io import OutputFolder, umask, write_csv_atomic, write_json_atomic
 from ddcm_casadi.run import RESULTS_CSV, RESULTS_JSON, run_case as run_library_case
