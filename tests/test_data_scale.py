@@ -8,7 +8,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-import ddcm_casadi.data.dataset as data_module
+from ddcm_casadi.data.search import CHUNK
 import ddcm_casadi.data.limits as limits
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
@@ -42,7 +42,7 @@ def test_build_allocates_only_the_coordinates_and_the_tree(k):
     finally:
         tracemalloc.stop()
     kept = n * (16 * k + 8)
-    block = data_module._CHUNK * 2 * k * 8
+    block = CHUNK * 2 * k * 8
     assert peak <= kept + block + 2**20
     assert data.strain is strain and data.stress is stress  # float64 input is not copied
 

@@ -18,10 +18,7 @@ from ddcm_casadi.data.files import is_npy, read_csv, read_npy
 from ddcm_casadi.data import limits
 from ddcm_casadi.data.limits import searchable_coordinates
 from ddcm_casadi.data.metric import Metric
-from ddcm_casadi.data.search import KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
-
-#: Rows per block where a pass over the data would otherwise allocate a full-size temporary.
-_CHUNK = 1 << 16
+from ddcm_casadi.data.search import CHUNK, KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
 
 
 def check_positive(name: str, value: float) -> float:
@@ -100,8 +97,8 @@ class MaterialDataset:
         mean = X.mean(axis=0)
         X -= mean
         _, axes = np.linalg.eigh(X.T @ X)
-        for a in range(0, X.shape[0], _CHUNK):
-            X[a:a + _CHUNK] = X[a:a + _CHUNK] @ axes
+        for a in range(0, X.shape[0], CHUNK):
+            X[a:a + CHUNK] = X[a:a + CHUNK] @ axes
         object.__setattr__(self, "_frame", (mean, axes))
         # The exact KD-tree is always built (the other backends and k_nearest use it); the
         # others on first use (:meth:`search`).
