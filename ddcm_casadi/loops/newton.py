@@ -161,7 +161,8 @@ def smoothed_newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarra
         if res.converged:
             return res, 0.0, 0
     else:  # the caller has already tried mu = 0
-        res = NewtonResult(np.array(z0, dtype=float), False, 0, np.inf, np.inf, "not started")
+        res = NewtonResult(np.array(z0, dtype=float), False, 0, np.inf, np.inf,
+                           "no stage of the smoothing continuation converged")
     iterations = res.iterations
     z = z0
     best, best_mu, stages = res, 0.0, 0
