@@ -150,8 +150,9 @@ class NewtonSystem:
         return {name: self.unknowns.get(z, name) for name in self.unknowns.names}
 
 
-class PairSystem:
-    """Builder of systems ``r(z; P) = A z + A_P P + L psi(y)`` (see the module notes).
+class SystemBuilder:
+    """What the builders of a problem's Newton systems share (:class:`PairSystem`, and
+    :class:`~ddcm_casadi.formulations.systems.ExpressionPairSystem` for nonlinear problems).
 
     Parameters
     ----------
@@ -169,6 +170,14 @@ class PairSystem:
         self.nc = problem.n_pairs
         self.nz = int(n_unknowns)
         self.parameters = parameters
+
+
+class PairSystem(SystemBuilder):
+    """Builder of systems ``r(z; P) = A z + A_P P + L psi(y)`` (see the module notes), from the
+    problem's sparse matrices (:class:`SystemBuilder` gives the parameters)."""
+
+    def __init__(self, problem: ComplementarityProblem, n_unknowns: int, parameters: Parameters) -> None:
+        super().__init__(problem, n_unknowns, parameters)
         # per local variable: its symbol, and (pair, column, value) of its maps of z and of P
         self._slots: list[tuple[ca.SX, tuple, tuple]] = []
         self._maps: dict[tuple, tuple] = {}

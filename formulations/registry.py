@@ -4,28 +4,21 @@ from __future__ import annotations
 
 from typing import Any
 
-from ddcm_casadi.errors import InputError
+from ddcm_casadi.registry import Registry
 
-_REGISTRY: dict[str, type] = {}
+_REGISTRY: Registry[type] = Registry("formulation", listing="available")
 
 
 def register(cls: type) -> type:
     """Class decorator: register a :class:`~ddcm_casadi.formulations.base.Formulation` under ``cls.name``."""
-    if cls.name in _REGISTRY:
-        raise ValueError(f"formulation {cls.name!r} is already registered")
-    _REGISTRY[cls.name] = cls
-    return cls
+    return _REGISTRY.add(cls.name, cls)
 
 
 def available() -> list[str]:
     """Names of the registered formulations, in registration order."""
-    return list(_REGISTRY)
+    return _REGISTRY.names()
 
 
 def get(name: str, **options: Any):
     """A new formulation instance by name, with keyword options (copied, validated)."""
-    try:
-        cls = _REGISTRY[name]
-    except KeyError:
-        raise InputError(f"unknown formulation {name!r}; available: {', '.join(_REGISTRY)}") from None
-    return cls(**options)
+    return _REGISTRY[name](**options)

@@ -25,7 +25,7 @@ from ddcm_casadi.problems.parameters import Parameters
 from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.newton import SparseJacobian
 
-from .pairs import PairSystem, SystemFunctions
+from .pairs import PairSystem, SystemBuilder, SystemFunctions
 
 
 def pair_system(problem: ComplementarityProblem, n_unknowns: int, parameters: Parameters):
@@ -45,25 +45,13 @@ def _product(A, v: ca.SX, columns: int) -> ca.SX:
     return ca.mtimes(to_casadi(A), v[:A.shape[1]])
 
 
-class ExpressionPairSystem:
+class ExpressionPairSystem(SystemBuilder):
     """Builder of the Newton systems of a nonlinear problem (the interface of
-    :class:`~ddcm_casadi.formulations.pairs.PairSystem`), all in one ``SX`` graph.
-
-    Parameters
-    ----------
-    problem : ComplementarityProblem
-        ``z`` starts with the problem's ``[x; p]`` (or only ``x``).
-    n_unknowns : int
-        Size of ``z``.
-    parameters : Parameters
-        The system's parameters (the problem's first).
-    """
+    :class:`~ddcm_casadi.formulations.pairs.PairSystem`, the parameters of
+    :class:`~ddcm_casadi.formulations.pairs.SystemBuilder`), all in one ``SX`` graph."""
 
     def __init__(self, problem: ComplementarityProblem, n_unknowns: int, parameters: Parameters) -> None:
-        self.problem = problem
-        self.nc = problem.n_pairs
-        self.nz = int(n_unknowns)
-        self.parameters = parameters
+        super().__init__(problem, n_unknowns, parameters)
         self._z = ca.SX.sym("z", self.nz)
         self._P = ca.SX.sym("P", parameters.size)
         self._slots: list[tuple[ca.SX, ca.SX]] = []  # (one pair's symbol, the values of every pair)

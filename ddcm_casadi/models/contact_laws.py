@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ddcm_casadi.errors import InputError
+from ddcm_casadi.registry import Registry
 
 
 @dataclass(frozen=True)
@@ -42,28 +42,22 @@ class ContactLaw:
         return len(self.components)
 
 
-_LAWS: dict[str, ContactLaw] = {}
+_LAWS: Registry[ContactLaw] = Registry("contact law")
 
 
 def register_contact_law(law: ContactLaw) -> ContactLaw:
     """Add a contact law kind (names are unique)."""
-    if law.name in _LAWS:
-        raise ValueError(f"contact law {law.name!r} is already registered")
-    _LAWS[law.name] = law
-    return law
+    return _LAWS.add(law.name, law)
 
 
 def contact_laws() -> list[str]:
     """Names of the registered contact laws."""
-    return list(_LAWS)
+    return _LAWS.names()
 
 
 def get_contact_law(name: str) -> ContactLaw:
     """A registered contact law by name; one-line :class:`InputError` otherwise."""
-    try:
-        return _LAWS[name]
-    except KeyError:
-        raise InputError(f"unknown contact law {name!r}; known: {', '.join(_LAWS)}") from None
+    return _LAWS[name]
 
 
 SIGNORINI = register_contact_law(ContactLaw(
