@@ -130,3 +130,40 @@ def test_find_cycle_names_a_cycle():
 def test_no_import_cycle():
     cycle = find_cycle(import_graph())
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+#: What each layer may import (besides the core modules ``ddcm_casadi.<name>`` and itself); the
+#: table of docs/architecture.md, downwards only.
+LAYERS = {
+    "data": set(),
+    "models": {"data"},
+    "problems": {"models", "data"},
+    "loops": {"problems"},
+    "formulations": {"loops", "problems"},
+    "drivers": {"formulations", "loops", "problems", "models", "data"},
+    "casefiles": {"drivers", "formulations", "models", "data"},
+    "outputs": {"drivers", "models", "data", "problems"},
+    "validation": {"casefiles", "drivers", "formulations", "loops", "problems", "models", "data", "cases"},
+}
+CORE = {"errors", "registry", "inputs", "io", "linalg", "factor_updates", "evaluate", "parallel", "version"}
+
+
+def _layer(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def test_layers_import_downwards_only():
+    """Models never import case files, drivers, outputs or commands; loops never import drivers;
+    and so on down the table: a layer imports only the layers below it and the core."""
+    wrong = []
+    for module, targets in import_graph().items():
+        layer = _layer(module)
+        if layer not in LAYERS:
+            continue
+        for target in targets:
+            other = _layer(target)
+            # the package root runs before any of its modules anyway (here: ``from ddcm_casadi import cases``)
+            if other not in (layer, "__init__") and other not in CORE and other not in LAYERS[layer]:
+                wrong.append(f"{module} -> {target}")
+    assert not wrong, wrong
