@@ -5,7 +5,9 @@
 - Owned folders (:class:`OutputFolder`): a run locks its output folder (:class:`FolderLock`), writes
   every output into a fresh temporary folder inside it and moves the files into place only when
   all of them are written; the files an earlier run of the tool wrote (its manifest) that the new
-  run did not write are removed, files it did not write never are.
+  run did not write are removed, files it did not write never are. A manifest is trusted only
+  when it carries the identity its tool writes (:data:`MANIFEST_FORMAT_KEY`): a ``results.json``
+  or ``sweep.json`` written by another program never makes a run remove a file.
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ LOCK_FILE = ".ddcm-casadi.lock"
 #: Prefixes of a run's temporary folders inside its output folder (new outputs, replaced ones).
 STAGING_PREFIX = ".ddcm-staging-"
 PREVIOUS_PREFIX = ".ddcm-previous-"
+#: The key of a manifest that says which tool and format wrote it (see :class:`OutputFolder`).
+MANIFEST_FORMAT_KEY = "format"
 
 
 def prepare_output_dir(path: str | os.PathLike) -> Path:
@@ -201,7 +205,9 @@ class OutputFolder:
     folder; when the block ends without an error, every file written there is moved into place and
     the files listed in the previous manifest that this run did not write are removed. The
     manifest is the JSON file ``manifest`` among the outputs, with a ``files`` list of the paths
-    (relative, ``/``-separated) the run wrote; the caller writes it, last.
+    (relative, ``/``-separated) the run wrote; the caller writes it, last. With ``identity`` (the
+    value of :data:`MANIFEST_FORMAT_KEY` that the tool writes into its manifest), a manifest
+    without that identity, written by another program, is not trusted: no file it lists is removed.
 
     On an error inside the block the temporary folder is removed and the folder keeps what it held
     (the previous complete results); an ``OSError`` (a full disk, a quota, a read-only file system)
@@ -210,10 +216,10 @@ class OutputFolder:
     nothing behind.
     """
 
-    def __init__(self, path: str | os.PathLike, *, tool: str, manifest: str) -> None:
+    def __init__(self, path: str | os.PathLike, *, tool: str, manifest: str, identity: str | None = None) -> None:
         created = not Path(path).exists()
         self.path = prepare_output_dir(path)
-        self.tool, self.manifest = tool, manifest
+        self.tool, self.manifest, self.identity = tool, manifest, identity
         self._created, self._committed = created, False
         self._lock = FolderLock(self.path, tool)
         try:
@@ -258,10 +264,14 @@ class OutputFolder:
 
     def previous_files(self) -> list[str]:
         """The files an earlier run of the tool wrote here (its manifest's ``files``), those that
-        are still regular files (or links) inside the folder; empty without a readable manifest."""
+        are still regular files (or links) inside the folder; empty without a readable manifest,
+        and without one of this tool's (``identity``, when given: another program's is not trusted)."""
         try:
-            listed = json.loads((self.path / self.manifest).read_text(encoding="utf-8")).get("files")
+            doc = json.loads((self.path / self.manifest).read_text(encoding="utf-8"))
+            listed = doc.get("files")
         except (OSError, ValueError, AttributeError):
+            return []
+        if self.identity is not None and doc.get(MANIFEST_FORMAT_KEY) != self.identity:
             return []
         if not isinstance(listed, list):
             return []

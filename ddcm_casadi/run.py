@@ -28,7 +28,7 @@ from ddcm_casadi import formulations as registry
 from ddcm_casadi.casefiles.base import Case
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.drivers.harness import VARIANTS, Comparison, compare
-from ddcm_casadi.io import OutputFolder, write_csv_atomic, write_json_atomic
+from ddcm_casadi.io import MANIFEST_FORMAT_KEY, OutputFolder, write_csv_atomic, write_json_atomic
 from ddcm_casadi.outputs.save import require_matplotlib, save_outputs
 from ddcm_casadi.parallel import resolve_jobs
 from ddcm_casadi.version import versions
@@ -38,6 +38,9 @@ if TYPE_CHECKING:
 
 RESULTS_CSV = "results.csv"
 RESULTS_JSON = "results.json"
+#: The identity of a ``results.json`` written by this package (its ``format``): only such a
+#: manifest makes a rerun remove the files it lists.
+RESULTS_FORMAT = "ddcm-casadi results"
 
 #: ``progress(variant, formulation, step_result)`` after every step of every run.
 Progress = Callable[[str, str, "StepResult"], None]
@@ -182,7 +185,8 @@ def results_document(case: Case, cmp: Comparison, *, files: Sequence[str],
     dict
         ``parameters`` (:func:`parameters`), ``versions``, ``summary``
         (:meth:`~ddcm_casadi.drivers.harness.Comparison.summary`), ``warnings`` (physically odd input),
-        ``fields`` (:func:`fields`; not for the one-unknown bar) and ``files``.
+        ``fields`` (:func:`fields`; not for the one-unknown bar), ``files`` and ``format``
+        (:data:`RESULTS_FORMAT`: the identity by which a rerun trusts the manifest).
     """
     params = parameters(case, cmp)
     if overrides:
@@ -192,6 +196,7 @@ def results_document(case: Case, cmp: Comparison, *, files: Sequence[str],
     if per_step is not None:
         doc["fields"] = per_step
     doc["files"] = list(files)
+    doc[MANIFEST_FORMAT_KEY] = RESULTS_FORMAT
     return doc
 
 
@@ -293,7 +298,7 @@ def run_case(case: Case, out_dir: str | Path | None = None, *, formulations: Seq
     chosen = select_variants(variants, case)
     jobs = resolve_jobs(jobs, len(names) * len(chosen))
     case.model.path_warnings()  # refuses a meaningless path before the folder is touched
-    folder = OutputFolder(out_dir, tool=tool, manifest=RESULTS_JSON) if out_dir is not None else None
+    folder = OutputFolder(out_dir, tool=tool, manifest=RESULTS_JSON, identity=RESULTS_FORMAT) if out_dir is not None else None
     try:
         draw = folder is not None and figures
         if draw:

@@ -36,13 +36,15 @@ from typing import Callable, Iterator
 
 from ddcm_casadi.errors import one_line
 from ddcm_casadi.errors import DDCMError, InputError
-from ddcm_casadi.io import OutputFolder, umask, write_csv_atomic, write_json_atomic
+from ddcm_casadi.io import MANIFEST_FORMAT_KEY, OutputFolder, umask, write_csv_atomic, write_json_atomic
 from ddcm_casadi.run import RESULTS_CSV, RESULTS_JSON, run_case as run_library_case
 from ddcm_casadi.version import versions as package_versions
 from ddcm_casadi.sweep.spec import SweepCase, SweepSpec, build_case, flatten
 from ddcm_casadi.sweep.table import case_rows, fits, summary_rows
 
 CASES = "cases"
+#: The identity of a ``sweep.json`` written by ``ddcm-sweep`` (its ``format``; see OutputFolder).
+SWEEP_FORMAT = "ddcm-casadi sweep"
 RECORD = "case.json"
 
 
@@ -256,12 +258,12 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, workers: int | None = None, s
     try:
         if todo:
             with dask_client(workers=workers, scheduler=scheduler) as client:
-                folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json")
+                folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json", identity=SWEEP_FORMAT)
                 _clean_partial(folder.path)
                 report.workers = n_workers(client)
                 _run(client, spec, todo, folder.path, report, progress)
         else:
-            folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json")
+            folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json", identity=SWEEP_FORMAT)
         report.seconds = time.perf_counter() - t0
         finish(spec, folder.path, report, figures=figures, versions=versions, folder=folder)
     finally:
@@ -332,7 +334,8 @@ def _write_summary(spec: SweepSpec, out: Path, into: Path, report: SweepReport, 
                seconds=report.seconds, fits=report.fits, figures=report.figures,
                versions={**package_versions(), **_dask_versions(), **(versions or {})},
                case_index=[dict(id=case.id, params=case.params, status=status[case.id]) for case in spec.cases],
-               files=["sweep.csv", *report.figures, "sweep.json"])  # the manifest (see OutputFolder)
+               files=["sweep.csv", *report.figures, "sweep.json"],  # the manifest (see OutputFolder)
+               **{MANIFEST_FORMAT_KEY: SWEEP_FORMAT})
     write_csv_atomic(into / "sweep.csv", rows)
     write_json_atomic(into / "sweep.json", doc)
 

@@ -1,0 +1,120 @@
+"""Issue 29, items 8-12: the commands and sweeps for real users.
+
+- 8: a manifest (``results.json``, ``sweep.json``) that another program wrote never makes a run
+  remove the files it lists.
+- 9: forked workers die with their parent (SIGTERM or SIGKILL to it).
+- 10: out of memory is one line (exit 2); sizes are estimated before building.
+- 11: sweeps: a cap on size, quiet Ctrl-C, a bounded handshake, the data-range flag and
+  ``--strict`` carried over, ``--out ""`` refused, every case validated before starting.
+- 12: load-path warnings and refusals based on the computed state or worded as estimates.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ddcm_casadi.io import OutputFolder
+
+from .test_bad_input import FAST, case_toml, run_cli
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+# ------------------------------------------------------------------------ 8: foreign manifests
+def test_compare_keeps_the_files_a_foreign_results_json_lists(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    (out / "results.json").write_text(json.dumps({"files": ["notes.txt", "results.json"]}))  # another tool's
+    cfg = tmp_path / "case.toml"
+    cfg.write_text(case_toml())
+    code, _, err = run_cli([*FAST, "--config", str(cfg), "--out", str(out)], capsys)
+    assert code == 0, err
+    assert (out / "notes.txt").read_text() == "mine"
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["format"] == "ddcm-casadi results"
+    # our own manifest is trusted: a rerun removes what it listed and does not write again
+    (out / "stale.png").write_text("ours")
+    doc["files"].append("stale.png")
+    (out / "results.json").write_text(json.dumps(doc))
+    assert run_cli([*FAST, "--config", str(cfg), "--out", str(out)], capsys)[0] == 0
+    assert not (out / "stale.png").exists() and (out / "notes.txt").exists()
+
+
+def test_sweep_does_not_trust_a_foreign_sweep_json(tmp_path):
+    from ddcm_casadi.sweep.runner import SWEEP_FORMAT
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.png").write_text("mine")
+    (out / "sweep.json").write_text(json.dumps({"files": ["mine.png", "sweep.json"]}))
+    with OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json", identity=SWEEP_FORMAT) as folder:
+        assert folder.previous_files() == []
+    (out / "sweep.json").write_text(json.dumps({"files": ["mine.png", "sweep.json"], "format": SWEEP_FORMAT}))
+    with OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json", identity=SWEEP_FORMAT) as folder:
+        assert folder.previous_files() == ["mine.png", "sweep.json"]
+
+
+# ------------------------------------------------------------------------ 9: orphaned workers
+_FORKER = """
+import os, sys, time
+from pathlib import Path
+from ddcm_casadi.parallel import map_forked
+
+folder = Path(sys.argv[1])
+
+def work(i):
+    (folder / f"{os.getpid()}.pid").write_text("")
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 120:  # busy, as a solve is
+        sum(range(10000))
+    return i
+
+map_forked(work, range(3), jobs=3)
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state not in ("Z", "X")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_forked_workers_die_with_their_parent(tmp_path, sig):
+    script = tmp_path / "forker.py"
+    script.write_text(_FORKER)
+    proc = subprocess.Popen([sys.executable, str(script), str(tmp_path)])
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(tmp_path.glob("*.pid"))) < 3:
+            assert time.monotonic() < deadline and proc.poll() is None, "the workers did not start"
+            time.sleep(0.1)
+        workers = [int(p.stem) for p in tmp_path.glob("*.pid") if int(p.stem) != proc.pid]
+        assert len(workers) == 2
+        proc.send_signal(sig)
+        proc.wait(timeout=60)
+        deadline = time.monotonic() + 30  # generous: they die at once
+        while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        left = [pid for pid in workers if _alive(pid)]
+    finally:
+        proc.kill()
+        proc.wait()
+        for pid in workers if "workers" in locals() else []:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+    assert not left, f"workers {left} outlived their parent"
