@@ -7,7 +7,10 @@ at a time from a shared counter, so a long run does not hold up the others; each
 same as in a serial run (the runs share no state).
 
 Ctrl-C reaches the whole process group: workers ignore it and the parent, which gets the
-``KeyboardInterrupt``, kills them. An exception in a run is re-raised in the parent (the one of the
+``KeyboardInterrupt``, kills them. Workers die with their parent however it ends (SIGTERM from
+``timeout``, CI or a batch scheduler, SIGKILL): on Linux the kernel sends them SIGKILL when it
+dies (``PR_SET_PDEATHSIG``); elsewhere a thread of each worker watches its parent and ends the
+worker once the parent is gone. An exception in a run is re-raised in the parent (the one of the
 first run in order, as a serial loop would have raised it); warnings issued in a worker are
 re-issued in the parent. Where ``os.fork`` does not exist (Windows), runs are serial.
 """
@@ -126,9 +129,11 @@ def _run_items(function, items, take, stop, results: dict[int, tuple[bool, objec
 def _fork_worker(function, items, take, stop) -> tuple[int, int]:
     """Fork one worker (:func:`_worker`); its pid and the read end of its pipe."""
     read, write = os.pipe()
+    parent = os.getpid()
     pid = os.fork()
     if pid == 0:  # pragma: no cover - the worker (coverage does not follow forks)
         os.close(read)
+        die_with_parent(parent)
         _worker(function, items, take, stop, write)
     os.close(write)
     return pid, read
@@ -165,10 +170,45 @@ def _kill(workers: list[tuple[int, int | None]]) -> None:
             os.close(read)
 
 
+def die_with_parent(parent: int) -> None:
+    """Make this (forked) process end when its parent ``parent`` does, however the parent ends.
+
+    On Linux the kernel sends SIGKILL at the parent's death (``prctl(PR_SET_PDEATHSIG)``); elsewhere,
+    or if ``prctl`` is not available, a daemon thread polls the parent's pid twice a second and
+    ends the process with ``os._exit`` once it has changed (the worker was re-parented). A parent
+    that died before the request took effect is caught by the same pid check.
+
+    Parameters
+    ----------
+    parent : int
+        The pid of the parent, read before the fork.
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            pr_set_pdeathsig = 1
+            if libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0:
+                if os.getppid() != parent:  # the parent died before the request
+                    os._exit(1)
+                return
+        except (OSError, AttributeError):  # no libc prctl: watch instead
+            pass
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            threading.Event().wait(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="ddcm-parent-watch", daemon=True).start()
+
+
 def _worker(function, items, take, stop, write: int) -> None:  # pragma: no cover - runs in a fork
     """A forked worker's life: runs until the counter passes the end, then its results and warnings
     through the pipe ``write``, and ``os._exit`` (no cleanup of the parent's state)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and kills the workers
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # whatever the parent installed: end at once
     results: dict[int, tuple[bool, object]] = {}
     status = 0
     with warnings.catch_warnings(record=True) as caught:
