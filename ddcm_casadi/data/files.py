@@ -62,18 +62,32 @@ def _csv_header(path: Path) -> list[str]:
     return header
 
 
+def _component_counts(names: list[str]) -> tuple[int, int]:
+    """How many numbered strain and stress columns (``strain_1``, ``stress_2``, ...) ``names`` hold,
+    or one each for the plain ``strain`` and ``stress`` of one-component data."""
+    counts = []
+    for what in ("strain", "stress"):
+        numbered = [n for n in names if re.fullmatch(rf"{what}_\d+", n)]
+        counts.append(len(numbered) or int(what in names))
+    return counts[0], counts[1]
+
+
 def _csv_columns(path: Path, header: list[str], k: int) -> tuple[int, ...]:
-    """The positions of the strain and stress columns of ``k`` components in ``header``."""
+    """The positions of the strain and stress columns of ``k`` components in ``header``.
+
+    Refused: missing columns, and numbered strain or stress columns beyond ``k`` (a 3-D file of six
+    Mandel components read by a plane-strain case would take ``e33`` for ``sqrt(2) e12``). Columns
+    of other names are ignored.
+    """
     names = [h.strip().lower() for h in header]
     wanted = (["strain"], ["stress"]) if k == 1 else ([f"strain_{i}" for i in range(1, k + 1)],
                                                      [f"stress_{i}" for i in range(1, k + 1)])
     missing = [w for w in wanted[0] + wanted[1] if w not in names]
-    if missing and k == 1:
-        raise InputError(f"data file {path} needs a header with columns 'strain' and 'stress', got {header!r}")
-    if missing:
-        cols = ",".join(wanted[0] + wanted[1])
-        raise InputError(f"data file {path} needs a header with columns {cols!r} ({k} strain and {k} stress "
-                         f"components for this metric), got {header!r}")
+    n_strain, n_stress = _component_counts(names)
+    if missing or (k > 1 and (n_strain, n_stress) != (k, k)):
+        cols = "'strain' and 'stress'" if k == 1 else repr(",".join(wanted[0] + wanted[1]))
+        raise InputError(f"data file {path} has {n_strain} strain and {n_stress} stress components, this case "
+                         f"(its metric) needs {k} of each: a header with columns {cols}")
     return tuple(names.index(w) for w in wanted[0] + wanted[1])
 
 
@@ -154,7 +168,9 @@ def read_npy(path: str | os.PathLike, *, c) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"data file {path} holds {table.dtype} values; the data must be real numbers")
     if table.ndim != 2 or table.shape[1] != 2 * k or table.shape[0] == 0:
         cols = "strain, stress" if k == 1 else f"strain_1..{k}, stress_1..{k}"
-        raise InputError(f"data file {path} holds an array of shape {table.shape}; it needs (N, {2 * k}) "
+        found = (f" ({table.shape[1] // 2} strain and {table.shape[1] // 2} stress components; this case needs {k} "
+                 f"of each)" if table.ndim == 2 and table.shape[1] % 2 == 0 and table.shape[1] != 2 * k else "")
+        raise InputError(f"data file {path} holds an array of shape {table.shape}{found}; it needs (N, {2 * k}) "
                          f"with N >= 1 and the columns {cols}")
     if table.shape[0] > limits.MAX_DATA_POINTS:
         raise InputError(f"data file {path} holds {table.shape[0]} points, more than {limits.MAX_DATA_POINTS}")
