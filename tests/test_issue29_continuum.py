@@ -79,3 +79,53 @@ def test_item2_an_obstacle_through_the_body_is_refused():
 def test_item2_an_ordinary_indentation_passes():
     """Travel of 20 um into the same block (a usual indentation) builds."""
     assert _indented_block([0.0, 1e-5, 2e-5]).n_contacts > 0
+
+
+# ----------------------------------------------------------------- 5: near-incompressible P1
+def _pressed_block(nu: float, degree: int):
+    """A 10 x 10 mm block on its bottom, pressed by a plane 1 um into its top."""
+    plane = Plane(point=(0.0, 0.01), normal=(0.0, -1.0), direction=(0.0, -1.0), travel=[0.0, 1e-6])
+    return continuum_model(mesh.rectangle(0.01, 0.01, nx=2, ny=2), degree=degree,
+                           materials=[Material(youngs_modulus=E, poisson_ratio=nu)],
+                           supports=[Support("ymin", "xy")], contacts=[Contact(plane, "ymax")])
+
+
+def test_item5_near_incompressible_p1_warns_and_points_to_p2(tmp_path):
+    """nu = 0.4999 on P1: a PhysicsWarning naming P2, also in results.json's warnings."""
+    import json
+
+    from ddcm_casadi.casefiles.config import load_case
+    from ddcm_casadi.run import run_case
+
+    with pytest.warns(PhysicsWarning, match=r"P1.*degree = 2"):
+        result = compare(_pressed_block(0.4999, 1), ["penalty"], variants=("classical",))
+    assert any("locks" in w for w in result.warnings)
+    case = tmp_path / "case.toml"
+    case.write_text("""
+[mesh]
+shape = "rectangle"
+size = [0.01, 0.01]
+divisions = [2, 2]
+[material]
+youngs_modulus = 200e9
+poisson_ratio = 0.4999
+[[supports]]
+boundary = "ymin"
+fix = "xy"
+[[contact]]
+boundary = "ymax"
+obstacle = "plane"
+point = [0.0, 0.01]
+normal = [0.0, -1.0]
+travel = [0.0, 1e-6]
+""")
+    with pytest.warns(PhysicsWarning):
+        run_case(load_case(case), tmp_path / "out", formulations=["penalty"], variants=["classical"], figures=False)
+    warnings = json.loads((tmp_path / "out" / "results.json").read_text())["warnings"]
+    assert any("degree = 2 (P2)" in w for w in warnings)
+
+
+@pytest.mark.parametrize("nu, degree", [(0.3, 1), (0.4999, 2)])
+def test_item5_no_locking_warning_where_there_is_none(nu, degree):
+    """Ordinary nu on P1, and any nu on P2: no locking warning."""
+    assert not any("locks" in w for w in _pressed_block(nu, degree).path_warnings())

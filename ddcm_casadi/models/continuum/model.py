@@ -40,6 +40,13 @@ from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materi
 from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
 from ddcm_casadi.models.continuum.obstacles import Obstacle
 
+#: Above this Poisson's ratio, linear (P1) elements lock (:meth:`ContinuumModel.path_warnings`):
+#: the bulk modulus over the shear modulus, ``2 (1 + nu) / (3 (1 - 2 nu))``, passes 9.7 at 0.45
+#: (it is 2.2 at nu = 0.3), and the constant-strain elements' volumetric constraints start to
+#: dominate; measured on a Hertz contact: P1 gives 2.75 x P2's force at nu = 0.4999. The usual
+#: threshold of thumb in finite-element practice.
+LOCKING_POISSON = 0.45
+
 #: A boundary: its name in ``mesh.boundaries``, or a predicate on facet midpoints ``(d, nf)``.
 Where = str | Callable[[np.ndarray], np.ndarray]
 
@@ -149,6 +156,17 @@ class ContinuumModel(ContactModel):
         """Nodal contact forces ``a p n`` (N; N/m in 2-D) per pair, ``(..., nc, d)``."""
         p = np.asarray(p)
         return (self.contact_area * p)[..., None] * self.contact_normals
+
+    def path_warnings(self) -> list[str]:
+        """:meth:`ContactModel.path_warnings`, plus volumetric locking: near-incompressible
+        material (``nu >`` :data:`LOCKING_POISSON`) on linear (P1) elements."""
+        out = super().path_warnings()
+        if self.discretisation.degree == 1 and self.poisson_ratio is not None:
+            nu = float(np.max(self.poisson_ratio))
+            if nu > LOCKING_POISSON:
+                out.append(f"poisson_ratio {nu:g} > {LOCKING_POISSON:g} on linear (P1) elements: nearly "
+                           f"incompressible material locks them (too stiff, forces too high); use degree = 2 (P2)")
+        return out
 
     # ------------------------------------------- self-description for the front ends
     def describe(self) -> dict:
