@@ -227,12 +227,11 @@ def _datasets(doc: dict, base_dir: Path, k: int, materials: list) -> list[Materi
         c = _metric(label, table.get("c", ddcm_c), k, users[0])
         if ("path" in table) == ("hookean" in table):
             raise InputError(f"[{label}] needs exactly one of 'path' or 'hookean'")
-        # "estimated" needs the data first: read them with a unit metric, then estimate
-        probe = c if isinstance(c, Metric) else Metric(np.eye(k))
+        # "estimated": fitted to the data before they are checked against it (MaterialDataset)
         if "path" in table:
             if not isinstance(table["path"], str):
                 raise InputError(f"[{label}] path must be a string")
-            ds = MaterialDataset.from_file(base_dir / table["path"], c=probe)
+            ds = MaterialDataset.from_file(base_dir / table["path"], c=c, components=k)
         else:
             hk = casefile.hookean_table(label, table["hookean"], _HOOKEAN)
             mat = users[0]
@@ -246,9 +245,7 @@ def _datasets(doc: dict, base_dir: Path, k: int, materials: list) -> list[Materi
             points = integer(label, "hookean.points", hk["points"], low=1, what="a positive integer (per axis)")
             lo = number(label, "hookean.strain_min", hk["strain_min"])
             hi = number(label, "hookean.strain_max", hk["strain_max"])
-            ds = MaterialDataset.hookean_grid(D, lo, hi, points, c=probe)
-        if c == "estimated":
-            ds = MaterialDataset(ds.strain, ds.stress, Metric.estimated(ds.strain, ds.stress))
+            ds = MaterialDataset.hookean_grid(D, lo, hi, points, c=c)
         out.append(ds)
     return out
 

@@ -21,6 +21,20 @@ from ddcm_casadi.data.metric import Metric
 from ddcm_casadi.data.search import CHUNK, KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
 
 
+#: The metric ``c`` that is fitted to the data (:meth:`Metric.estimated`) rather than given.
+ESTIMATED = "estimated"
+
+
+def _reading_metric(c, components: int | None):
+    """The metric whose number of components says which columns of a data file to read: ``c``
+    itself, or for ``c = "estimated"`` (fitted after reading) the identity of ``components``."""
+    if isinstance(c, str) and c == ESTIMATED:
+        if components is None:
+            raise InputError("a data file read with c = \"estimated\" needs its number of strain components")
+        return 1.0 if components == 1 else np.eye(int(components))
+    return c
+
+
 def check_positive(name: str, value: float) -> float:
     """Return ``value`` as a float, or raise :class:`InputError` unless it is a finite number > 0
     (:func:`ddcm_casadi.inputs.positive`; ``name`` says where it came from)."""
@@ -39,8 +53,10 @@ class MaterialDataset:
     strain, stress : array_like
         The data points: ``(N,)`` for one component per point (bars, trusses), ``(N, k)`` for
         ``k`` Mandel components. Duplicates and any ordering are accepted.
-    c : float, (k, k) array_like or Metric
-        The metric (Pa): a number for one component, an SPD matrix for ``k``.
+    c : float, (k, k) array_like, Metric or "estimated"
+        The metric (Pa): a number for one component, an SPD matrix for ``k``; ``"estimated"``
+        fits it to the data (:meth:`~ddcm_casadi.data.metric.Metric.estimated`), so that it is on
+        the data's own scale before the data are checked against it.
 
     Notes
     -----
@@ -62,7 +78,11 @@ class MaterialDataset:
     _frame: tuple = field(init=False, repr=False, default=())
 
     def __post_init__(self) -> None:
-        if isinstance(self.c, Metric):
+        if isinstance(self.c, str):
+            if self.c != ESTIMATED:
+                raise InputError(f"metric c must be a number, a matrix or {ESTIMATED!r}, got {self.c!r}")
+            metric = Metric.estimated(self.strain, self.stress)  # fitted to the data (refused if not SPD)
+        elif isinstance(self.c, Metric):
             metric = self.c
         elif np.ndim(self.c) == 0:
             metric = Metric(check_positive("metric c", self.c))
@@ -223,7 +243,7 @@ class MaterialDataset:
         return cls(strain, law(strain), c)
 
     @classmethod
-    def from_csv(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
+    def from_csv(cls, path: str | os.PathLike, *, c, components: int | None = None) -> "MaterialDataset":
         """Read a CSV file with the header ``strain,stress`` (one component per point) or
         ``strain_1,...,strain_k,stress_1,...,stress_k`` (``k`` Mandel components; ``c`` then a
         ``k x k`` SPD matrix). Other columns are ignored.
@@ -236,11 +256,11 @@ class MaterialDataset:
         InputError
             Missing, unreadable, empty, huge, non-UTF-8, one-column or non-numeric file.
         """
-        strain, stress = read_csv(path, c=c)
+        strain, stress = read_csv(path, c=_reading_metric(c, components))
         return cls(strain, stress, c)
 
     @classmethod
-    def from_npy(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
+    def from_npy(cls, path: str | os.PathLike, *, c, components: int | None = None) -> "MaterialDataset":
         """Read a numpy ``.npy`` file holding one ``(N, 2k)`` array, the columns of
         :meth:`from_csv` in order: ``strain, stress`` (``k = 1``) or ``strain_1..k, stress_1..k``
         (as ``numpy.save(path, numpy.column_stack([strain, stress]))`` writes it).
@@ -258,15 +278,16 @@ class MaterialDataset:
             Missing, unreadable, empty, not ``.npy``, truncated, not real-valued, of another
             shape, or with more than :data:`~ddcm_casadi.data.limits.MAX_DATA_POINTS` points.
         """
-        strain, stress = read_npy(path, c=c)
+        strain, stress = read_npy(path, c=_reading_metric(c, components))
         return cls(strain, stress, c)
 
     @classmethod
-    def from_file(cls, path: str | os.PathLike, *, c) -> "MaterialDataset":
+    def from_file(cls, path: str | os.PathLike, *, c, components: int | None = None) -> "MaterialDataset":
         """Read a data file by its suffix: ``.npy`` with :meth:`from_npy`, any other as CSV
-        (:meth:`from_csv`)."""
+        (:meth:`from_csv`). With ``c = "estimated"`` the metric is fitted to the data read, and
+        ``components`` (the case's strain components) says which columns to read."""
         reader = cls.from_npy if is_npy(path) else cls.from_csv
-        return reader(path, c=c)
+        return reader(path, c=c, components=components)
 
 
 class PointData:
