@@ -129,3 +129,38 @@ travel = [0.0, 1e-6]
 def test_item5_no_locking_warning_where_there_is_none(nu, degree):
     """Ordinary nu on P1, and any nu on P2: no locking warning."""
     assert not any("locks" in w for w in _pressed_block(nu, degree).path_warnings())
+
+
+# ------------------------------------------------------------- 6: plane-strain von Mises stress
+def test_item6_plane_strain_sigma_zz_in_the_vtu_and_von_mises(tmp_path):
+    """Classical: sigma_zz = nu (s11 + s22) in the stress tensor and in von Mises, element by
+    element (the block pressed by a plane). DDCM: sigma_zz unknown (its 2-D data carry none), NaN
+    in the tensor and von Mises, with an in-plane von Mises beside them."""
+    import meshio
+
+    from ddcm_casadi.data.dataset import MaterialDataset
+    from ddcm_casadi.data.metric import Metric, isotropic_elasticity
+    from ddcm_casadi.outputs.continuum_results import write_vtu
+
+    D = isotropic_elasticity(E, NU, 2)[0]
+    data = MaterialDataset.hookean_grid(D, -2e-4, 2e-4, 7, c=Metric(D))
+    plane = Plane(point=(0.0, 0.01), normal=(0.0, -1.0), direction=(0.0, -1.0), travel=[0.0, 1e-6])
+    model = continuum_model(mesh.rectangle(0.01, 0.01, nx=2, ny=2),
+                            materials=[Material(youngs_modulus=E, poisson_ratio=NU, data=0)],
+                            supports=[Support("ymin", "xy")], contacts=[Contact(plane, "ymax")], datasets=[data])
+    cmp = compare(model, ["penalty"])
+    write_vtu(cmp, tmp_path)
+    classical = meshio.read(tmp_path / "vtu" / "classical_penalty_0001.vtu")
+    stress = classical.cell_data["stress"][0].reshape(-1, 3, 3)
+    s11, s22, s12, s33 = stress[:, 0, 0], stress[:, 1, 1], stress[:, 0, 1], stress[:, 2, 2]
+    assert np.max(np.abs(s22)) > 0  # the block is loaded
+    # exact arithmetic up to roundoff of the per-element mean: 1e-12 of the stress
+    scale = np.max(np.abs(stress))
+    np.testing.assert_allclose(s33, NU * (s11 + s22), atol=1e-12 * scale)
+    mean = (s11 + s22 + s33) / 3
+    expected = np.sqrt(1.5 * ((s11 - mean) ** 2 + (s22 - mean) ** 2 + (s33 - mean) ** 2 + 2 * s12 ** 2))
+    np.testing.assert_allclose(classical.cell_data["von_mises"][0], expected, rtol=1e-12, atol=1e-12 * scale)
+    ddcm = meshio.read(tmp_path / "vtu" / "ddcm_penalty_0001.vtu")
+    assert np.isnan(ddcm.cell_data["stress"][0].reshape(-1, 3, 3)[:, 2, 2]).all()
+    assert np.isnan(ddcm.cell_data["von_mises"][0]).all()
+    assert np.isfinite(ddcm.cell_data["von_mises_in_plane"][0]).all()

@@ -1,6 +1,7 @@
 """Output of continuum results: Mandel helpers and ParaView files; the figures are re-exported.
 
-- :func:`mandel_to_tensor`, :func:`von_mises`: material-point strain and stress in Mandel notation
+- :func:`mandel_to_tensor`, :func:`von_mises`, :func:`plane_strain_sigma_zz`: material-point strain and
+  stress in Mandel notation
   (2-D plane strain ``[e11, e22, sqrt(2) e12]``; 3-D
   ``[e11, e22, e33, sqrt(2) e23, sqrt(2) e13, sqrt(2) e12]``) as tensors and equivalent stress.
 - :func:`write_vtu_series`: one ``.vtu`` file per load step and a ``.pvd`` collection for ParaView.
@@ -33,7 +34,7 @@ from ddcm_casadi.outputs.continuum_figures import (
 )
 
 __all__ = ["figure_convergence", "figure_deformed_body", "figure_pressure_profile", "fit_rate", "mandel_to_tensor",
-           "von_mises", "write_vtu_series"]
+           "plane_strain_sigma_zz", "von_mises", "write_vtu_series"]
 
 # Tensor index of each Mandel component; off-diagonal components carry a factor sqrt(2).
 _MANDEL_INDEX = {2: [(0, 0), (1, 1), (0, 1)],
@@ -53,7 +54,7 @@ def _mandel(values: Any, dim: int) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- Mandel notation
-def mandel_to_tensor(values: Any, dim: int) -> np.ndarray:
+def mandel_to_tensor(values: Any, dim: int, out_of_plane: Any = None) -> np.ndarray:
     """Symmetric 3 x 3 tensors from Mandel vectors.
 
     Parameters
@@ -63,21 +64,45 @@ def mandel_to_tensor(values: Any, dim: int) -> np.ndarray:
         (``[a11, a22, a33, sqrt(2) a23, sqrt(2) a13, sqrt(2) a12]``).
     dim : {2, 3}
         Spatial dimension.
+    out_of_plane : array_like, shape (N,) or scalar, optional
+        2-D only: the ``a33`` component, which the 2-D Mandel vector does not carry (plane strain:
+        ``e33 = 0`` but ``sigma_33 = nu (sigma_11 + sigma_22)`` for an isotropic law,
+        :func:`plane_strain_sigma_zz`); NaN marks it unknown. Default: 0.
 
     Returns
     -------
     ndarray, shape (N, 3, 3)
-        The tensors. In 2-D the third row and column are zero: the plane-strain stress
-        ``sigma_33`` is not part of the Mandel vector, so it is *not* filled in here.
+        The tensors. In 2-D the third row and column are zero but for ``a33 = out_of_plane``.
     """
     v = _mandel(values, dim)
     t = np.zeros((v.shape[0], 3, 3))
     for c, (i, j) in enumerate(_MANDEL_INDEX[dim]):
         t[:, i, j] = t[:, j, i] = v[:, c] if i == j else v[:, c] / np.sqrt(2.0)
+    if out_of_plane is not None:
+        if dim != 2:
+            raise InputError("out_of_plane is the 2-D a33 component; a 3-D Mandel vector carries it")
+        zz = np.broadcast_to(np.asarray(out_of_plane, dtype=float), (v.shape[0],))
+        t[:, 2, 2] = zz
     return t
 
 
-def von_mises(stress: Any, dim: int) -> np.ndarray:
+def plane_strain_sigma_zz(stress: Any, poisson_ratio: Any) -> np.ndarray:
+    """The out-of-plane stress of plane strain for an isotropic law: ``nu (sigma_11 + sigma_22)``.
+
+    ``e33 = 0`` gives ``sigma_33 = lambda (e11 + e22) = nu (sigma_11 + sigma_22)``.
+
+    Parameters
+    ----------
+    stress : array_like, shape (N, 3)
+        2-D Mandel stresses.
+    poisson_ratio : array_like, shape (N,) or scalar
+        Poisson's ratio of each point.
+    """
+    v = _mandel(stress, 2)
+    return np.asarray(poisson_ratio, dtype=float) * (v[:, 0] + v[:, 1])
+
+
+def von_mises(stress: Any, dim: int, out_of_plane: Any = None) -> np.ndarray:
     """Von Mises equivalent stress ``sqrt(3/2 s:s)`` (``s`` the deviator) of Mandel stresses.
 
     Parameters
@@ -86,15 +111,17 @@ def von_mises(stress: Any, dim: int) -> np.ndarray:
         Mandel stress vectors (see :func:`mandel_to_tensor`).
     dim : {2, 3}
         Spatial dimension.
+    out_of_plane : array_like, shape (N,) or scalar, optional
+        2-D only: ``sigma_33`` (plane strain: :func:`plane_strain_sigma_zz`; NaN if unknown, which
+        makes the result NaN). Default 0: only the in-plane components enter,
+        ``sqrt(s11^2 - s11 s22 + s22^2 + 3 s12^2)`` (plane *stress*).
 
     Returns
     -------
     ndarray, shape (N,)
-        Equivalent stress. In 2-D only the in-plane components enter (``sigma_33 = 0``):
-        ``sqrt(s11^2 - s11 s22 + s22^2 + 3 s12^2)``. For the plane-strain value including
-        ``sigma_33``, pass the 3-D Mandel vector with ``dim=3``.
+        Equivalent stress.
     """
-    t = mandel_to_tensor(stress, dim)
+    t = mandel_to_tensor(stress, dim, out_of_plane)
     dev = t - np.trace(t, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
     return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
 

@@ -8,6 +8,13 @@ distance ``sqrt(d^2)`` of the states to their data). Figures: the contact pressu
 at the last step against Hertz (when the model has a Hertz reference) and the deformed body
 coloured by the von Mises stress (the contact history is :func:`ddcm_casadi.outputs.plots.figure_contact_history`).
 
+Plane strain (2-D): the out-of-plane stress ``sigma_zz`` is no part of the 2-D Mandel state. For a
+classical run it is ``nu (sigma_11 + sigma_22)`` (``e_zz = 0`` with the isotropic law), written in
+the ``stress`` tensor and used in ``von_mises``. A DDCM run has no law, and its 2-D data carry only
+the three in-plane components, so its ``sigma_zz`` is unknown: NaN in the ``stress`` tensor and in
+``von_mises``; the VTU adds ``von_mises_in_plane`` (``sigma_zz = 0``, plane-stress formula), and
+the DDCM figure is coloured by it and says so.
+
 The output layer of :class:`~ddcm_casadi.models.continuum.model.ContinuumModel`: the writer and the
 drawings are registered (:mod:`ddcm_casadi.outputs.drawings`) under the names the model declares
 (``vtu``; ``pressure_profile``, ``deformed_body``), and :mod:`ddcm_casadi.outputs.save` calls them.
@@ -21,7 +28,8 @@ import numpy as np
 
 from ddcm_casadi.outputs.drawings import register_drawing, register_field_writer
 from ddcm_casadi.outputs.continuum import (
-    figure_deformed_body, figure_pressure_profile, mandel_to_tensor, von_mises, write_vtu_series,
+    figure_deformed_body, figure_pressure_profile, mandel_to_tensor, plane_strain_sigma_zz, von_mises,
+    write_vtu_series,
 )
 
 
@@ -40,15 +48,30 @@ def _per_element(model, values: np.ndarray) -> np.ndarray:
     return values.reshape((-1, nq) + values.shape[1:]).mean(axis=1)
 
 
+def sigma_zz(model, variant: str, stress: np.ndarray) -> np.ndarray | None:
+    """The plane-strain ``sigma_zz`` per material point of a 2-D run (``None`` in 3-D, where the
+    Mandel vector carries it): ``nu (sigma_11 + sigma_22)`` for a classical run, NaN (unknown)
+    for a DDCM run (no law; 2-D data carry no ``sigma_zz``)."""
+    if model.dimension != 2:
+        return None
+    if variant == "classical" and model.poisson_ratio is not None:
+        return plane_strain_sigma_zz(stress, model.poisson_ratio)
+    return np.full(stress.shape[0], np.nan)
+
+
 def _step_data(model, run, step) -> dict:
     disc, d, k = model.discretisation, model.dimension, model.strain_components
     pressure = np.zeros(disc.scalar_basis.N)
     np.add.at(pressure, model.contact_dofs, step.p)
     strain = np.asarray(step.strain).reshape(-1, k)
     stress = np.asarray(step.stress).reshape(-1, k)
+    zz = sigma_zz(model, run.variant, stress)
     cell = dict(strain=mandel_to_tensor(_per_element(model, strain), d).reshape(-1, 9),
-                stress=mandel_to_tensor(_per_element(model, stress), d).reshape(-1, 9),
-                von_mises=_per_element(model, von_mises(stress, d)))
+                stress=mandel_to_tensor(_per_element(model, stress), d,
+                                        None if zz is None else _per_element(model, zz)).reshape(-1, 9),
+                von_mises=_per_element(model, von_mises(stress, d, zz)))
+    if zz is not None and np.isnan(zz).any():
+        cell["von_mises_in_plane"] = _per_element(model, von_mises(stress, d))
     if step.stress_star is not None:
         star = np.asarray(step.stress_star).reshape(-1, k)
         d2 = model.dataset.distance2(strain, stress, step.data_index)
@@ -128,7 +151,12 @@ def draw_deformed_body(cmp, *, variant: str, formulation: str):
     model, key = cmp.model, (variant, formulation)
     last = cmp.results[key].steps[-1]
     d, k = model.dimension, model.strain_components
-    vm = _per_element(model, von_mises(np.asarray(last.stress).reshape(-1, k), d))
+    stress = np.asarray(last.stress).reshape(-1, k)
+    zz = sigma_zz(model, variant, stress)
+    label = "von Mises stress"
+    if zz is not None and np.isnan(zz).any():  # DDCM in 2-D: sigma_zz unknown
+        zz, label = None, "von Mises stress of the in-plane components (sigma_zz unknown)"
+    vm = _per_element(model, von_mises(stress, d, zz))
     disc = model.discretisation
     nn = model.mesh.p.shape[1]  # vertices come first among the scalar dofs
     points = disc.dof_locations()[:nn]
@@ -137,7 +165,7 @@ def draw_deformed_body(cmp, *, variant: str, formulation: str):
     cdofs = model.contact_dofs[active]
     cdofs = cdofs[cdofs < nn]
     drawn = [ob.drawing(float(ob.travels(model.n_steps)[-1])) for ob in model.obstacles]
-    title = f"{key[0]}/{key[1]}: von Mises stress, last step"
+    title = f"{key[0]}/{key[1]}: {label}, last step"
     if d == 2:
         cells, values = model.mesh.t.T, vm
     else:
@@ -145,6 +173,6 @@ def draw_deformed_body(cmp, *, variant: str, formulation: str):
         counts = np.bincount(model.mesh.t.ravel(), minlength=nn)
         values = np.bincount(model.mesh.t.ravel(), weights=np.repeat(vm, model.mesh.t.shape[0]), minlength=nn)
         values = values / np.maximum(counts, 1)
-    return figure_deformed_body(points, cells, displacement=disp, values=values, value_label="von Mises stress",
+    return figure_deformed_body(points, cells, displacement=disp, values=values, value_label=label,
                                 contact_points=cdofs if cdofs.size else None,
                                 obstacles=[o for o in drawn if o is not None], title=title)
