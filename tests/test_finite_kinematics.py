@@ -147,3 +147,31 @@ def test_finite_kinematics_refused_where_unavailable(tmp_path):
     path.write_text('kinematics = "finite"\n' + (EXAMPLES / "bar_stops.toml").read_text())
     with pytest.raises(InputError, match=r"kinematics = 'finite' is not available for \[bar\] cases"):
         load_case(path)
+
+
+def test_restoration_start_closes_violated_gaps_unloaded():
+    """After the snap the previous state has passed the plane: the restart is the unloaded
+    state on the plane (its gap closed exactly, stresses and pressures zero)."""
+    data = MaterialDataset.hookean(200e9, -0.006, 0.008, 201, c=200e9)
+    pair = build_problems(von_mises_truss(dataset=data))
+    problem = pair.projection
+    x, p = pair.scaled_start("mpcc", np.array([0.0, -0.09375]), np.array([1.2e7]), np.array([-9.9e8, -9.9e8]))
+    params = pair.projection_params(10, [-0.00495] * 2, [-9.9e8] * 2)
+    assert problem.penetrates(x, params)
+    xr, pr = problem.restoration_start(x, params)
+    assert not problem.penetrates(xr, params)
+    f = pair.fields("mpcc", xr, pr)
+    t = pair.model.load_parameter[10]
+    np.testing.assert_allclose(f["u"], [0.0, -t], atol=1e-15)
+    assert np.all(f["stress"] == 0) and np.all(pr == 0)
+
+
+def test_ddcm_fischer_burmeister_crosses_the_snap_from_the_restart():
+    """With 201 data points DDCM Fischer-Burmeister converges at every step, the snap included:
+    the projections after it start from the unloaded state on the plane (they failed from the
+    previous state)."""
+    data = MaterialDataset.hookean(200e9, -0.006, 0.008, 201, c=200e9)
+    r = compare(von_mises_truss(dataset=data), ["fischer_burmeister"], variants=("ddcm",))["ddcm", "fischer_burmeister"]
+    assert all(s.converged for s in r.steps)
+    p_ref = np.array([von_mises_truss().closed_form(k)[1] for k in range(25)])
+    assert np.max(np.abs(r.array("p") - p_ref)) <= 200e9 * 0.014 / 200  # the data's stress spacing

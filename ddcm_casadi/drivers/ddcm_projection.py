@@ -46,6 +46,12 @@ class Projection:
         known (the solution is at least as good as the formulation restarted on the exact global
         branch); ``error`` is the scaled distance to the exact projection.
         """
+        problem = self.problems.projection
+        if not problem.affine and problem.penetrates(x0, params):
+            # A nonlinear projection whose warm start has passed an obstacle (the load step moved
+            # it past a snap-through): start from the unloaded state resting on the obstacles.
+            x0, p0 = problem.restoration_start(x0, params)
+            state = None
         sol = self.built.solve(params, x0, p0, state)
         if not sol.converged and state:
             # Warm multipliers can mislead Newton near many corners (measured: 9 stops at the

@@ -237,6 +237,42 @@ class ComplementarityProblem:
         scale = max(float(np.max(np.abs(K))), np.finfo(float).tiny)
         return float(np.linalg.eigvalsh(H)[0]) / scale
 
+    @cached_property
+    def _gap_jacobian(self):
+        """``(z, P) -> dg/du`` (sparse, the displacement block ``u`` of ``x``)."""
+        z, P = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
+        n_u = self.unknowns[0][1]
+        J = ca.jacobian(self.gap_map.render(z, P), z[:n_u])
+        colind, row = J.sparsity().get_ccs()
+        return NumericFunction(ca.Function("gap_jacobian", [z, P], [J])), (np.asarray(row), np.asarray(colind), J.shape)
+
+    def penetrates(self, x, params, *, tol: float = 1e-9) -> bool:
+        """Whether the displacements of ``x`` (scaled) pass an obstacle by more than ``tol``
+        (scaled gap units) at the parameters ``params``."""
+        z = np.concatenate([np.asarray(x, float), np.zeros(self.n_pairs)])
+        return bool(np.any(self.gap_map.value(z, np.asarray(params, float)) < -tol))
+
+    def restoration_start(self, x, params) -> tuple[np.ndarray, np.ndarray]:
+        """A start ``(x, p)`` (scaled) for when a warm start fails on a nonlinear problem: the
+        displacements moved by the least-norm Gauss-Newton step that closes every violated gap
+        (``u - G_v^T (G_v G_v^T)^-1 g_v``, ``G_v`` the rows of ``dg/du`` where ``g < 0``), every
+        other block of ``x`` (the stresses of a projection) and the pressures zero: the unloaded
+        state resting on the obstacles it had passed. A snap-through makes the previous state a
+        poor start: the new solution lies on the other side of an unstable equilibrium."""
+        x = np.asarray(x, float)
+        n_u = self.unknowns[0][1]
+        z = np.concatenate([x, np.zeros(self.n_pairs)])
+        P = np.asarray(params, float)
+        gap = self.gap_map.value(z, P)
+        u = x[:n_u].copy()
+        violated = np.flatnonzero(gap < 0)
+        if violated.size:
+            function, (row, colind, shape) = self._gap_jacobian
+            G = sp.csc_matrix((np.asarray(function(z, P), float), row, colind), shape=shape).tocsr()[violated]
+            GGt = (G @ G.T).toarray()
+            u -= G.T @ np.linalg.lstsq(GGt, gap[violated], rcond=None)[0]
+        return np.concatenate([u, np.zeros(x.size - n_u)]), np.zeros(self.n_pairs)
+
     def scaled_penalty(self, gamma: float) -> float:
         """A physical contact stiffness (Pa/m) in the problem's scaled units."""
         return gamma * self.gap_ref / self.pressure_ref
