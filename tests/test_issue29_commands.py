@@ -118,3 +118,62 @@ def test_forked_workers_die_with_their_parent(tmp_path, sig):
             except OSError:
                 pass
     assert not left, f"workers {left} outlived their parent"
+
+
+# --------------------------------------------------------- 12: refusals and warnings from the state
+_STRETCHED = """
+[structure]
+nodes = [[0.0, 0.0], [1.0, 0.0]]
+members = [[0, 1]]
+area = 1.0
+youngs_modulus = 1.0
+supports = [[0, "xy"], [1, "y"]]
+
+[[obstacles]]
+normal = [1.0, 0.0]
+offsets = [1.0, 1.5, 2.0]
+nodes = [1]
+"""
+
+
+def test_a_bar_stretched_to_strain_one_runs_with_a_warning(tmp_path, capsys):
+    """A hard device pulling the bar to strain 1 (E = 1) was refused as 'pushed through the body'."""
+    cfg = tmp_path / "stretch.toml"
+    cfg.write_text(_STRETCHED)
+    code, _, err = run_cli([*FAST, "--config", str(cfg), "--out", str(tmp_path / "out")], capsys)
+    assert code == 0, err
+    assert "pushed past" not in err and "strain of about 1 " in err
+    # pushed the other way, through the fixed end, it is still refused
+    cfg.write_text(_STRETCHED.replace("normal = [1.0, 0.0]", "normal = [-1.0, 0.0]")
+                   .replace("offsets = [1.0, 1.5, 2.0]", "offsets = [-1.0, -0.5, 0.0]"))
+    code, _, err = run_cli([*FAST, "--config", str(cfg), "--out", str(tmp_path / "out2")], capsys)
+    assert code == 2 and "pushed past a fixed end" in err
+
+
+def test_bar_on_stops_has_no_false_strain_warning():
+    """It warned 'strain of about 0.12' where the strain is 0.064 (the stops close only part way)."""
+    sys.path.insert(0, str(ROOT / "examples"))
+    try:
+        import bar_on_stops
+    finally:
+        sys.path.remove(str(ROOT / "examples"))
+    from ddcm_casadi.models.scales import computed_strain
+
+    model = bar_on_stops.build_model(quick=True)
+    assert model.path_warnings() == []
+    low, _ = computed_strain(model, "classical", len(model.load_parameter) - 1)
+    assert low == pytest.approx(-0.064, rel=1e-3)
+
+
+def test_a_continuum_travel_starting_above_zero_is_the_load_not_a_warning():
+    from ddcm_casadi.casefiles.config import load_case
+
+    from .test_continuum import _CASE
+
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "c.toml"
+        path.write_text(_CASE.replace("travel = [0.0, 1e-6]", "travel = [1e-6, 2e-6, 3e-6]"))
+        model = load_case(path).model
+    assert not any("start inside the body" in w for w in model.path_warnings())

@@ -116,39 +116,121 @@ def load_path_warnings(model: ContactModel) -> list[str]:
     """What is physically odd about the load path of ``model``, one line each; refuses what is
     meaningless.
 
-    - The obstacles already penetrate the body at the first step: the body starts with
-      contact forces and no load (often an obstacle placed on the wrong side).
-    - The largest strain the obstacles impose (the penetration spread over the body as the
-      scales estimate it, :func:`reference_scales`) beyond :data:`LARGE_STRAIN`: far outside the
-      small-strain model.
+    - The obstacles already penetrate the body at the first step, and not because the load
+      parameter moved them there: where the gaps change along the path, they are extrapolated
+      linearly to a load parameter of zero (a continuum's obstacle travel starting above zero is
+      the load, not an obstacle on the wrong side). The body then starts with contact forces and no
+      load (often an obstacle placed on the wrong side).
+    - The strain at the step of deepest penetration beyond :data:`LARGE_STRAIN`: far outside the
+      small-strain model. The quick estimate of the scales (:func:`reference_scales`, every
+      pair held) only selects the paths to look at; the strain reported is that of the computed
+      state of that step (:func:`computed_strain`: a linear elastic solve with the contacts found
+      by an active set), so a stop that closes only part way is accounted for.
 
     The strain checks apply to small kinematics only.
 
     Raises
     ------
     InputError
-        An imposed strain of 1 or more (an obstacle pushed past a fixed end, through the
-        body): a small-strain model is meaningless there.
+        A computed compressive strain of 1 or more (an obstacle pushed past a fixed end, through
+        the body: a member shortened to nothing); for continua, a strain of 1 or more of any sign.
+        A bar stretched to a strain of 1 is a warning, not a refusal.
     """
     out = []
-    first = -np.min(model.gap_offsets[0], initial=0.0)
-    if first > 1e-12 * model.length_scale:
-        n = int(np.sum(model.gap_offsets[0] < 0))
+    starting = _starting_penetration(model)
+    if starting is not None:
+        n, first = starting
         out.append(f"the obstacles start inside the body: {n} contact pair(s) penetrate by up to {first:.3g} m "
                    f"at the first step ({model.load_parameter_name}={model.load_parameter[0]:.6g}), so there are "
                    f"contact forces before any load")
     if model.kinematics != "small":  # large strains and rotations are what finite kinematics model
         return out
-    model.scales_for("classical" if model.youngs_modulus is not None else "ddcm")
+    kind = "classical" if model.youngs_modulus is not None else "ddcm"
+    model.scales_for(kind)
     imposed = max((v for k, v in model._cache.items() if isinstance(k, tuple) and k[0] == "imposed_strain"),
                   default=0.0)
+    if imposed <= LARGE_STRAIN:  # the quick estimate (every pair held) is the larger: nothing to look at
+        return out
     worst = int(np.argmin(np.min(model.gap_offsets, axis=1))) if model.n_contacts else 0
     where = f"{model.load_parameter_name}={model.load_parameter[worst]:.6g}"
-    if imposed >= 1.0:
-        raise InputError(f"the obstacles impose a strain of about {imposed:.3g} at {where} (penetration "
+    low, high = computed_strain(model, kind, worst)
+    compression = -low
+    squashed = compression if model.strain_components == 1 else max(compression, high)
+    if squashed >= 1.0 - 1e-4:
+        raise InputError(f"the obstacles impose a strain of about {squashed:.2g} at {where} (penetration "
                          f"{-np.min(model.gap_offsets):.3g} m): pushed past a fixed end or through the body; "
                          f"a small-strain model is meaningless there")
-    if imposed > LARGE_STRAIN:
-        out.append(f"the obstacles impose a strain of about {imposed:.3g} at {where}: far beyond the "
-                   f"small-strain model (> {LARGE_STRAIN:g})")
+    strain = max(compression, high)
+    if strain > LARGE_STRAIN:
+        out.append(f"the obstacles impose a strain of about {strain:.2g} at {where} (a linear elastic solve of "
+                   f"that step): far beyond the small-strain model (> {LARGE_STRAIN:g})")
     return out
+
+
+def _starting_penetration(model: ContactModel) -> tuple[int, float] | None:
+    """The pairs that penetrate at a load parameter of zero, and by how much: the first step's
+    gaps, extrapolated linearly to a load parameter of zero where they change along the path and
+    the load parameter with them (``None``: none penetrate, or the first step is not penetrated)."""
+    g0 = model.gap_offsets[0] if model.n_contacts else np.zeros(0)
+    tol = 1e-12 * model.length_scale
+    if not np.any(g0 < -tol):
+        return None
+    lam = np.asarray(model.load_parameter, dtype=float)
+    gaps = model.gap_offsets
+    if lam.size >= 2 and gaps.shape[0] >= 2 and lam[1] != lam[0] and np.any(gaps[1] != gaps[0]):
+        rate = (gaps[1] - gaps[0]) / (lam[1] - lam[0])
+        at_zero = g0 - lam[0] * rate
+        moved_in = (rate * (lam[1] - lam[0]) < 0) & (at_zero >= -tol)  # brought into contact by the path
+        still = (g0 < -tol) & ~moved_in
+    else:
+        still = g0 < -tol
+    if not np.any(still):
+        return None
+    return int(np.sum(still)), float(-np.min(g0[still]))
+
+
+def computed_strain(model: ContactModel, kind: str, step: int) -> tuple[float, float]:
+    """The smallest and largest strain component of a linear elastic solve of step ``step``.
+
+    The load and the obstacles of the step, with a representative modulus per point
+    (:meth:`~ddcm_casadi.models.base.ContactModel.point_stiffness`); contacts by a penalty active
+    set (a pair is active while it penetrates; a stiff spring, ``1e6`` times the stiffest
+    diagonal of ``K``, holds it), at most 30 passes. A singular system (a body held by nothing)
+    falls back on every pair held, as :func:`reference_scales` does.
+
+    Returns
+    -------
+    tuple of float
+        ``(min, max)`` over every strain component of every point (signed: compression < 0).
+    """
+    D = model.point_stiffness(kind)
+    B, G, w, a = model.strain_operator, model.gap_operator, model.volumes, model.contact_area
+    k = model.strain_components
+    K = (B.T @ sp.diags(np.repeat(w * D, k)) @ B).tocsc()
+    k_max = float(np.max(K.diagonal())) if K.shape[0] else 1.0
+    f = model.loads[step] if model.loads.size else np.zeros(model.n_dofs)
+    g0 = model.gap_offsets[step] if model.n_contacts else np.zeros(0)
+    kappa = 1e6 * k_max / float(np.max(a)) if model.n_contacts else 0.0
+    active = g0 < 0
+    u = np.zeros(model.n_dofs)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(30):
+            held = sp.diags(kappa * a * active)
+            try:
+                u = factorize((K + G.T @ held @ G).tocsc() if model.n_contacts else K).solve(
+                    f - (G.T @ (held @ g0) if model.n_contacts else 0.0))
+            except SingularMatrix:
+                held = sp.diags(kappa * a)
+                try:
+                    u = factorize((K + G.T @ held @ G).tocsc()).solve(f - G.T @ (held @ np.minimum(g0, 0.0)))
+                except SingularMatrix:
+                    return 0.0, 0.0
+                break
+            now = (g0 + G @ u < 0) if model.n_contacts else active
+            if np.array_equal(now, active):
+                break
+            active = now
+    e = B @ u
+    if not e.size or not np.all(np.isfinite(e)):
+        return 0.0, 0.0
+    return float(np.min(e)), float(np.max(e))
