@@ -74,6 +74,69 @@ class CaseRun:
     out_dir: Path | None = None
 
 
+# -------------------------------------------------------------------------------------- memory
+def physical_memory() -> int | None:
+    """The machine's physical memory in bytes (``os.sysconf``), or ``None`` where it is unknown."""
+    import os
+
+    try:
+        pages, size = os.sysconf("SC_PHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+    return int(pages) * int(size) if pages > 0 and size > 0 else None
+
+
+def estimate_bytes(model, runs: int = 1) -> int:
+    """A rough estimate of the memory the runs of ``model`` need at once, in bytes.
+
+    The sparse factor of the stiffness matrix dominates: ``nnz(K)`` times a fill factor
+    (``n^(1/3)`` for a 3-D continuum, six Mandel components; ``log2 n`` otherwise, as nested
+    dissection gives), 12 bytes an entry (value and index), per run at once; plus the operators
+    and, for data-driven runs, the data (with the search tree, about three copies of it).
+
+    Parameters
+    ----------
+    model : ContactModel
+        The built model.
+    runs : int
+        Runs held in memory at once (processes of ``--jobs``).
+
+    Returns
+    -------
+    int
+        Bytes, an estimate (within a factor of a few).
+    """
+    B = model.strain_operator
+    n = max(int(model.n_dofs), 2)
+    nnz_k = (abs(B).T @ abs(B)).nnz if B.nnz else n
+    fill = n ** (1.0 / 3.0) if model.strain_components >= 6 else float(np.log2(n))
+    per_run = 12.0 * nnz_k * max(fill, 1.0) + 12.0 * (B.nnz + model.gap_operator.nnz)
+    data = 0.0
+    if model.dataset is not None:
+        data = 3.0 * 8.0 * 2 * sum(np.asarray(d.strain).size for d in getattr(model.dataset, "datasets", []))
+    return int(per_run * max(int(runs), 1) + data)
+
+
+def check_memory(model, runs: int = 1) -> None:
+    """Refuse, before any work, a case whose estimated memory (:func:`estimate_bytes`) exceeds the
+    machine's physical memory (:func:`physical_memory`).
+
+    Raises
+    ------
+    InputError
+        One line with the estimate, the machine's memory and what to reduce.
+    """
+    have = physical_memory()
+    if have is None:
+        return
+    need = estimate_bytes(model, runs)
+    if need > have:
+        raise InputError(f"this case needs about {need / 2**30:.3g} GiB ({model.n_dofs} unknowns"
+                         + (f", {runs} runs at once" if runs > 1 else "")
+                         + f") but the machine has {have / 2**30:.3g} GiB of memory: use a coarser mesh, "
+                         "fewer data points or fewer --jobs")
+
+
 # ----------------------------------------------------------------------------------- selection
 def select_formulations(names: Sequence[str] | None) -> list[str]:
     """The formulations to run: ``names`` (checked), or every registered one.
@@ -292,12 +355,14 @@ def run_case(case: Case, out_dir: str | Path | None = None, *, formulations: Seq
     Raises
     ------
     InputError
-        Bad selection, a meaningless load path, a folder in use or that cannot be written (one line).
+        Bad selection, a meaningless load path, a case too big for the machine's memory
+        (:func:`check_memory`), a folder in use or that cannot be written (one line).
     """
     names = select_formulations(formulations)
     chosen = select_variants(variants, case)
     jobs = resolve_jobs(jobs, len(names) * len(chosen))
     case.model.path_warnings()  # refuses a meaningless path before the folder is touched
+    check_memory(case.model, jobs)  # refuses what cannot fit, as well
     folder = OutputFolder(out_dir, tool=tool, manifest=RESULTS_JSON, identity=RESULTS_FORMAT) if out_dir is not None else None
     try:
         draw = folder is not None and figures

@@ -177,3 +177,29 @@ def test_a_continuum_travel_starting_above_zero_is_the_load_not_a_warning():
         path.write_text(_CASE.replace("travel = [0.0, 1e-6]", "travel = [1e-6, 2e-6, 3e-6]"))
         model = load_case(path).model
     assert not any("start inside the body" in w for w in model.path_warnings())
+
+
+# ------------------------------------------------------------------------------ 10: out of memory
+def test_memory_error_is_one_line_exit_2(tmp_path, capsys, monkeypatch):
+    """Was a 40-line traceback and exit 1."""
+    from ddcm_casadi.commands import compare as cli
+
+    def exhausted(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(cli, "run_case", exhausted)
+    code, _, err = run_cli([*FAST, "--out", str(tmp_path / "out")], capsys)
+    assert code == 2 and "Traceback" not in err, err
+    assert err.strip().splitlines() == ["ddcm-compare: error: out of memory: the case is too big for this machine; "
+                                        "use a coarser mesh, fewer data points or fewer --jobs"]
+
+
+def test_a_case_bigger_than_the_machine_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    import ddcm_casadi.run as run
+
+    assert run.physical_memory() and run.physical_memory() > 2**20
+    monkeypatch.setattr(run, "physical_memory", lambda: 1000)
+    out = tmp_path / "out"
+    code, _, err = run_cli([*FAST, "--out", str(out)], capsys)
+    assert code == 2 and "needs about" in err and "GiB of memory" in err, err
+    assert not out.exists()

@@ -34,7 +34,8 @@ class Parser(argparse.ArgumentParser):
 def run_guarded(prog: str, run_command: Callable[[list[str] | None], int], argv: list[str] | None, *,
                 interrupted: str = "interrupted") -> int:
     """``run_command(argv)``, with an input error as one line ``prog: error: ...`` and exit status
-    :data:`EXIT_INPUT`, and Ctrl-C as ``prog: interrupted`` and status 130 (every command's ``main``).
+    :data:`EXIT_INPUT`, running out of memory (``MemoryError``) as one line and :data:`EXIT_INPUT`
+    too, and Ctrl-C as ``prog: interrupted`` and status 130 (every command's ``main``).
 
     Parameters
     ----------
@@ -51,6 +52,10 @@ def run_guarded(prog: str, run_command: Callable[[list[str] | None], int], argv:
         return run_command(argv)
     except DDCMError as exc:
         print(f"{prog}: error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_INPUT
+    except MemoryError:
+        print(f"{prog}: error: out of memory: the case is too big for this machine; use a coarser mesh, "
+              "fewer data points or fewer --jobs", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
         print(f"{prog}: {interrupted}", file=sys.stderr)
