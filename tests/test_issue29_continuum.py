@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import skfem
@@ -164,3 +166,86 @@ def test_item6_plane_strain_sigma_zz_in_the_vtu_and_von_mises(tmp_path):
     assert np.isnan(ddcm.cell_data["stress"][0].reshape(-1, 3, 3)[:, 2, 2]).all()
     assert np.isnan(ddcm.cell_data["von_mises"][0]).all()
     assert np.isfinite(ddcm.cell_data["von_mises_in_plane"][0]).all()
+
+
+# ------------------------------------------------------------------------------ 13: messages
+_CASE = """
+[mesh]
+shape = "rectangle"
+size = [0.02, 0.01]
+divisions = [4, 2]
+[material]
+youngs_modulus = 200e9
+poisson_ratio = 0.3
+[[supports]]
+boundary = "ymin"
+fix = "xy"
+[[contact]]
+boundary = "ymax"
+obstacle = "circle"
+radius = 0.05
+center = [0.01, 0.06]
+travel = [0.0, 1e-6]
+"""
+
+
+def _cli(tmp_path, text: str, *sets: str, capsys=None) -> tuple[int, str]:
+    """``ddcm-compare --config case.toml --set ...``: its exit status and its stderr."""
+    from ddcm_casadi.commands.compare import main
+
+    case = tmp_path / "case.toml"
+    case.write_text(text)
+    args = ["--config", str(case), "--formulations", "penalty", "--variants", "classical", "-q"]
+    for s in sets:
+        args += ["--set", s]
+    try:
+        code = main(args)
+    except SystemExit as stop:  # argparse's errors exit
+        code = stop.code
+    return code, capsys.readouterr().err
+
+
+def _path_case(path: str) -> str:
+    return _CASE.replace('shape = "rectangle"\nsize = [0.02, 0.01]\ndivisions = [4, 2]', f'path = "{path}"')
+
+
+@pytest.mark.parametrize("setup, sets, expected", [
+    ("folder", (), r"mesh path .*mesh is a folder, not a mesh file"),
+    ("garbage", (), r"cannot read Gmsh file .*garbage\.msh: not a Gmsh mesh \(undecodable bytes\)"),
+    (None, ("mesh.degree=3",), r"\[mesh\] degree must be 1 \(P1\) or 2 \(P2\), got 3$"),
+    (None, ("mesh.refine_near={point=[0.5, 0.5], radius=0.004, levels=2}",),
+     r"\[mesh\] refine_near: no mesh node lies within radius 0\.004 of point \(0\.5, 0\.5\)$"),
+    (None, ("contact.0.radius=1e300",), r"out of range: the classical problem's displacement scale is 1e\+300"),
+])
+def test_item13_case_file_messages(tmp_path, capsys, setup, sets, expected):
+    """Each a single line naming what is wrong, exit status 2, no 'array(' and no traceback."""
+    text = _CASE
+    if setup == "folder":
+        (tmp_path / "mesh").mkdir()
+        text = _path_case("mesh")
+    elif setup == "garbage":
+        (tmp_path / "garbage.msh").write_bytes(bytes(range(128, 256)) * 20)
+        text = _path_case("garbage.msh")
+    code, err = _cli(tmp_path, text, *sets, capsys=capsys)
+    lines = [line for line in err.splitlines() if "error" in line]
+    assert code == 2 and len(lines) == 1, err
+    assert re.search(expected, lines[0]), lines[0]
+    assert "array(" not in err and "Traceback" not in err
+
+
+def test_item13_a_contact_boundary_matching_no_facet():
+    """From the API: a facet test no facet passes is named, not a numpy ValueError."""
+    contact = Contact(Circle((0.01, 0.06), 0.05, travel=[0.0, 1e-6]), lambda x: x[1] > 1.0)
+    with pytest.raises(InputError, match=r"contact 0 \(obstacle .*\): boundary its facet test matches no boundary facet"):
+        continuum_model(mesh.rectangle(0.02, 0.01, nx=4, ny=2), materials=[Material(youngs_modulus=E, poisson_ratio=NU)],
+                        supports=[Support("ymin", "xy")], contacts=[contact])
+
+
+def test_item13_an_obstacle_pressing_on_fully_fixed_nodes():
+    """A plane pressed into the top, which the supports fix in x and y: refused before solving
+    (it ended NOT CONVERGED), naming the obstacle, the nodes and the penetration."""
+    plane = Plane(point=(0.0, 0.01), normal=(0.0, -1.0), direction=(0.0, -1.0), travel=[0.0, 1e-6], name="press")
+    with pytest.raises(InputError, match=r"obstacle 'press' presses on 5 contact node\(s\) the supports fix in every "
+                                         r"direction .*penetration 1e-06 m at step 1"):
+        continuum_model(mesh.rectangle(0.02, 0.01, nx=4, ny=2), materials=[Material(youngs_modulus=E, poisson_ratio=NU)],
+                        supports=[Support("ymin", "xy"), Support("ymax", "xy")], contacts=[Contact(plane, "ymax")])

@@ -66,7 +66,8 @@ Continua
 
     [data]                       # strain_1..k,stress_1..k CSV (Mandel: k = 3 in 2-D, 6 in 3-D),
     hookean = { strain_min = -0.01, strain_max = 0.01, points = 21 }    # or a linear law on a
-    c = "isotropic"              # grid of points^k states; c: "isotropic" (from the material),
+    c = "isotropic"              # grid of points^k states (grading = 2: denser towards zero);
+                                 # c: "isotropic" (from the material),
                                  # "estimated" (from the data), a number (c I) or a k x k matrix
 
 Strains and stresses are in Mandel notation: 2-D ``[e11, e22, sqrt(2) e12]``, 3-D ``[e11, e22,
@@ -75,7 +76,7 @@ e33, sqrt(2) e23, sqrt(2) e13, sqrt(2) e12]``. The result is
 """
 
 _MESH = {"shape", "size", "divisions", "origin", "radius", "center", "refine", "path", "degree", "refine_near"}
-_HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus", "poisson_ratio"}
+_HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus", "poisson_ratio", "grading"}
 _SHAPES = ("rectangle", "box", "disc", "half_disc", "ball")
 _OBSTACLES = ("plane", "circle", "sphere", "cylinder", "punch")
 
@@ -133,13 +134,18 @@ def _shape_mesh(doc: dict, base_dir: Path):
         d = mesh.p.shape[0]
         if "point" not in r or "radius" not in r:
             raise InputError("[mesh] refine_near needs 'point' and 'radius'")
-        mesh = meshes.refine_near(mesh, vector("mesh", "refine_near.point", r["point"], d),
-                                  positive("mesh", "refine_near.radius", r["radius"]),
-                                  levels=integer("mesh", "refine_near.levels", r.get("levels", 1), low=1, high=12,
-                                                 what="an integer"),
-                                  shrink=number("mesh", "refine_near.shrink", r.get("shrink", 0.5)),
-                                  buffer=number("mesh", "refine_near.buffer", r.get("buffer", 0.0)))
-    degree = integer("mesh", "degree", m.get("degree", 1), low=1, high=2, what="1 or 2")
+        point = vector("mesh", "refine_near.point", r["point"], d)
+        radius = positive("mesh", "refine_near.radius", r["radius"])
+        levels = integer("mesh", "refine_near.levels", r.get("levels", 1), low=1, high=12, what="an integer")
+        shrink = number("mesh", "refine_near.shrink", r.get("shrink", 0.5))
+        buffer = number("mesh", "refine_near.buffer", r.get("buffer", 0.0))
+        try:
+            mesh = meshes.refine_near(mesh, point, radius, levels=levels, shrink=shrink, buffer=buffer)
+        except InputError as err:  # name the table: the function's own message names its argument
+            raise InputError(f"[mesh] refine_near: {err}") from None
+    degree = m.get("degree", 1)
+    if isinstance(degree, bool) or not isinstance(degree, int) or degree not in (1, 2):
+        raise InputError(f"[mesh] degree must be 1 (P1) or 2 (P2), got {show(degree)}")
     return mesh, degree
 
 
@@ -245,7 +251,8 @@ def _datasets(doc: dict, base_dir: Path, k: int, materials: list) -> list[Materi
             points = integer(label, "hookean.points", hk["points"], low=1, what="a positive integer (per axis)")
             lo = number(label, "hookean.strain_min", hk["strain_min"])
             hi = number(label, "hookean.strain_max", hk["strain_max"])
-            ds = MaterialDataset.hookean_grid(D, lo, hi, points, c=c)
+            grading = number(label, "hookean.grading", hk.get("grading", 1.0))  # range: graded_axis
+            ds = MaterialDataset.hookean_grid(D, lo, hi, points, c=c, grading=grading)
         out.append(ds)
     return out
 

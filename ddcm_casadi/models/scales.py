@@ -71,6 +71,8 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
             worst = int(np.argmax(np.max(penetration, axis=1)))
             u_g = spring().solve(kappa * (GA @ penetration[worst]))
             normal = float(np.max(np.abs(G @ u_g), initial=0.0))
+            if not np.isfinite(normal):  # the solve overflowed: the scale check below says what is out of range
+                strain = np.inf
             if normal > 0:
                 imposed = float(np.max(np.abs(B @ u_g), initial=0.0)) * pen / normal
                 model._cache[("imposed_strain", kind)] = imposed

@@ -188,6 +188,27 @@ def _check_not_through(ob: Obstacle, gaps: np.ndarray, nodes: np.ndarray, n_step
                          f"{extent:.3g} m along its direction; use smaller steps of travel")
 
 
+#: A reference gap below ``-PENETRATION_TOL`` times the body's size is a penetration (the
+#: tolerance of :func:`~ddcm_casadi.models.scales.load_path_warnings`: 1e-12 of the size is
+#: roundoff of coordinates, far below any indentation).
+PENETRATION_TOL = 1e-12
+
+
+def _check_movable(keep: np.ndarray, gap0: np.ndarray, points: np.ndarray, owner: np.ndarray,
+                   obstacles: list, size: float) -> None:
+    """Refuse an obstacle that presses on nodes whose every displacement component is fixed: its
+    gap there cannot open, so no pressure satisfies contact (the solvers end not converged)."""
+    stuck = ~keep.any(axis=1) & np.any(gap0 < -PENETRATION_TOL * size, axis=0)
+    if np.any(stuck):
+        first = int(np.flatnonzero(stuck)[0])
+        step = int(np.argmin(gap0[:, first]))
+        raise InputError(f"obstacle {obstacles[owner[first]].name!r} presses on {int(stuck.sum())} contact node(s) "
+                         f"the supports fix in every direction (first at "
+                         f"({', '.join(f'{c:.3g}' for c in points[first])}), penetration "
+                         f"{-float(gap0[step, first]):.3g} m at step {step}): they cannot move out of its way; "
+                         f"free them or keep the obstacle off them")
+
+
 def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: np.ndarray, n_steps: int,
                    size: float) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, list[Obstacle], dict]:
     """One pair per boundary dof of each contact surface.
@@ -217,7 +238,12 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: n
         ob = c.obstacle
         if ob.dimension != d:
             raise InputError(f"obstacle {ob.name!r} is {ob.dimension}-D, the mesh {d}-D")
-        dofs, area = fem.tributary_areas(disc, select_facets(disc.mesh, c.where))
+        facets = select_facets(disc.mesh, c.where)
+        if not facets.size:
+            where = repr(c.where) if isinstance(c.where, str) else "its facet test"
+            raise InputError(f"contact {i} (obstacle {ob.name!r}): boundary {where} matches no boundary facet "
+                             f"of the mesh")
+        dofs, area = fem.tributary_areas(disc, facets)
         X = disc.dof_locations()[dofs]
         gaps = ob.gap_offsets(X, n_steps)
         if float(np.min(gaps)) > size:
@@ -242,6 +268,7 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: n
     N = np.concatenate(normals)
     cols = index_of[disc.vector_dofs()[:, cdofs]].T  # (nc, d)
     keep = cols >= 0  # a fixed component moves no gap
+    _check_movable(keep, np.concatenate(g0, axis=1), np.concatenate(points), np.concatenate(owner), obstacles, size)
     G = sp.csr_matrix((N[keep], (np.nonzero(keep)[0], cols[keep])), shape=(nc, free.size))
     contact = dict(contact_dofs=cdofs, contact_points=np.concatenate(points), contact_normals=N,
                    contact_obstacle=np.concatenate(owner))

@@ -41,12 +41,16 @@ def read_mesh(path: str | Path) -> Mesh:
     Raises
     ------
     InputError
-        For a missing file, an unknown suffix, a file meshio cannot read, no triangle or tetra
+        For a missing file, a folder, a missing or unknown suffix, undecodable bytes, a file meshio cannot read, no triangle or tetra
         cells, mixed element kinds, or a mesh :func:`check_mesh` rejects.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"mesh path {path} is a folder, not a mesh file (.msh, .vtu or .xdmf)")
     kind, reader = READERS.get(path.suffix.lower(), (None, None))
     if reader is None:
+        if not path.suffix:
+            raise InputError(f"mesh file {path} has no suffix; name it .msh, .vtu or .xdmf")
         raise InputError(f"unknown mesh file suffix {path.suffix!r} of {path}; use .msh, .vtu or .xdmf")
     path = input_file(path, "mesh file")
     try:
@@ -54,6 +58,8 @@ def read_mesh(path: str | Path) -> Mesh:
     except ImportError as err:  # meshio's XDMF reader needs h5py, even for inline XML data
         raise InputError(f"cannot read {path}: meshio needs the Python module {err.name!r} "
                          f"for {path.suffix} files") from None
+    except UnicodeDecodeError:  # a binary file that is no mesh (meshio decodes its header as text)
+        raise InputError(f"cannot read {kind} file {path}: not a {kind} mesh (undecodable bytes)") from None
     except (meshio.ReadError, OSError, ValueError, KeyError, IndexError, TypeError,
             AttributeError, EOFError, ET.ParseError, zlib.error) as err:
         # meshio's readers fail in many ways on a bad file: one line is enough to say which file

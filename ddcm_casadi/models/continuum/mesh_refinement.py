@@ -113,7 +113,8 @@ def refine_near(mesh: Mesh, point: Sequence[float], radius: float, *, levels: in
             dist = np.linalg.norm(mesh.p - x0[:, None], axis=0)
             near = dist <= reach
             if level == 0 and not near.any():
-                raise InputError(f"no mesh node lies within radius={radius!r} of point={short_repr(point)}")
+                raise InputError(f"no mesh node lies within radius {r:g} of point "
+                                 f"({', '.join(f'{c:g}' for c in x0)})")
             near[np.argmin(dist)] = True
             marked = np.nonzero(near[mesh.t].any(axis=0))[0]
             fine = _refined(mesh, marked)
