@@ -203,3 +203,57 @@ def test_a_case_bigger_than_the_machine_is_refused_before_any_work(tmp_path, cap
     code, _, err = run_cli([*FAST, "--out", str(out)], capsys)
     assert code == 2 and "needs about" in err and "GiB of memory" in err, err
     assert not out.exists()
+
+
+# ---------------------------------------------------------------------------------- 11: sweeps
+_BASE = case_toml()
+
+
+def _spec(folder: Path, grid: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "base.toml").write_text(_BASE)
+    path = folder / "spec.toml"
+    path.write_text(f'base = "base.toml"\nformulations = ["fischer_burmeister"]\n[grid]\n{grid}\n')
+    return path
+
+
+def test_sweep_refuses_an_empty_out(tmp_path, capsys, monkeypatch):
+    from ddcm_casadi.commands.sweep import main as sweep_main
+
+    path = _spec(tmp_path / "spec", '"ddcm.c" = [3e11]')
+    monkeypatch.chdir(tmp_path / "spec")
+    before = sorted(p.name for p in (tmp_path / "spec").iterdir())
+    assert sweep_main([str(path), "--out", "", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ddcm-sweep: error: --out must be a folder")
+    assert sorted(p.name for p in (tmp_path / "spec").iterdir()) == before
+
+
+def test_a_grid_above_the_limit_needs_max_cases(tmp_path, capsys):
+    from ddcm_casadi.commands.sweep import main as sweep_main
+    from ddcm_casadi.errors import InputError
+    from ddcm_casadi.sweep.spec import MAX_CASES, load_spec
+
+    values = ", ".join(f"{3e11 + i:.1f}" for i in range(MAX_CASES + 1))
+    path = _spec(tmp_path / "spec", f'"ddcm.c" = [{values}]')
+    with pytest.raises(InputError, match=f"has {MAX_CASES + 1} cases, more than {MAX_CASES}; pass --max-cases"):
+        load_spec(path, check=False)
+    assert len(load_spec(path, check=False, max_cases=MAX_CASES + 1).cases) == MAX_CASES + 1
+    assert sweep_main([str(path), "--out", str(tmp_path / "out"), "-q"]) == 2
+    assert "--max-cases" in capsys.readouterr().err and not (tmp_path / "out").exists()
+
+
+def test_sweep_takes_the_lock_before_starting_a_cluster(tmp_path):
+    """The lock was taken after a cluster had started: a second sweep into a busy folder first
+    connected to (or started) a cluster."""
+    from ddcm_casadi.errors import InputError
+    from ddcm_casadi.io import FolderLock
+    from ddcm_casadi.sweep.runner import run_sweep
+    from ddcm_casadi.sweep.spec import load_spec
+
+    spec = load_spec(_spec(tmp_path / "spec", '"ddcm.c" = [3e11]'), check=False)
+    out = tmp_path / "out"
+    out.mkdir()
+    with FolderLock(out, "ddcm-compare"):
+        with pytest.raises(InputError, match="is in use by ddcm-compare"):
+            run_sweep(spec, out, scheduler="tcp://127.0.0.1:1", figures=False)

@@ -19,7 +19,7 @@ from ddcm_casadi.commands.base import EXIT_NOT_CONVERGED, Parser, run_guarded
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.version import __version__
 from ddcm_casadi.sweep.runner import run_sweep
-from ddcm_casadi.sweep.spec import load_spec
+from ddcm_casadi.sweep.spec import MAX_CASES, load_spec
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -28,6 +28,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", required=True, help="output folder (cases/, sweep.csv, sweep.json, figures)")
     p.add_argument("--workers", metavar="N", type=int, help="worker processes of the LocalCluster (default: cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run on an existing Dask scheduler, e.g. tcp://host:8786")
+    p.add_argument("--max-cases", metavar="N", type=int,
+                   help=f"run a spec of more than {MAX_CASES} cases (up to N)")
     p.add_argument("--force", action="store_true", help="rerun every case, finished or not")
     p.add_argument("--retry-failed", action="store_true", help="rerun the cases that failed")
     p.add_argument("--no-plots", action="store_true", help="do not draw the figures")
@@ -73,7 +75,11 @@ def run(argv: list[str] | None = None) -> int:
     if args.workers is not None and args.scheduler:
         raise InputError("--workers sizes the local cluster; it cannot be combined with --scheduler")
 
-    spec = load_spec(args.spec)
+    if not args.out.strip():
+        raise InputError(f"--out must be a folder, got {args.out!r}")
+    if args.max_cases is not None and args.max_cases < 1:
+        raise InputError(f"--max-cases must be a positive integer, got {args.max_cases}")
+    spec = load_spec(args.spec, max_cases=args.max_cases)
     if not args.quiet:
         print(f"ddcm-sweep: {spec.path}: {len(spec.cases)} cases ({', '.join(spec.columns)})", file=sys.stderr)
     report = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, force=args.force,

@@ -250,25 +250,23 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, workers: int | None = None, s
     """
     t0 = time.perf_counter()
     out = Path(out)
-    todo = pending(spec, out, force=force, retry_failed=retry_failed) if out.is_dir() else list(spec.cases)
-    report = SweepReport(out=out, total=len(spec.cases), skipped=len(spec.cases) - len(todo))
     if figures and spec.figures:
         from ddcm_casadi.sweep import figures as _figures  # noqa: F401 - a missing matplotlib fails before any work
-    folder = None  # locked from its creation to the end: one sweep (or ddcm-compare) per folder
+    # Locked before the cluster starts, to the end: one sweep (or ddcm-compare) per folder, and a
+    # refused second sweep starts no workers.
+    folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json", identity=SWEEP_FORMAT)
     try:
+        todo = pending(spec, out, force=force, retry_failed=retry_failed)
+        report = SweepReport(out=out, total=len(spec.cases), skipped=len(spec.cases) - len(todo))
         if todo:
+            _clean_partial(folder.path)
             with dask_client(workers=workers, scheduler=scheduler) as client:
-                folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json", identity=SWEEP_FORMAT)
-                _clean_partial(folder.path)
                 report.workers = n_workers(client)
                 _run(client, spec, todo, folder.path, report, progress)
-        else:
-            folder = OutputFolder(out, tool="ddcm-sweep", manifest="sweep.json", identity=SWEEP_FORMAT)
         report.seconds = time.perf_counter() - t0
         finish(spec, folder.path, report, figures=figures, versions=versions, folder=folder)
     finally:
-        if folder is not None:
-            folder.close()
+        folder.close()
     return report
 
 

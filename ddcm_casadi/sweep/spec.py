@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import math
 import json
 import tempfile
 from dataclasses import dataclass
@@ -211,7 +212,17 @@ def _figures(value: Any, columns: list[str]) -> tuple[FigureSpec, ...]:
     return tuple(out)
 
 
-def load_spec(path: str | Path, *, check: bool = True) -> SweepSpec:
+#: The most cases a spec may expand to without ``max_cases`` (``ddcm-sweep --max-cases``): the
+#: cases are expanded in memory, a few kB each, and a grid this large is more often a typo.
+MAX_CASES = 10_000
+
+
+def case_count(grid: tuple[tuple[str, tuple], ...], seeds: tuple[int, ...] | None) -> int:
+    """The number of cases of a grid and seeds, without expanding them."""
+    return math.prod(len(values) for _, values in grid) * (len(seeds) if seeds is not None else 1)
+
+
+def load_spec(path: str | Path, *, check: bool = True, max_cases: int | None = None) -> SweepSpec:
     """Read and validate a sweep spec and expand its cases.
 
     Parameters
@@ -221,12 +232,15 @@ def load_spec(path: str | Path, *, check: bool = True) -> SweepSpec:
     check : bool
         Build the first case in full (data and model), so that the case file's own validation
         runs before any work.
+    max_cases : int, optional
+        The most cases to expand (default :data:`MAX_CASES`); a larger grid is refused before it
+        is expanded.
 
     Raises
     ------
     InputError
         Missing or malformed spec, unknown key, empty grid, missing base case, or a key or value
-        that cannot be applied (one line).
+        that cannot be applied, more cases than ``max_cases`` (one line).
     """
     path = input_file(path, "sweep spec")
     spec = read_document(path)
@@ -258,6 +272,10 @@ def load_spec(path: str | Path, *, check: bool = True) -> SweepSpec:
     if not grid and seeds is None:
         raise InputError(f"empty grid in {path}: [grid] needs at least one dotted key with a list of values "
                          "(or give seeds)")
+    count, limit = case_count(grid, seeds), MAX_CASES if max_cases is None else int(max_cases)
+    if count > limit:
+        raise InputError(f"the sweep spec {path} has {count} cases, more than {limit}; pass --max-cases {count} "
+                         "to run them all (or use a coarser grid)")
     cases = _expand(grid, seeds, base_doc, generate, variants, formulations)
     columns = [k for k, _ in grid] + ([SEED] if seeds is not None else [])
     figures = _figures(spec.get("figures", []), columns)
