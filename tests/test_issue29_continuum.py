@@ -15,6 +15,7 @@ from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.models.continuum import Circle, Contact, Material, Plane, Support, continuum_model, mesh
 from ddcm_casadi.models.continuum import model as continuum_module
 from ddcm_casadi.models.continuum.model import BodyForce
+from tests.test_continuum import _CASE  # a 10 mm square pressed by a circle
 
 E, NU = 200e9, 0.3
 
@@ -103,24 +104,7 @@ def test_item5_near_incompressible_p1_warns_and_points_to_p2(tmp_path):
         result = compare(_pressed_block(0.4999, 1), ["penalty"], variants=("classical",))
     assert any("locks" in w for w in result.warnings)
     case = tmp_path / "case.toml"
-    case.write_text("""
-[mesh]
-shape = "rectangle"
-size = [0.01, 0.01]
-divisions = [2, 2]
-[material]
-youngs_modulus = 200e9
-poisson_ratio = 0.4999
-[[supports]]
-boundary = "ymin"
-fix = "xy"
-[[contact]]
-boundary = "ymax"
-obstacle = "plane"
-point = [0.0, 0.01]
-normal = [0.0, -1.0]
-travel = [0.0, 1e-6]
-""")
+    case.write_text(_CASE.replace("poisson_ratio = 0.3", "poisson_ratio = 0.4999"))
     with pytest.warns(PhysicsWarning):
         run_case(load_case(case), tmp_path / "out", formulations=["penalty"], variants=["classical"], figures=False)
     warnings = json.loads((tmp_path / "out" / "results.json").read_text())["warnings"]
@@ -169,24 +153,6 @@ def test_item6_plane_strain_sigma_zz_in_the_vtu_and_von_mises(tmp_path):
 
 
 # ------------------------------------------------------------------------------ 13: messages
-_CASE = """
-[mesh]
-shape = "rectangle"
-size = [0.02, 0.01]
-divisions = [4, 2]
-[material]
-youngs_modulus = 200e9
-poisson_ratio = 0.3
-[[supports]]
-boundary = "ymin"
-fix = "xy"
-[[contact]]
-boundary = "ymax"
-obstacle = "circle"
-radius = 0.05
-center = [0.01, 0.06]
-travel = [0.0, 1e-6]
-"""
 
 
 def _cli(tmp_path, text: str, *sets: str, capsys=None) -> tuple[int, str]:
@@ -206,7 +172,7 @@ def _cli(tmp_path, text: str, *sets: str, capsys=None) -> tuple[int, str]:
 
 
 def _path_case(path: str) -> str:
-    return _CASE.replace('shape = "rectangle"\nsize = [0.02, 0.01]\ndivisions = [4, 2]', f'path = "{path}"')
+    return _CASE.replace('shape = "rectangle"\nsize = [0.01, 0.01]\ndivisions = [2, 2]', f'path = "{path}"')
 
 
 @pytest.mark.parametrize("setup, sets, expected", [
