@@ -5,10 +5,17 @@
 from __future__ import annotations
 
 import re
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import skfem
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 from ddcm_casadi import compare
 from ddcm_casadi.errors import InputError, PhysicsWarning
@@ -215,3 +222,65 @@ def test_item13_an_obstacle_pressing_on_fully_fixed_nodes():
                                          r"direction .*penetration 1e-06 m at step 1"):
         continuum_model(mesh.rectangle(0.02, 0.01, nx=4, ny=2), materials=[Material(youngs_modulus=E, poisson_ratio=NU)],
                         supports=[Support("ymin", "xy"), Support("ymax", "xy")], contacts=[Contact(plane, "ymax")])
+
+
+# ------------------------------------------------------------------------ 14: meshes from files
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "cases"
+
+
+def test_item14_the_example_mesh_file_with_physical_groups_runs():
+    """examples/cases/block_groups.toml on its .msh (boundaries from Gmsh physical names)."""
+    from ddcm_casadi.casefiles.config import load_case
+
+    model = load_case(EXAMPLES / "block_groups.toml").model
+    assert {"bottom", "top", "left", "4"} <= set(model.mesh.boundaries)
+    run = compare(model, ["fischer_burmeister"], variants=("classical",))["classical", "fischer_burmeister"]
+    assert run.converged and np.sum(model.contact_area * run.steps[-1].p) > 0
+
+
+def _facets(case_text: str, tmp_path, section: str = "supports") -> tuple[set, skfem.MeshTri1]:
+    """The facets the first ``section`` table of a case selects, and the case's mesh."""
+    from ddcm_casadi.casefiles import continuum as parser
+    from ddcm_casadi.casefiles.config import load_case
+    from ddcm_casadi.models.continuum.mesh import select_facets
+
+    case = tmp_path / "case.toml"
+    case.write_text(case_text)
+    load_case(case)  # the whole case builds
+    # the parser's boundary of the first table of the section, on the case's mesh
+    doc = tomllib.loads(case_text)
+    body = parser._shape_mesh(doc, tmp_path)[0]
+    return set(select_facets(body, parser._boundary(section, doc[section][0], 2)).tolist()), body
+
+
+def test_item14_boundaries_by_tag_box_and_plane_on_a_file_without_names(tmp_path):
+    """A VTU of the example's block has no boundaries: a box and a plane choose them, and pick
+    the same facets as the names of the .msh; the unnamed tag 4 of the .msh is its right side."""
+    import meshio
+
+    from ddcm_casadi.models.continuum.mesh import read_mesh
+
+    named = read_mesh(EXAMPLES / "block_groups.msh")
+    meshio.write(tmp_path / "block.vtu", meshio.Mesh(np.column_stack([named.p.T, np.zeros(named.p.shape[1])]),
+                                                     [("triangle", named.t.T)]))
+    assert not read_mesh(tmp_path / "block.vtu").boundaries
+    text = (EXAMPLES / "block_groups.toml").read_text().replace('path = "block_groups.msh"', 'path = "block.vtu"')
+    text = text.replace('boundary = "bottom" ', 'boundary = { point = [0.0, 0.0], normal = [0.0, 1.0] } ')
+    text = text.replace('boundary = "top" ', 'boundary = { min = [0.0, 0.01], max = [0.02, 0.01] } ')
+    bottom, body = _facets(text, tmp_path, "supports")
+    top, _ = _facets(text, tmp_path, "contact")
+    # read_mesh keeps the node and element order, so facet numbers agree between the two files
+    assert np.array_equal(body.facets, named.facets)
+    assert bottom == set(named.boundaries["bottom"].tolist()) and top == set(named.boundaries["top"].tolist())
+    on_msh = (EXAMPLES / "block_groups.toml").read_text().replace(
+        'path = "block_groups.msh"', f'path = "{EXAMPLES / "block_groups.msh"}"').replace(
+        'boundary = "bottom" ', 'boundary = 4 ')
+    right, msh = _facets(on_msh, tmp_path, "supports")
+    assert right == set(np.flatnonzero(np.isclose(msh.p[0, msh.facets].mean(axis=0), 0.02)).tolist())
+
+
+def test_item14_a_bad_boundary_table_is_one_line(tmp_path, capsys):
+    """A table that is neither a box nor a plane: named in one line, exit 2."""
+    text = _CASE.replace('boundary = "ymin"', 'boundary = { centre = [0.0, 0.0] }')
+    code, err = _cli(tmp_path, text, capsys=capsys)
+    assert code == 2 and "is a box {min, max} or a plane {point, normal[, tolerance]}, got keys centre" in err

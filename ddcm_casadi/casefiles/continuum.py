@@ -40,9 +40,12 @@ Continua
     poisson_ratio = 0.3
     data = 0                     # optional: the [[data]] set of this material (default 0 if data)
 
-    [[supports]]                 # fixed displacement components on a named boundary
+    [[supports]]                 # fixed displacement components on a boundary
     boundary = "ymin"            # generated shapes: xmin, xmax, ymin, ymax (zmin, zmax); arc, flat; surface
-    fix = "xy"
+    fix = "xy"                   # mesh files: a Gmsh physical group's name, or its tag (boundary = 3),
+                                 # or by position: boundary = { min = [x0, y0], max = [x1, y1] } (a box)
+                                 # or { point = [..], normal = [..], tolerance = 1e-9 } (a plane);
+                                 # docs/meshes.md
 
     [[loads]]                    # optional, scaled by [loading] load_factors
     boundary = "ymax"            # a traction (Pa) on a boundary, or
@@ -154,12 +157,31 @@ def _tables(doc: dict, name: str) -> list[dict]:
     return value if isinstance(value, list) else [value]
 
 
-def _boundary(label: str, table: dict) -> str:
+def _boundary(label: str, table: dict, d: int):
+    """The boundary of a table: a name of the mesh, a Gmsh physical tag (an integer: a group
+    without a name is named by its tag), or a geometric test on the boundary facets' midpoints,
+    ``{ min = [..], max = [..] }`` (a box, bounds included) or ``{ point = [..], normal = [..] }``
+    (a plane, with an optional ``tolerance`` in m): for mesh files without named boundaries."""
+    from ddcm_casadi.models.continuum.mesh import FacetBox, FacetPlane
+
     if "boundary" not in table:
-        raise InputError(f"[{label}] needs 'boundary' (a boundary name of the mesh)")
-    if not isinstance(table["boundary"], str):
-        raise InputError(f"[{label}] boundary must be a name, got {show(table['boundary'])}")
-    return table["boundary"]
+        raise InputError(f"[{label}] needs 'boundary' (a boundary name or tag of the mesh, or a box or plane)")
+    b = table["boundary"]
+    if isinstance(b, str):
+        return b
+    if isinstance(b, int) and not isinstance(b, bool):
+        return str(b)  # read_mesh names an unnamed Gmsh physical group by its tag
+    if isinstance(b, dict):
+        if set(b) == {"min", "max"}:
+            return FacetBox(tuple(vector(label, "boundary.min", b["min"], d)),
+                            tuple(vector(label, "boundary.max", b["max"], d)))
+        if set(b) in ({"point", "normal"}, {"point", "normal", "tolerance"}):
+            tol = positive(label, "boundary.tolerance", b["tolerance"]) if "tolerance" in b else None
+            return FacetPlane(tuple(vector(label, "boundary.point", b["point"], d)),
+                              tuple(vector(label, "boundary.normal", b["normal"], d)), tol)
+        raise InputError(f"[{label}] boundary as a table is a box {{min, max}} or a plane {{point, normal[, tolerance]}}, "
+                         f"got keys {', '.join(sorted(b)) or 'none'}")
+    raise InputError(f"[{label}] boundary must be a name, a tag, a box or a plane, got {show(b)}")
 
 
 def _obstacle(label: str, t: dict, d: int):
@@ -291,7 +313,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
         label = f"supports {i}"
         if "fix" not in t:
             raise InputError(f"[{label}] needs 'fix' (components, e.g. \"xy\")")
-        supports.append(Support(_boundary(label, t), t["fix"]))
+        supports.append(Support(_boundary(label, t, d), t["fix"]))
     if not supports:
         raise InputError("missing [[supports]]: a continuum must be held")
 
@@ -301,7 +323,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
         if ("traction" in t) == ("body_force" in t):
             raise InputError(f"[{label}] needs exactly one of 'traction' or 'body_force'")
         if "traction" in t:
-            tractions.append(Traction(_boundary(label, t), tuple(vector(label, "traction", t["traction"], d))))
+            tractions.append(Traction(_boundary(label, t, d), tuple(vector(label, "traction", t["traction"], d))))
         else:
             region = t.get("region")
             if "boundary" in t:
@@ -315,7 +337,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     contacts = []
     for i, t in enumerate(_tables(doc, "contact")):
         label = f"contact {i}"
-        contacts.append(Contact(_obstacle(label, t, d), _boundary(label, t)))
+        contacts.append(Contact(_obstacle(label, t, d), _boundary(label, t, d)))
 
     reference = None
     if "hertz" in doc:

@@ -240,7 +240,8 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: n
             raise InputError(f"obstacle {ob.name!r} is {ob.dimension}-D, the mesh {d}-D")
         facets = select_facets(disc.mesh, c.where)
         if not facets.size:
-            where = repr(c.where) if isinstance(c.where, str) else "its facet test"
+            # a name or a FacetBox / FacetPlane (dataclasses) shows itself; a bare function does not
+            where = repr(c.where) if isinstance(c.where, str) or hasattr(c.where, "__dataclass_fields__") else "its facet test"
             raise InputError(f"contact {i} (obstacle {ob.name!r}): boundary {where} matches no boundary facet "
                              f"of the mesh")
         dofs, area = fem.tributary_areas(disc, facets)

@@ -12,7 +12,8 @@ This module is the one to import; it holds the generated shapes and re-exports t
 - :func:`read_mesh` reads Gmsh ``.msh`` (2.2 and 4.1), ``.vtu`` and ``.xdmf`` files with meshio
   (:mod:`~ddcm_casadi.models.continuum.mesh_files`);
 - :func:`check_mesh` rejects meshes a model cannot use (the model builders call it too);
-- :func:`mesh_size`, :func:`describe` and :func:`select_facets` are small helpers
+- :func:`mesh_size`, :func:`describe` and :func:`select_facets` are small helpers, and
+  :class:`FacetBox`, :class:`FacetPlane` facet tests that choose boundaries by position
   (:mod:`~ddcm_casadi.models.continuum.mesh_checks`).
 """
 
@@ -24,12 +25,12 @@ import numpy as np
 from skfem import MeshTet1, MeshTri1
 
 from ddcm_casadi.data.dataset import check_positive
-from ddcm_casadi.models.continuum.mesh_checks import (DEGENERATE, Mesh, check_count, check_mesh, check_point,
-                                                      describe, mesh_size, select_facets)
+from ddcm_casadi.models.continuum.mesh_checks import (DEGENERATE, FacetBox, FacetPlane, Mesh, check_count,
+                                                      check_mesh, check_point, describe, mesh_size, select_facets)
 from ddcm_casadi.models.continuum.mesh_files import READERS, read_mesh
 from ddcm_casadi.models.continuum.mesh_refinement import Curved, refine_near, refined_shape
 
-__all__ = ["DEGENERATE", "READERS", "Curved", "Mesh", "ball", "box", "check_mesh", "describe", "disc",
+__all__ = ["DEGENERATE", "READERS", "Curved", "FacetBox", "FacetPlane", "Mesh", "ball", "box", "check_mesh", "describe", "disc",
            "half_disc", "mesh_size", "read_mesh", "rectangle", "refine_near", "select_facets"]
 
 

@@ -3,6 +3,8 @@
 - :func:`check_mesh` rejects meshes a model cannot use (the model builders and
   :func:`~ddcm_casadi.models.continuum.mesh_files.read_mesh` call it);
 - :func:`mesh_size`, :func:`describe` and :func:`select_facets` are small helpers;
+  :class:`FacetBox` and :class:`FacetPlane` are facet tests for :func:`select_facets` (boundaries
+  chosen by position, for mesh files without named boundaries);
 - :func:`match_simplices` finds simplices by their vertex sets (refinement, mesh files);
 - :func:`check_count`, :func:`check_point`, :func:`check_mesh_type` and :func:`short_repr` check
   the arguments of the mesh functions with one-line messages.
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import dataclass
 from typing import Callable, Union
 
 import numpy as np
@@ -127,6 +130,79 @@ def select_facets(mesh: Mesh, where: str | Callable[[np.ndarray], np.ndarray]) -
         raise InputError(f"a facet test must return a bool array of shape {facets.shape}, "
                          f"got {hit.dtype} of shape {hit.shape}")
     return facets[hit].astype(np.int64)
+
+
+@dataclass(frozen=True)
+class FacetBox:
+    """A facet test: the boundary facets whose midpoints lie in the box ``lo <= x <= hi``
+    (bounds included). Pass it to :func:`select_facets` or as a ``where`` of the model builder.
+
+    Parameters
+    ----------
+    lo, hi : tuple of float
+        The box's corners, one number per axis.
+    """
+
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        lo, hi = check_point("box min", self.lo), check_point("box max", self.hi, len(self.lo))
+        if np.any(lo > hi):
+            raise InputError(f"box min must not exceed box max, got min {tuple(lo)} and max {tuple(hi)}")
+        object.__setattr__(self, "lo", tuple(map(float, lo)))
+        object.__setattr__(self, "hi", tuple(map(float, hi)))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        if x.shape[0] != lo.size:
+            raise InputError(f"a box of {lo.size} coordinates on a {x.shape[0]}-D mesh")
+        return np.all((x >= lo[:, None]) & (x <= hi[:, None]), axis=0)
+
+
+#: The default tolerance of :class:`FacetPlane`, relative to the extent of the boundary: facets
+#: on the plane have their midpoints on it to the roundoff of their coordinates (1e-16 of the
+#: size), a facet off it by at least about half an element; 1e-6 lies between for any mesh whose
+#: elements are larger than 2e-6 of the body.
+PLANE_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class FacetPlane:
+    """A facet test: the boundary facets whose midpoints lie on the plane (a line in 2-D) through
+    ``point`` with normal ``normal``, within ``tolerance`` (m; default :data:`PLANE_TOL` times
+    the extent of the boundary).
+
+    Parameters
+    ----------
+    point, normal : tuple of float
+        A point of the plane and its normal (any length but zero).
+    tolerance : float, optional
+        The largest distance of a midpoint from the plane (m).
+    """
+
+    point: tuple[float, ...]
+    normal: tuple[float, ...]
+    tolerance: float | None = None
+
+    def __post_init__(self) -> None:
+        point, normal = check_point("plane point", self.point), check_point("plane normal", self.normal, len(self.point))
+        norm = float(np.linalg.norm(normal))
+        if not norm > 0:
+            raise InputError("plane normal must be a non-zero vector")
+        if self.tolerance is not None and not (isinstance(self.tolerance, (int, float)) and 0 < self.tolerance < math.inf):
+            raise InputError(f"plane tolerance must be a positive finite number (m), got {short_repr(self.tolerance)}")
+        object.__setattr__(self, "point", tuple(map(float, point)))
+        object.__setattr__(self, "normal", tuple(map(float, normal / norm)))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        p, n = np.asarray(self.point), np.asarray(self.normal)
+        if x.shape[0] != p.size:
+            raise InputError(f"a plane of {p.size} coordinates on a {x.shape[0]}-D mesh")
+        tol = self.tolerance
+        if tol is None:
+            tol = PLANE_TOL * max(float(np.max(np.ptp(x, axis=1), initial=0.0)), float(np.max(np.abs(x), initial=0.0)))
+        return np.abs(n @ (x - p[:, None])) <= tol
 
 
 def match_simplices(old_s: np.ndarray, new_s: np.ndarray) -> np.ndarray:
