@@ -284,3 +284,13 @@ def test_item14_a_bad_boundary_table_is_one_line(tmp_path, capsys):
     text = _CASE.replace('boundary = "ymin"', 'boundary = { centre = [0.0, 0.0] }')
     code, err = _cli(tmp_path, text, capsys=capsys)
     assert code == 2 and "is a box {min, max} or a plane {point, normal[, tolerance]}, got keys centre" in err
+
+
+def test_item2_an_approach_from_afar_in_one_step_passes():
+    """A circle 1 m above the block that comes down 1 m + 10 um in one step only indents it: its
+    travel is 1 m, but it touches only after 1 m."""
+    block = mesh.rectangle(0.02, 0.01, nx=4, ny=2)
+    far = Contact(Circle((0.01, 1.06), 0.05, direction=(0.0, -1.0), travel=[0.0, 1.0 + 1e-5]), "ymax")
+    model = continuum_model(block, materials=[Material(youngs_modulus=E, poisson_ratio=NU)],
+                            supports=[Support("ymin", "xy")], contacts=[far])
+    assert np.min(model.gap_offsets[-1]) < 0

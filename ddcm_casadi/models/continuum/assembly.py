@@ -166,25 +166,29 @@ def _check_not_through(ob: Obstacle, gaps: np.ndarray, nodes: np.ndarray, n_step
     The body's extent along the direction of travel ``d`` is ``ptp(X . d)`` over its nodes. The
     obstacle's advance past its first position of contact is ``s_t - s_0 - max(min g_0, 0)``
     (``g_0`` the gaps at the first step: the way it has to go before it touches); an advance
-    beyond the extent, or one step in which a pair's gap changes sign by more than the extent,
-    can only mean it went through the body and out the other side (its gaps are then positive
-    again and it carries no force, silently). The threshold is the extent itself: no less than
+    beyond the extent, or one step forward in which a pair goes from inside the obstacle to a
+    gap larger than the extent, can only mean it went through the body and out the other side
+    (its gaps are then positive again and it carries no force, silently). The threshold is the extent itself: no less than
     the whole body, so an indentation of any depth a small-strain model can mean passes.
     """
     direction = ob.offset(1.0)
     extent = float(np.ptp(nodes @ direction))
     s = ob.travels(n_steps)
-    advance = s - s[0] - max(float(np.min(gaps[0], initial=0.0)), 0.0)
+    approach = max(float(np.min(gaps[0])), 0.0) if gaps.size else 0.0  # the way to go before it touches
+    advance = s - s[0] - approach
     worst = int(np.argmax(advance))
     if advance[worst] > extent:
         raise InputError(f"obstacle {ob.name!r} passes through the body: its travel {s[worst]:.3g} m takes it "
                          f"{advance[worst]:.3g} m past first contact, beyond the body's extent {extent:.3g} m "
                          f"along its direction; reduce the travel")
-    jump = np.abs(np.diff(gaps, axis=0)) * (np.diff(np.sign(gaps), axis=0) != 0)
+    # out the other side: a pair inside the obstacle at one step and outside at the next while the
+    # obstacle advances (an approach from afar, + to -, and a release while it retreats are fine)
+    through = (gaps[:-1] <= 0) & (gaps[1:] > 0) & (np.diff(s) > 0)[:, None]
+    jump = np.diff(gaps, axis=0) * through
     if jump.size and float(np.max(jump)) > extent:
         step = int(np.argmax(np.max(jump, axis=1)))
         raise InputError(f"obstacle {ob.name!r} passes through the body between steps {step} and {step + 1}: "
-                         f"a gap changes sign by {float(np.max(jump)):.3g} m, more than the body's extent "
+                         f"a gap opens from inside it to {float(np.max(jump)):.3g} m, more than the body's extent "
                          f"{extent:.3g} m along its direction; use smaller steps of travel")
 
 
