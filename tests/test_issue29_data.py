@@ -75,3 +75,67 @@ def test_item7_estimated_metric_for_generated_steel_data(tmp_path: Path) -> None
         tmp_path, '[data]\nhookean = { strain_min = -0.01, strain_max = 0.01, points = 5 }\nc = "estimated"\n'))
     D = isotropic_elasticity(200e9, 0.3, 2)[0]
     assert np.allclose(case.model.dataset.metric.matrix, D, rtol=1e-9, atol=1e-9 * np.abs(D).max())
+
+
+# ------------------------------------------------------------------ item 3: DDCM on coarse data says so
+def _hertz_forces(case_path: Path, overrides=(), formulation: str = "fischer_burmeister"):
+    """The comparison of one formulation on a Hertz case, and its last classical and DDCM forces."""
+    import warnings
+
+    from ddcm_casadi import compare
+    case = load_case(case_path, overrides=overrides)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cmp = compare(case.model, [formulation], ddcm_max_outer=case.ddcm_max_outer)
+    force = lambda variant: case.model.step_summary(cmp[variant, formulation].steps[-1].u,  # noqa: E731
+                                                    cmp[variant, formulation].steps[-1].p)["total_contact_force"]
+    return cmp, force("classical"), force("ddcm"), caught
+
+
+def test_item3_three_points_per_axis_is_flagged_everywhere(tmp_path: Path) -> None:
+    """Zero contact force where the classical one is 1.9 MN/m, reported converged and nothing else."""
+    import json
+
+    from ddcm_casadi.errors import PhysicsWarning
+    from ddcm_casadi.run import run_case
+    cmp, classical, ddcm, caught = _hertz_forces(HERTZ, [("data.hookean.points", 3)])
+    assert classical > 1e6 and ddcm < 1e-3 * classical  # the silent nonsense, still computed
+    steps = cmp["ddcm", "fischer_burmeister"].steps
+    assert steps[-1].datum_share == 1.0 and steps[-1].state_spacings < 1.0  # within a spacing of zero
+    assert steps[-1].coarse_data and not steps[0].coarse_data  # the unloaded step is not judged
+    assert any(issubclass(w.category, PhysicsWarning) and "too coarse" in str(w.message) for w in caught)
+    assert "DATA TOO COARSE" in cmp.table()
+    row = [r for r in cmp.rows() if r["variant"] == "ddcm"][-1]
+    assert row["datum_share"] == 1.0 and row["coarse_data"]
+    case = load_case(HERTZ, overrides=[("data.hookean.points", 3)])
+    with pytest.warns(PhysicsWarning, match="too coarse"):
+        done = run_case(case, tmp_path / "out", formulations=["fischer_burmeister"], figures=False)
+    doc = json.loads((done.out_dir / "results.json").read_text())
+    ddcm_run = next(r for r in doc["summary"] if r["variant"] == "ddcm")
+    assert ddcm_run["coarse_data_steps"] == [1, 2, 3, 4] and ddcm_run["max_datum_share"] == 1.0
+    assert any("too coarse" in w for w in doc["warnings"])
+
+
+def test_item3_a_uniform_state_on_one_datum_is_not_coarse() -> None:
+    from ddcm_casadi.data.extrapolation import coarse_data
+    assert coarse_data(1.0, 0.0, 5.0, 100) == ""      # every point on one datum, alike: a uniform strain
+    assert coarse_data(1.0, 0.5, 5.0, 1) == ""        # one material point (a bar)
+    assert coarse_data(0.67, 1.2, 12.0, 1308) != ""   # hertz2d on 21^3 data
+    assert coarse_data(0.01, 1.0, 120.0, 1308) == ""  # hertz2d on its graded 101^3 data
+
+
+def test_item3_the_hertz_example_data_are_adequate() -> None:
+    """hertz2d.toml's DDCM force was 48 % of the classical one (21^3 regular data)."""
+    cmp, classical, ddcm, caught = _hertz_forces(HERTZ)
+    assert abs(ddcm / classical - 1) < 0.08, ddcm / classical
+    assert not any("too coarse" in str(w.message) for w in caught)
+    assert not cmp["ddcm", "fischer_burmeister"].steps[-1].coarse_data
+
+
+def test_item3_graded_data_keep_their_ends() -> None:
+    from ddcm_casadi.data.dataset import graded_axis
+    axis = graded_axis(-0.012, 0.012, 7, 2.0)
+    assert axis[0] == -0.012 and axis[-1] == 0.012 and axis[3] == 0.0
+    assert np.allclose(np.diff(axis)[2:4], 0.012 / 9)  # (1/3)^2 of the range's half
+    with pytest.raises(InputError, match="grading"):
+        graded_axis(-1, 1, 5, 0.5)

@@ -26,7 +26,7 @@ from ddcm_casadi.commands.base import (  # noqa: F401 - EXIT_INPUT: the API
 )
 from ddcm_casadi.casefiles.config import default_case, load_case_with_overrides
 from ddcm_casadi.errors import InputError, PhysicsWarning
-from ddcm_casadi.drivers.harness import VARIANTS, Comparison
+from ddcm_casadi.drivers.harness import VARIANTS, Comparison, coarse_data_warning
 from ddcm_casadi.parallel import resolve_jobs
 from ddcm_casadi.run import CaseRun, run_case, select_formulations, select_variants
 from ddcm_casadi.version import __version__
@@ -157,6 +157,8 @@ def _final_warnings(result: CaseRun, *, strict: bool) -> int:
         print("WARNING: states beyond the material data (DDCM stresses stop at the data's edge) in "
               + ", ".join(f"{r.variant}/{r.formulation} at {sum(s.extrapolated > 0 for s in r.steps)} steps"
                           for r in beyond), file=sys.stderr)
+    for coarse in filter(None, (coarse_data_warning(r, cmp.model.load_parameter_name) for r in cmp.results.values())):
+        print(f"WARNING: {coarse}", file=sys.stderr)
     failed = [r for r in cmp.results.values() if not r.converged]
     if failed:
         print("WARNING: non-converged steps in " + ", ".join(f"{r.variant}/{r.formulation}" for r in failed),

@@ -216,29 +216,32 @@ class MaterialDataset:
 
     @classmethod
     def hookean_grid(cls, stiffness, strain_min: float, strain_max: float, points_per_axis: int, *,
-                     c) -> "MaterialDataset":
-        """A linear law ``stress = D strain`` sampled on a regular grid of ``points_per_axis^k``
-        strain states in ``[strain_min, strain_max]^k`` (Mandel components; ``D`` a ``k x k``
-        matrix, e.g. :func:`~ddcm_casadi.data.metric.isotropic_elasticity`). The data spacing is
-        ``(strain_max - strain_min) / (points_per_axis - 1)`` in every component."""
+                     c, grading: float = 1.0) -> "MaterialDataset":
+        """A linear law ``stress = D strain`` sampled on a grid of ``points_per_axis^k`` strain
+        states in ``[strain_min, strain_max]^k`` (Mandel components; ``D`` a ``k x k`` matrix, e.g.
+        :func:`~ddcm_casadi.data.metric.isotropic_elasticity`). With ``grading = 1`` the grid is
+        regular, its spacing ``(strain_max - strain_min) / (points_per_axis - 1)`` in every
+        component; a larger ``grading`` makes it denser towards zero strain (:func:`graded_axis`)."""
         D = np.atleast_2d(np.asarray(stiffness, dtype=float))
         k = D.shape[0]
         if D.shape != (k, k) or not np.all(np.isfinite(D)):
             raise InputError(f"a Hookean data set needs a finite square stiffness, got shape {D.shape}")
-        return cls.from_law(lambda strain: strain @ D.T, k, strain_min, strain_max, points_per_axis, c=c)
+        return cls.from_law(lambda strain: strain @ D.T, k, strain_min, strain_max, points_per_axis, c=c,
+                            grading=grading)
 
     @classmethod
     def from_law(cls, law, components: int, strain_min: float, strain_max: float, points_per_axis: int, *,
-                 c) -> "MaterialDataset":
+                 c, grading: float = 1.0) -> "MaterialDataset":
         """Any law ``stress = law(strain)`` (``(n, k) -> (n, k)``, Mandel components) sampled on a
-        regular grid of ``points_per_axis^k`` strain states in ``[strain_min, strain_max]^k``."""
+        grid of ``points_per_axis^k`` strain states in ``[strain_min, strain_max]^k``, regular or
+        graded towards zero strain (``grading``, :func:`graded_axis`)."""
         k, n = int(components), int(points_per_axis)
         if n < 1 or float(n) ** k > limits.MAX_DATA_POINTS:
             raise InputError(f"points per axis must be between 1 and {int(limits.MAX_DATA_POINTS ** (1 / k))} "
                              f"for {k} components (at most {limits.MAX_DATA_POINTS} points), got {points_per_axis!r}")
         if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
             raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
-        axis = np.linspace(strain_min, strain_max, n)
+        axis = graded_axis(strain_min, strain_max, n, grading)
         strain = np.stack(np.meshgrid(*([axis] * k), indexing="ij"), axis=-1).reshape(-1, k)
         return cls(strain, law(strain), c)
 
@@ -288,6 +291,36 @@ class MaterialDataset:
         ``components`` (the case's strain components) says which columns to read."""
         reader = cls.from_npy if is_npy(path) else cls.from_csv
         return reader(path, c=c, components=components)
+
+
+#: The largest grading of a generated grid (:func:`graded_axis`): at 4 the spacing next to zero of
+#: 101 points over [-0.01, 0.01] is already 3e-9 of the range's, far below any measured strain.
+MAX_GRADING = 4.0
+
+
+def graded_axis(strain_min: float, strain_max: float, points: int, grading: float = 1.0) -> np.ndarray:
+    """``points`` strains from ``strain_min`` to ``strain_max``, denser towards zero.
+
+    Equally spaced in ``t = sign(e) |e|^(1 / grading)``, then ``e = sign(t) |t|^grading``: the ends
+    are kept, ``grading = 1`` is :func:`numpy.linspace`, and with ``grading = 2`` the spacing next
+    to zero strain is about ``2 / (points - 1)`` of the spacing at the ends (on a range symmetric
+    about zero). A continuum's strains decay away from the load, so the many small strains of the
+    body need a finer spacing than the few large ones (:mod:`ddcm_casadi.data.extrapolation`,
+    coarse data).
+
+    Raises
+    ------
+    InputError
+        ``grading`` not a number in ``[1, MAX_GRADING]``.
+    """
+    if isinstance(grading, bool) or not isinstance(grading, (int, float, np.integer, np.floating)) \
+            or not 1.0 <= float(grading) <= MAX_GRADING:
+        raise InputError(f"grading must be a number from 1 (a regular grid) to {MAX_GRADING:g}, got {grading!r}")
+    p = float(grading)
+    if p == 1.0:
+        return np.linspace(strain_min, strain_max, points)
+    t = np.linspace(*(math.copysign(abs(e) ** (1.0 / p), e) for e in (strain_min, strain_max)), points)
+    return np.sign(t) * np.abs(t) ** p
 
 
 class PointData:

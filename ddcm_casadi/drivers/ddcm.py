@@ -33,7 +33,7 @@ import numpy as np
 
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.problems.exact import ExactEnumerator
-from ddcm_casadi.data.extrapolation import DataCoverage
+from ddcm_casadi.data.extrapolation import DataCoverage, coarse_data
 from ddcm_casadi.problems.build import ProblemPair
 from ddcm_casadi.drivers import ddcm_improve
 from ddcm_casadi.drivers.checks import finish_step
@@ -261,6 +261,12 @@ class DDCMSolver:
 
     def finish(self, step: StepResult) -> None:
         """:func:`~ddcm_casadi.drivers.checks.finish_step` with this solver's problem, penalty
-        stiffness and data range."""
+        stiffness and data range, then how coarse the data are for the step's states
+        (:meth:`~ddcm_casadi.data.extrapolation.DataCoverage.coarseness`, a flag)."""
         finish_step(step, self.problems.projection, self.problems.model,
                     penalty_stiffness=getattr(self.built, "penalty_stiffness", None), coverage=self.coverage)
+        if step.data_index is not None and step.strain is not None:  # how coarse the data are here
+            step.datum_share, step.datum_spread, step.state_spacings = self.coverage.coarseness(
+                step.strain, step.stress, step.data_index)
+            step.coarse_data = coarse_data(step.datum_share, step.datum_spread, step.state_spacings,
+                                           self.problems.model.n_points)

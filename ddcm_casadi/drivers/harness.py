@@ -29,7 +29,8 @@ VARIANTS = ("classical", "ddcm")
 _COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "max_abs_u", "total_contact_force",
             "active_contacts", "converged", "iterations", "outer_iterations",
             "residual", "complementarity", "penetration", "strain_star", "stress_star", "data_index",
-            "distance", "extrapolated", "data_spacings", "global_optimum", "global_distance",
+            "distance", "extrapolated", "data_spacings", "datum_share", "state_spacings", "coarse_data",
+            "global_optimum", "global_distance",
             "projection_global", "projection_error",
             "error_u", "error_p", "seconds", "message")
 
@@ -207,6 +208,7 @@ class Comparison:
                         row.update(strain_star=float(s.strain_star[0]), stress_star=float(s.stress_star[0]),
                                    data_index=int(s.data_index[0]))
                     row.update(distance=s.distance, extrapolated=s.extrapolated, data_spacings=s.data_spacings,
+                               datum_share=s.datum_share, state_spacings=s.state_spacings, coarse_data=s.coarse_data,
                                projection_error=s.projection_error, projection_global=s.projection_global,
                                global_optimum=s.global_optimum, global_distance=s.global_distance,
                                global_gap=s.global_gap, projections=s.projections)
@@ -252,7 +254,13 @@ class Comparison:
                            extrapolated_steps=int(sum(s.extrapolated > 0 for s in r.steps)),
                            extrapolated_h=[s.load_parameter for s in r.steps if s.extrapolated > 0],
                            max_extrapolated_states=int(max(s.extrapolated for s in r.steps)),
-                           max_data_spacings=_nanmax(r.array("data_spacings")))
+                           max_data_spacings=_nanmax(r.array("data_spacings")),
+                           # data too coarse for the states (a flag: ddcm_casadi.data.extrapolation.coarse_data)
+                           coarse_data_steps=[s.step for s in r.steps if s.coarse_data],
+                           coarse_data_h=[s.load_parameter for s in r.steps if s.coarse_data],
+                           max_datum_share=_nanmax(r.array("datum_share")),
+                           max_state_spacings=_nanmax(r.array("state_spacings")),
+                           coarse_data=next((s.coarse_data for s in reversed(r.steps) if s.coarse_data), ""))
             out.append(rec)
         return out
 
@@ -274,6 +282,8 @@ class Comparison:
                 notes.append(f"DATA RANGE EXCEEDED at {rec['extrapolated_steps']} step"
                              f"{'s' if rec['extrapolated_steps'] > 1 else ''} (max {rec['max_extrapolated_states']} "
                              f"of {self.model.n_points} states; {_listing(rec['extrapolated_h'], name)})")
+            if rec.get("coarse_data_steps"):
+                notes.append(_note("DATA TOO COARSE", rec["coarse_data_h"], name) + f": {rec['coarse_data']}")
             if rec.get("local_minimum_h"):
                 notes.append(_note("local minimum", rec["local_minimum_h"], name))
             if rec.get("projection_not_global_steps"):
@@ -378,4 +388,28 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
 
     for (variant, form), r in zip(runs, map_forked(run, runs, jobs=resolve_jobs(jobs, len(runs)))):
         out.results[(variant, form.name)] = r
+        coarse = coarse_data_warning(r, model.load_parameter_name)
+        if coarse:
+            out.warnings.append(coarse)
+            warnings.warn(coarse, PhysicsWarning, stacklevel=2)
     return out
+
+
+def coarse_data_warning(result: PathResult, name: str | None = None) -> str:
+    """The warning of a DDCM run whose data are too coarse for its states at some steps
+    (:func:`~ddcm_casadi.data.extrapolation.coarse_data`), or ``""``.
+
+    Parameters
+    ----------
+    result : PathResult
+        One variant x formulation run.
+    name : str, optional
+        The model's load parameter, to list the steps by.
+    """
+    steps = [s for s in result.steps if s.coarse_data]
+    if not steps:
+        return ""
+    where = _note("at", [s.load_parameter for s in steps], name)[3:] if name else _note("at", [s.step for s in steps])[3:]
+    return (f"{result.variant}/{result.formulation}: the material data are too coarse for the states {where} "
+            f"- {steps[-1].coarse_data}; DDCM rounds each state to a datum, so expect contact forces well "
+            f"below the classical ones: use more data points, denser towards zero strain")

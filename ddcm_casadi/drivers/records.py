@@ -48,6 +48,14 @@ class StepResult:
     extrapolated: int = 0
     #: The largest offset of a state from its nearest datum along the data, in local data spacings.
     data_spacings: float = float("nan")
+    #: Coarse data (:meth:`~ddcm_casadi.data.extrapolation.DataCoverage.coarseness`): the share of the
+    #: material points on the most used datum, how far their states spread (in data spacings), and
+    #: the states' size (the largest distance from zero of a state, in data spacings at its datum); ``coarse_data`` says why the data are
+    #: too coarse for this step (:func:`~ddcm_casadi.data.extrapolation.coarse_data`), ``""`` if not.
+    datum_share: float = float("nan")
+    datum_spread: float = float("nan")
+    state_spacings: float = float("nan")
+    coarse_data: str = ""
     #: What the driver left out at this step and why (e.g. the exact enumeration of a problem
     #: that is not affine), ``"; "``-separated; ``""`` when nothing was.
     notes: str = ""
