@@ -104,7 +104,8 @@ def physical_check(step: StepResult, problem, length_scale: float, *,
     return "physical check failed: " + "; ".join(failed) if failed else ""
 
 
-#: The true equilibrium error (:func:`equilibrium_error`) is measured against at least this many
+#: The true equilibrium error (:func:`equilibrium_error`, at most :data:`PHYSICAL_TOL`, which a
+#: singular solve misses by five orders of magnitude) is measured against at least this many
 #: times the problem's force unit: the solvers stop at 1e-9 to 1e-11 of their scaled units, so a
 #: step whose load is below 1e-6 of the force unit (a step before contact, a zero load) carries
 #: only roundoff, and dividing by it would turn roundoff into a failure (measured: 8e-10 N of
@@ -121,17 +122,19 @@ def _force_scale(problem, model) -> float:
 
 
 def equilibrium_error(step: StepResult, model, force_floor: float = 0.0) -> float | None:
-    """The true equilibrium error of a step's physical fields relative to its load, or ``None``
+    """The true equilibrium error of a step's physical fields relative to its forces, or ``None``
     where it is not defined here.
 
     ``r = B^T (w sigma) - f - G^T (a p)`` (``B`` the strain operator, ``w`` the point volumes,
     ``sigma`` the step's stress, ``f`` its load, ``G`` the gap operator, ``a`` the contact areas),
     recomputed from the physical fields rather than taken from the solver: a solve of a singular
     system (a body no support holds) can meet its own scaled test while ``r`` is of the order of
-    the load. The error is ``max |r| / max(max |f|, max |G^T a p|, force_floor)``, the load being
-    what every term balances (``force_floor`` keeps a step that carries no load from dividing
-    roundoff by zero); ``0`` when ``r`` vanishes to roundoff (``ROUNDOFF`` times the largest
-    element force ``|B|^T (w |sigma|)``).
+    the load (measured: 3 times the load, 0.4 of the element forces). The error is
+    ``max |r| / max(max |f|, max |G^T a p|, max |B|^T (w |sigma|), force_floor)``: relative to
+    the terms that cancel in ``r`` (the load and the element forces, as in a backward error;
+    a slender structure's element forces exceed its load by orders of magnitude, and roundoff
+    in ``r`` follows them), ``force_floor`` keeping a step that carries nothing from dividing
+    roundoff by zero.
 
     Defined for small kinematics, the normal (Signorini) contact law and models whose steps carry
     no history (their load is ``model.loads[step]``), with the step's stress known; ``None`` else.
@@ -151,9 +154,8 @@ def equilibrium_error(step: StepResult, model, force_floor: float = 0.0) -> floa
     terms = abs(B).T @ (weights * np.abs(stress))
     load = max(float(np.max(np.abs(f), initial=0.0)), float(np.max(np.abs(contact), initial=0.0)), force_floor)
     error = float(np.max(np.abs(r), initial=0.0))
-    if error <= ROUNDOFF * float(np.max(terms, initial=0.0)):
-        return 0.0
-    return error / load if load > 0 else float("inf")
+    scale = max(load, float(np.max(terms, initial=0.0)))
+    return error / scale if scale > 0 else 0.0
 
 
 def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | None = None,
@@ -168,7 +170,8 @@ def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | 
     error = (equilibrium_error(step, model, EQUILIBRIUM_FLOOR * _force_scale(problem, model))
              if np.all(np.isfinite(step.u)) else None)
     if error is not None and not error <= PHYSICAL_TOL:
-        what = f"true equilibrium error |B^T w sigma - f - G^T a p| {error:.3g} of the load > {PHYSICAL_TOL:g}"
+        what = (f"true equilibrium error |B^T w sigma - f - G^T a p| {error:.3g} of the forces (load, element forces) "
+                f"> {PHYSICAL_TOL:g}")
         failure = f"{failure}; {what}" if failure else f"physical check failed: {what}"
     if failure and step.converged:
         step.converged = False
