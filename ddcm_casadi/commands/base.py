@@ -4,10 +4,12 @@ one-line usage errors, exit statuses, and errors and Ctrl-C turned into one line
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import Callable, NoReturn
 
 from ddcm_casadi.errors import DDCMError, one_line
+from ddcm_casadi.linalg import abandoned_work
 
 #: Exit status of bad input (usage errors included): one line ``prog: error: ...`` on stderr.
 EXIT_INPUT = 2
@@ -35,7 +37,10 @@ def run_guarded(prog: str, run_command: Callable[[list[str] | None], int], argv:
                 interrupted: str = "interrupted") -> int:
     """``run_command(argv)``, with an input error as one line ``prog: error: ...`` and exit status
     :data:`EXIT_INPUT`, running out of memory (``MemoryError``) as one line and :data:`EXIT_INPUT`
-    too, and Ctrl-C as ``prog: interrupted`` and status 130 (every command's ``main``).
+    too, and Ctrl-C as ``prog: interrupted`` and status 130 (every command's ``main``). After
+    Ctrl-C during a long factorisation (:func:`ddcm_casadi.linalg.abandoned_work`) the process
+    leaves at once (``os._exit``): its ``with`` blocks have run, and the interpreter's shutdown
+    would free memory under the factorisation still running.
 
     Parameters
     ----------
@@ -59,4 +64,8 @@ def run_guarded(prog: str, run_command: Callable[[list[str] | None], int], argv:
         return EXIT_INPUT
     except KeyboardInterrupt:
         print(f"{prog}: {interrupted}", file=sys.stderr)
+        if abandoned_work():  # a factorisation still runs in its thread: shutting down would free
+            sys.stdout.flush()  # its memory under it, so leave at once
+            sys.stderr.flush()
+            os._exit(EXIT_INTERRUPTED)
         return EXIT_INTERRUPTED
