@@ -30,6 +30,7 @@ import shutil
 import tempfile
 import time
 from contextlib import contextmanager, nullcontext
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
@@ -205,17 +206,24 @@ class SweepReport:
 Progress = Callable[[int, int, SweepCase, dict | None, str | None], None]
 
 
-def pending(spec: SweepSpec, out: Path, *, force: bool = False, retry_failed: bool = False) -> list[SweepCase]:
-    """The cases still to run: all with ``force``; else those without a finished folder (and the
-    failed ones with ``retry_failed``)."""
+def pending(spec: SweepSpec, out: Path, *, force: bool = False, retry_failed: bool = False) -> array:
+    """The indices of the cases still to run (all with ``force``; else those without a finished
+    folder, and the failed ones with ``retry_failed``), as a compact array of integers: the cases
+    themselves are built again when they are submitted."""
     if force:
-        return list(spec.cases)
-    todo = []
+        return array("q", range(len(spec.cases)))
+    todo = array("q")
     for case in spec.cases:
         record = read_record(out, case.id)
         if record is None or (retry_failed and record.get("status") != "ok"):
-            todo.append(case)
+            todo.append(case.index)
     return todo
+
+
+#: Tasks in flight per worker: enough to keep every worker busy, few enough that a grid of 10^6
+#: cases never has more than a few hundred cases (and their futures) in memory at once.
+BATCH_PER_WORKER = 4
+MIN_BATCH = 16
 
 
 def run_sweep(spec: SweepSpec, out: str | Path, *, workers: int | None = None, scheduler: str | None = None,
@@ -258,7 +266,7 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, workers: int | None = None, s
     try:
         todo = pending(spec, out, force=force, retry_failed=retry_failed)
         report = SweepReport(out=out, total=len(spec.cases), skipped=len(spec.cases) - len(todo))
-        if todo:
+        if len(todo):
             _clean_partial(folder.path)
             with dask_client(workers=workers, scheduler=scheduler) as client:
                 report.workers = n_workers(client)
@@ -270,23 +278,38 @@ def run_sweep(spec: SweepSpec, out: str | Path, *, workers: int | None = None, s
     return report
 
 
-def _run(client, spec: SweepSpec, todo: list[SweepCase], out: Path, report: SweepReport,
-         progress: Progress | None) -> None:
+def _run(client, spec: SweepSpec, todo: array, out: Path, report: SweepReport,
+         progress: Progress | None, batch: int | None = None) -> None:
+    """Submit the cases of ``todo`` (indices) in batches: at most ``batch`` tasks in flight
+    (default :data:`BATCH_PER_WORKER` per worker, at least :data:`MIN_BATCH`), the next submitted
+    as one finishes, so memory stays bounded whatever the size of the grid."""
     from distributed import as_completed
 
     variants = list(spec.variants) if spec.variants else None
     formulations = list(spec.formulations) if spec.formulations else None
-    futures = {}
     fixed = dict(flatten(spec.document.get("set", {})))  # the spec's [set], applied to every case
-    for case in todo:
+    batch = batch or max(MIN_BATCH, BATCH_PER_WORKER * (report.workers or 1))
+    indices = iter(todo)
+    futures: dict = {}
+
+    def submit() -> object | None:
+        index = next(indices, None)
+        if index is None:
+            return None
+        case = spec.cases[index]
         task = dict(case=dict(id=case.id, index=case.index, params=case.params, doc=case.doc, generate=case.generate),
                     base=str(spec.base.resolve()), variants=variants, formulations=formulations,
                     overrides={**fixed, **case.params})
-        futures[client.submit(run_case, task, pure=False)] = case
+        future = client.submit(run_case, task, pure=False)
+        futures[future] = case
+        return future
+
+    first = [f for f in (submit() for _ in range(batch)) if f is not None]
+    queue = as_completed(first)
     done = 0
     try:
-        for future in as_completed(futures):
-            case = futures[future]
+        for future in queue:
+            case = futures.pop(future)
             record, error = None, None
             try:
                 result = future.result()
@@ -298,9 +321,13 @@ def _run(client, spec: SweepSpec, todo: list[SweepCase], out: Path, report: Swee
                 report.ran += 1
                 if result["status"] != "ok":
                     report.failed.append(case.id)
+            future.release()
             done += 1
             if progress is not None:
                 progress(done, len(todo), case, record, error)
+            following = submit()
+            if following is not None:
+                queue.add(following)
     except BaseException:
         client.cancel(list(futures))
         raise
@@ -317,21 +344,25 @@ def finish(spec: SweepSpec, out: Path, report: SweepReport, *, figures: bool = T
 
 def _write_summary(spec: SweepSpec, out: Path, into: Path, report: SweepReport, *, figures: bool,
                    versions: dict | None) -> None:
-    records = [(case, read_record(out, case.id)) for case in spec.cases]
-    rows = [row for _, rec in records if rec is not None for row in case_rows(rec, spec.columns)]
+    rows, status, index = [], {}, []  # one pass over the cases, none kept (only ids and values)
+    for case in spec.cases:
+        rec = read_record(out, case.id)
+        if rec is not None:
+            rows.extend(case_rows(rec, spec.columns))
+        status[case.id] = (rec or {}).get("status", "missing")
+        index.append(dict(id=case.id, params=case.params, status=status[case.id]))
     report.fits = fits(rows, spec.figures, spec.columns)
     if figures and spec.figures and rows:
         from ddcm_casadi.sweep.figures import save_figures
 
         report.figures = [p.name for p in save_figures(spec, rows, into)]
-    status = {case.id: (rec or {}).get("status", "missing") for case, rec in records}
     doc = dict(spec=spec.document, spec_path=str(spec.path), base=str(spec.base), columns=spec.columns,
                cases=len(spec.cases), finished=sum(s != "missing" for s in status.values()),
                failed=sum(s == "failed" for s in status.values()), missing=sum(s == "missing" for s in status.values()),
                ran=report.ran, skipped=report.skipped, lost=len(report.lost), workers=report.workers,
                seconds=report.seconds, fits=report.fits, figures=report.figures,
                versions={**package_versions(), **_dask_versions(), **(versions or {})},
-               case_index=[dict(id=case.id, params=case.params, status=status[case.id]) for case in spec.cases],
+               case_index=index,
                files=["sweep.csv", *report.figures, "sweep.json"],  # the manifest (see OutputFolder)
                **{MANIFEST_FORMAT_KEY: SWEEP_FORMAT})
     write_csv_atomic(into / "sweep.csv", rows)

@@ -31,28 +31,35 @@ Grid keys are dotted keys into the case document, exactly as ``ddcm-compare --se
 case, identified by a hash of its resolved parameters: the case document after the overrides,
 the generator's resolved fields, the variants and the formulations.
 
-Everything that can be checked without solving is checked when the spec is loaded: unknown keys,
-an empty grid, a missing base case, keys that do not resolve in the document, the generator of
-every case, and the first case is built in full (so an unknown key of the case file is found
-before any work). A value that only fails in its own case (a negative modulus in one grid point)
-fails that case, recorded, without stopping the sweep.
+The cases are not materialised: :class:`CaseGrid` computes case ``k`` from its index (the grid
+is a mixed-radix number, seeds innermost), so a spec of 10^6 cases costs no memory until a case
+is asked for, and the runner submits them in batches.
+
+Everything that can be checked without solving is checked when the spec is loaded, for every
+case, before any work: unknown keys, an empty grid, a missing base case, keys that do not resolve
+in the document, the generator, and every distinct case built in full exactly as a case file
+(types, ranges, unknown keys: everything :func:`~ddcm_casadi.casefiles.config.case_from_dict`
+checks before solving; seeds share one build, since a seed changes only the drawn data). A bad
+value is refused in one line naming its case, wherever it is in the grid. Only what appears when
+a case runs (a solve that fails, a refusal computed from the solved state) fails that case,
+recorded, without stopping the sweep.
 """
 
 from __future__ import annotations
 
 import hashlib
-import itertools
 import math
 import json
 import tempfile
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ddcm_casadi import formulations as registry
 from ddcm_casadi.casefiles.base import read_document
 from ddcm_casadi.casefiles.config import case_from_dict
-from ddcm_casadi.errors import InputError
+from ddcm_casadi.errors import DDCMError, InputError, one_line
 from ddcm_casadi.drivers.harness import VARIANTS
 from ddcm_casadi.inputs import input_file
 from ddcm_casadi.casefiles.overrides import apply_overrides, split_key
@@ -89,6 +96,50 @@ class SweepCase:
     generate: dict | None
 
 
+class CaseGrid(Sequence):
+    """The cases of a sweep, in grid order (seeds innermost), computed on demand from their index.
+
+    A sequence (``len``, indexing, iteration) that holds only the grid: case ``k`` is built when
+    it is asked for (its document, generator and id), so a large grid costs no memory.
+    """
+
+    def __init__(self, grid: tuple[tuple[str, tuple], ...], seeds: tuple[int, ...] | None, base_doc: dict,
+                 generate: dict | None, variants: tuple[str, ...] | None,
+                 formulations: tuple[str, ...] | None) -> None:
+        self.grid, self.seeds, self.base_doc, self.generate = grid, seeds, base_doc, generate
+        self.variants, self.formulations = variants, formulations
+        self._sizes = [len(values) for _, values in grid]
+        self._n_seeds = len(seeds) if seeds is not None else 1
+        self._len = math.prod(self._sizes) * self._n_seeds
+
+    def __len__(self) -> int:
+        return self._len
+
+    def combination(self, index: int) -> tuple[tuple, int | None]:
+        """The grid values and the seed of case ``index``."""
+        rest, s = divmod(index, self._n_seeds)
+        combo = []
+        for size, (_, values) in zip(reversed(self._sizes), reversed(self.grid)):
+            rest, k = divmod(rest, size)
+            combo.append(values[k])
+        return tuple(reversed(combo)), (self.seeds[s] if self.seeds is not None else None)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[k] for k in range(*index.indices(self._len))]
+        if not isinstance(index, int) or isinstance(index, bool):
+            raise TypeError(f"case indices are integers, got {index!r}")
+        k = index + self._len if index < 0 else index
+        if not 0 <= k < self._len:
+            raise IndexError(f"case index {index} out of range ({self._len} cases)")
+        combo, seed = self.combination(k)
+        return _make_case(k, combo, seed, self.grid, self.base_doc, self.generate, self.variants, self.formulations)
+
+    def __iter__(self) -> Iterator[SweepCase]:
+        for k in range(self._len):
+            yield self[k]
+
+
 @dataclass(frozen=True)
 class SweepSpec:
     """A validated sweep specification with its cases, in grid order (seeds innermost)."""
@@ -101,7 +152,7 @@ class SweepSpec:
     variants: tuple[str, ...] | None
     formulations: tuple[str, ...] | None
     figures: tuple[FigureSpec, ...]
-    cases: tuple[SweepCase, ...]
+    cases: CaseGrid = field(repr=False)
 
     @property
     def columns(self) -> list[str]:
@@ -212,8 +263,8 @@ def _figures(value: Any, columns: list[str]) -> tuple[FigureSpec, ...]:
     return tuple(out)
 
 
-#: The most cases a spec may expand to without ``max_cases`` (``ddcm-sweep --max-cases``): the
-#: cases are expanded in memory, a few kB each, and a grid this large is more often a typo.
+#: The most cases a spec may have without ``max_cases`` (``ddcm-sweep --max-cases``): every case
+#: is validated before the sweep starts, and a grid this large is more often a typo.
 MAX_CASES = 10_000
 
 
@@ -230,17 +281,19 @@ def load_spec(path: str | Path, *, check: bool = True, max_cases: int | None = N
     path : str or Path
         The spec (``.toml`` or ``.json``); ``base`` is relative to its folder.
     check : bool
-        Build the first case in full (data and model), so that the case file's own validation
-        runs before any work.
+        Validate every case before any work (:func:`validate_cases`): its overrides and generator,
+        and every distinct case built in full (data and model), so that the case file's own
+        validation runs. Without it the cases are only counted (they are built when asked for).
     max_cases : int, optional
-        The most cases to expand (default :data:`MAX_CASES`); a larger grid is refused before it
-        is expanded.
+        The most cases (default :data:`MAX_CASES`); a larger grid is refused before any case is
+        built.
 
     Raises
     ------
     InputError
         Missing or malformed spec, unknown key, empty grid, missing base case, or a key or value
-        that cannot be applied, more cases than ``max_cases`` (one line).
+        that cannot be applied, more cases than ``max_cases``, a case that its case file would
+        refuse (one line, naming the case).
     """
     path = input_file(path, "sweep spec")
     spec = read_document(path)
@@ -276,36 +329,77 @@ def load_spec(path: str | Path, *, check: bool = True, max_cases: int | None = N
     if count > limit:
         raise InputError(f"the sweep spec {path} has {count} cases, more than {limit}; pass --max-cases {count} "
                          "to run them all (or use a coarser grid)")
-    cases = _expand(grid, seeds, base_doc, generate, variants, formulations)
+    cases = CaseGrid(grid, seeds, base_doc, generate, variants, formulations)
     columns = [k for k, _ in grid] + ([SEED] if seeds is not None else [])
     figures = _figures(spec.get("figures", []), columns)
     out = SweepSpec(path=path, document=spec, base=base, grid=grid, seeds=seeds, variants=variants,
                     formulations=formulations, figures=figures, cases=cases)
     if check:
-        build_case(out.cases[0], out)
+        validate_cases(out)
     return out
 
 
-def _expand(grid, seeds, base_doc, generate, variants, formulations) -> tuple[SweepCase, ...]:
-    keys = [k for k, _ in grid]
-    cases = []
-    for combo in itertools.product(*(values for _, values in grid)):
-        for seed in (seeds if seeds is not None else (None,)):
-            params = dict(zip(keys, combo))
-            doc = apply_overrides(base_doc, [(k, v) for k, v in params.items() if not k.startswith("generate.")],
-                                  what="grid key")
-            gen = None
-            if generate is not None:
-                table = apply_overrides(generate, [(k[len("generate."):], v) for k, v in params.items()
-                                                   if k.startswith("generate.")], what="grid key generate")
-                if seed is not None:
-                    table[SEED] = seed
-                    params[SEED] = seed
-                gen = generator_from_dict(table, doc).describe()
-            cid = case_id(doc, gen, list(variants) if variants else None,
-                          list(formulations) if formulations else None)
-            cases.append(SweepCase(id=cid, index=len(cases), params=params, doc=doc, generate=gen))
-    return tuple(cases)
+def describe_case(case: SweepCase) -> str:
+    """How a message names a case: its number and its swept values."""
+    values = ", ".join(f"{k} = {_canonical(v)}" for k, v in case.params.items())
+    return f"case {case.index + 1}" + (f" ({values})" if values else "")
+
+
+def validate_cases(spec: SweepSpec) -> int:
+    """Check every case of ``spec`` before any work; returns how many distinct cases were built.
+
+    Every case's overrides and generator are applied, and every distinct case (its document and
+    its generator without the seed: a seed changes only the drawn data) is built in full as a
+    case file (:func:`build_case`), so a value its case file refuses is refused here, whatever
+    its place in the grid.
+
+    Raises
+    ------
+    InputError
+        The first case that cannot be built, named (:func:`describe_case`), with its reason.
+    """
+    built: set[str] = set()
+    grid = spec.cases
+    for k in range(len(grid)):
+        combo, seed = grid.combination(k)
+        if seed is not None and spec.seeds is not None and seed != spec.seeds[0]:
+            continue  # the same document and generator as the first seed's case, checked there
+        try:
+            case = grid[k]
+        except DDCMError as exc:
+            raise InputError(f"{_name(k, combo, seed, spec)}: {one_line(exc)}") from None
+        key = _canonical([case.doc, {n: v for n, v in (case.generate or {}).items() if n != SEED}])
+        if key in built:
+            continue
+        try:
+            build_case(case, spec)
+        except DDCMError as exc:
+            raise InputError(f"{describe_case(case)}: {one_line(exc)}") from None
+        built.add(key)
+    return len(built)
+
+
+def _name(index: int, combo: tuple, seed: int | None, spec: SweepSpec) -> str:
+    pairs = [(k, v) for (k, _), v in zip(spec.grid, combo)] + ([(SEED, seed)] if seed is not None else [])
+    values = ", ".join(f"{k} = {_canonical(v)}" for k, v in pairs)
+    return f"case {index + 1}" + (f" ({values})" if values else "")
+
+
+def _make_case(index: int, combo: tuple, seed: int | None, grid, base_doc, generate, variants,
+               formulations) -> SweepCase:
+    params = dict(zip((k for k, _ in grid), combo))
+    doc = apply_overrides(base_doc, [(k, v) for k, v in params.items() if not k.startswith("generate.")],
+                          what="grid key")
+    gen = None
+    if generate is not None:
+        table = apply_overrides(generate, [(k[len("generate."):], v) for k, v in params.items()
+                                           if k.startswith("generate.")], what="grid key generate")
+        if seed is not None:
+            table[SEED] = seed
+            params[SEED] = seed
+        gen = generator_from_dict(table, doc).describe()
+    cid = case_id(doc, gen, list(variants) if variants else None, list(formulations) if formulations else None)
+    return SweepCase(id=cid, index=index, params=params, doc=doc, generate=gen)
 
 
 def build_case(case: SweepCase, spec_or_base: SweepSpec | Path):

@@ -1,0 +1,148 @@
+"""Issue 29, item 11: sweeps for real users (the remaining bullets).
+
+- every case is validated before any work, whatever its place in the grid;
+- a large grid is not materialised: cases are computed from their index and submitted in batches;
+- Ctrl-C reaches the client only (the workers ignore the terminal's SIGINT);
+- ``--scheduler`` pointed at a silent peer gives up after a bounded handshake;
+- the data-range flag and non-converged steps reach ``sweep.csv``, the warnings and ``--strict``;
+- no dashboard (nor any HTTP server) listens on 8787;
+- ``[generate]`` makes continuum (Mandel) data, and no message about a deleted temporary file;
+- the Hertz metrics of continuum cases reach ``sweep.csv``; an empty figure is not written.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import tracemalloc
+from pathlib import Path
+
+import pytest
+
+from ddcm_casadi.errors import InputError
+
+from .test_sweep import BASE, read_csv, write_spec
+
+distributed = pytest.importorskip("distributed")
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+# ---------------------------------------------------------------- every case validated up front
+def test_a_bad_value_anywhere_in_the_grid_is_refused_before_any_work(tmp_path, capsys):
+    """A bad value was refused up front only in the first case; later it failed its case at run time."""
+    from ddcm_casadi.commands.sweep import main as sweep_main
+    from ddcm_casadi.sweep.spec import load_spec
+
+    path = write_spec(tmp_path / "spec", 'base = "base.toml"\nvariants = ["ddcm"]\nformulations = ["fischer_burmeister"]\n'
+                                          '[grid]\n"bar.youngs_modulus" = [200e9, 100e9, -1.0]\n"ddcm.c" = [3e11, 4e11]\n')
+    with pytest.raises(InputError, match=r"^case 5 \(bar\.youngs_modulus = -1\.0, ddcm\.c = 300000000000\.0\): "
+                                         r"\[bar\] youngs_modulus must be finite and positive, got -1\.0$"):
+        load_spec(path)
+    out = tmp_path / "out"
+    assert sweep_main([str(path), "--out", str(out), "-q", "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("ddcm-sweep: error: case 5 ") and not out.exists()
+    # a bad generated value in the last seed-free combination, too
+    path = write_spec(tmp_path / "gen", 'base = "base.toml"\nseeds = 2\n[generate]\n'
+                                        '[grid]\n"generate.strain_max" = [0.002, -0.5]\n')
+    with pytest.raises(InputError, match=r"^case 3 \(generate\.strain_max = -0\.5, seed = 0\): .*strain_min"):
+        load_spec(path)
+
+
+def test_seeds_share_one_build_when_validated(tmp_path):
+    from ddcm_casadi.sweep.spec import load_spec, validate_cases
+
+    spec = load_spec(write_spec(tmp_path, 'base = "base.toml"\nseeds = 5\n[generate]\n[grid]\n'
+                                          '"generate.points" = [30, 60]\n'), check=False)
+    assert len(spec.cases) == 10 and validate_cases(spec) == 2
+
+
+# ------------------------------------------------------------------------------- lazy expansion
+def test_a_large_grid_is_not_materialised(tmp_path):
+    """A 10^6-case grid spent 89 s and 2.4 GB expanding; the cases are now computed on demand."""
+    from ddcm_casadi.sweep.spec import load_spec
+
+    values = ", ".join(f"{3e11 + i:.1f}" for i in range(1000))
+    path = write_spec(tmp_path, f'base = "base.toml"\n[grid]\n"ddcm.c" = [{values}]\n'
+                                f'"bar.length" = [{", ".join(f"{1 + i / 1e4:.4f}" for i in range(1000))}]\n')
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    try:
+        spec = load_spec(path, check=False, max_cases=10**6)
+        n = len(spec.cases)
+        last = spec.cases[-1]
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert n == 10**6 and time.perf_counter() - t0 < 10 and peak < 20 * 2**20
+    assert last.index == 10**6 - 1 and last.params == {"ddcm.c": 3e11 + 999, "bar.length": 1.0999}
+    assert spec.cases[1].params == {"ddcm.c": 3e11, "bar.length": 1.0001}  # the last key innermost
+    assert [c.index for c in spec.cases[2:4]] == [2, 3]
+
+
+class _FakeFuture:
+    def __init__(self, value):
+        self.value = value
+
+    def result(self):
+        return self.value
+
+    def release(self):
+        pass
+
+
+class _FakeClient:
+    """Runs each task at once, counting the futures in flight (submitted, not yet taken)."""
+
+    def __init__(self, runner):
+        self.runner, self.in_flight, self.most = runner, 0, 0
+
+    def submit(self, fn, task, pure=False):
+        self.in_flight += 1
+        self.most = max(self.most, self.in_flight)
+        return _FakeFuture(dict(status="ok", error=None, rows=[], results_rows=None, results=None, seconds=0.0,
+                                worker=None))
+
+    def cancel(self, futures):
+        pass
+
+
+def test_cases_are_submitted_in_batches(tmp_path, monkeypatch):
+    """Every case was submitted at once (all futures and tasks in memory)."""
+    import distributed as dist
+
+    from ddcm_casadi.sweep import runner
+    from ddcm_casadi.sweep.spec import load_spec
+
+    class _AsCompleted:
+        def __init__(self, futures):
+            self.queue = list(futures)
+
+        def add(self, future):
+            self.queue.append(future)
+
+        def __iter__(self):
+            while self.queue:
+                client.in_flight -= 1
+                yield self.queue.pop(0)
+
+    values = ", ".join(f"{3e11 + i:.1f}" for i in range(100))
+    spec = load_spec(write_spec(tmp_path / "spec", f'base = "base.toml"\n[grid]\n"ddcm.c" = [{values}]\n'),
+                     check=False)
+    client = _FakeClient(runner)
+    monkeypatch.setattr(dist, "as_completed", _AsCompleted)
+    out = tmp_path / "out"
+    out.mkdir()
+    report = runner.SweepReport(out=out, total=100, workers=2)
+    todo = runner.pending(spec, out)
+    runner._run(client, spec, todo, out, report, None)
+    assert report.ran == 100 and len(list((out / runner.CASES).iterdir())) == 100
+    assert client.most == runner.MIN_BATCH
