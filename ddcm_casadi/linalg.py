@@ -43,6 +43,36 @@ import scipy.sparse.linalg as spla
 from ddcm_casadi.errors import InputError
 
 
+#: Bytes per stored material datum and Mandel component (strain and stress, 8 bytes each, about
+#: three copies with the search tree and the working arrays).
+DATA_BYTES_PER_VALUE = 48
+
+
+def factor_bytes(n: int, stiffness_nonzeros: int, three_d: bool) -> float:
+    """A rough estimate of the bytes of one sparse factor of a stiffness matrix and its operators.
+
+    ``nnz(K)`` times a fill factor (``n^(1/3)`` in 3-D; ``log2 n`` otherwise, as nested
+    dissection gives), 12 bytes an entry (value and index).
+
+    Parameters
+    ----------
+    n : int
+        Unknowns.
+    stiffness_nonzeros : int
+        Nonzeros of the stiffness pattern.
+    three_d : bool
+        A 3-D continuum (six Mandel components).
+
+    Returns
+    -------
+    float
+        Bytes, an estimate (within a factor of a few).
+    """
+    n = max(int(n), 2)
+    fill = n ** (1.0 / 3.0) if three_d else float(np.log2(n))
+    return 12.0 * max(int(stiffness_nonzeros), n) * max(fill, 1.0)
+
+
 def to_casadi(A: sp.spmatrix) -> ca.DM:
     """A scipy sparse matrix as a sparse CasADi ``DM`` (same pattern, no densification)."""
     A = sp.csc_matrix(A)

@@ -37,6 +37,15 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
+def physical_memory() -> int | None:
+    """The machine's physical memory in bytes (``os.sysconf``), or ``None`` where it is unknown."""
+    try:
+        pages, size = os.sysconf("SC_PHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+    return int(pages) * int(size) if pages > 0 and size > 0 else None
+
+
 def resolve_jobs(jobs: int | None, tasks: int) -> int:
     """Worker processes for ``tasks`` runs: ``jobs`` (``None``: :func:`available_cores`), at most one
     per run."""

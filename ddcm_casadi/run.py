@@ -30,7 +30,8 @@ from ddcm_casadi.errors import InputError
 from ddcm_casadi.drivers.harness import VARIANTS, Comparison, compare
 from ddcm_casadi.io import MANIFEST_FORMAT_KEY, OutputFolder, write_csv_atomic, write_json_atomic
 from ddcm_casadi.outputs.save import require_matplotlib, save_outputs
-from ddcm_casadi.parallel import resolve_jobs
+from ddcm_casadi.linalg import DATA_BYTES_PER_VALUE, factor_bytes
+from ddcm_casadi.parallel import physical_memory, resolve_jobs  # noqa: F401 - physical_memory: the API
 from ddcm_casadi.version import versions
 
 if TYPE_CHECKING:
@@ -75,17 +76,6 @@ class CaseRun:
 
 
 # -------------------------------------------------------------------------------------- memory
-def physical_memory() -> int | None:
-    """The machine's physical memory in bytes (``os.sysconf``), or ``None`` where it is unknown."""
-    import os
-
-    try:
-        pages, size = os.sysconf("SC_PHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, ValueError, OSError):
-        return None
-    return int(pages) * int(size) if pages > 0 and size > 0 else None
-
-
 def estimate_bytes(model, runs: int = 1) -> int:
     """A rough estimate of the memory the runs of ``model`` need at once, in bytes.
 
@@ -109,11 +99,10 @@ def estimate_bytes(model, runs: int = 1) -> int:
     B = model.strain_operator
     n = max(int(model.n_dofs), 2)
     nnz_k = (abs(B).T @ abs(B)).nnz if B.nnz else n
-    fill = n ** (1.0 / 3.0) if model.strain_components >= 6 else float(np.log2(n))
-    per_run = 12.0 * nnz_k * max(fill, 1.0) + 12.0 * (B.nnz + model.gap_operator.nnz)
+    per_run = factor_bytes(n, nnz_k, model.strain_components >= 6) + 12.0 * (B.nnz + model.gap_operator.nnz)
     data = 0.0
     if model.dataset is not None:
-        data = 3.0 * 8.0 * 2 * sum(np.asarray(d.strain).size for d in getattr(model.dataset, "datasets", []))
+        data = DATA_BYTES_PER_VALUE * sum(np.asarray(d.strain).size for d in getattr(model.dataset, "datasets", []))
     return int(per_run * max(int(runs), 1) + data)
 
 

@@ -299,3 +299,71 @@ def test_ctrl_c_interrupts_a_long_factorisation_at_once(tmp_path):
     assert proc.returncode == 130, (out, err)
     assert "factorised" not in out and err.strip() == "factorise: interrupted", err
     assert took < 3.0, f"Ctrl-C took {took:.1f} s"
+
+
+# ------------------------------------------------------------- 10: sizes estimated before building
+_BIG_BOX = """
+[mesh]
+shape = "box"
+size = [0.02, 0.02, 0.01]
+divisions = [60, 60, 30]
+[material]
+youngs_modulus = 200e9
+poisson_ratio = 0.3
+[[supports]]
+boundary = "zmin"
+fix = "xyz"
+[[contact]]
+boundary = "zmax"
+obstacle = "sphere"
+center = [0.01, 0.01, 0.06]
+radius = 0.05
+travel = [0.0, 1e-6]
+[data]
+hookean = { strain_min = -0.01, strain_max = 0.01, points = 11 }
+c = "isotropic"
+"""
+
+
+def test_a_continuum_that_cannot_fit_is_refused_before_it_is_built(tmp_path, capsys, monkeypatch):
+    """The estimate came after the model (and its 1.8 M data points) had been built, minutes in."""
+    import ddcm_casadi.parallel as parallel
+    from ddcm_casadi.models.continuum import model as continuum
+
+    def never(*args, **kwargs):
+        raise AssertionError("the model was built")
+
+    monkeypatch.setattr(parallel, "physical_memory", lambda: 2**30)
+    monkeypatch.setattr(continuum, "continuum_model", never)
+    cfg = tmp_path / "big.toml"
+    cfg.write_text(_BIG_BOX)
+    code, _, err = run_cli([*FAST, "--config", str(cfg), "--out", str(tmp_path / "out")], capsys)
+    assert code == 2, err
+    line, = err.strip().splitlines()
+    assert "needs about" in line and "3-D continuum (P1): 648 000 elements" in line and "1.8 M data points" in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_large_continuum_build_is_announced_and_warned_about(tmp_path, capsys, monkeypatch):
+    """A 3-D mesh of 1e5 dofs printed nothing for minutes, and nothing warned of its memory."""
+    import ddcm_casadi.casefiles.continuum as casefile
+    import ddcm_casadi.parallel as parallel
+    from ddcm_casadi.models.continuum import mesh
+    from ddcm_casadi.models.continuum.fem import estimate_size
+
+    from .test_continuum import _CASE
+
+    size = estimate_size(mesh.rectangle(0.01, 0.01, nx=2, ny=2), 1)
+    assert (size.elements, size.dofs, size.points, size.stress_unknowns) == (8, 18, 8, 24)
+    monkeypatch.setattr(parallel, "physical_memory", lambda: int(1.5 * size.bytes))  # above half of it
+    monkeypatch.setattr(casefile, "ANNOUNCE_UNKNOWNS", 10)  # so that this small case counts as large
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(_CASE)
+    loud = [a for a in FAST if a != "-q"]
+    code, _, err = run_cli([*loud, "--config", str(cfg)], capsys)
+    assert code == 0, err
+    assert ("ddcm-compare: building 2-D continuum (P1): 8 elements, 18 unknowns, 24 stress unknowns, about "
+            in err), err
+    assert "ddcm-compare: warning: " in err and "more than half of the machine's" in err
+    code, _, err = run_cli([*FAST, "--config", str(cfg)], capsys)  # -q: no notice, the warning stays
+    assert code == 0 and "building" not in err and "more than half" in err

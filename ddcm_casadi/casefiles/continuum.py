@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +13,7 @@ from ddcm_casadi.casefiles import common as casefile
 from ddcm_casadi.casefiles.base import Case, register_case_kind
 from ddcm_casadi.casefiles.common import integer, nonempty_list, number, positive, show, vector
 from ddcm_casadi.data.dataset import MaterialDataset
-from ddcm_casadi.errors import InputError
+from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.data.metric import COMPONENTS, Metric, isotropic_elasticity
 from ddcm_casadi.models.continuum.hertz import HertzReference
 from ddcm_casadi.models.continuum.obstacles import Ball, Cylinder, FlatPunch, Plane
@@ -77,6 +79,16 @@ Strains and stresses are in Mandel notation: 2-D ``[e11, e22, sqrt(2) e12]``, 3-
 e33, sqrt(2) e23, sqrt(2) e13, sqrt(2) e12]``. The result is
 :func:`~ddcm_casadi.models.continuum.model.continuum_model`.
 """
+
+#: The logger that announces a large build (``ddcm-compare`` prints its INFO lines unless ``-q``).
+BUILD_LOG = logging.getLogger("ddcm_casadi.build")
+#: A build of this many displacement or stress unknowns, or data points, takes long enough (tens
+#: of seconds and more) to be announced before it starts.
+ANNOUNCE_UNKNOWNS = 20_000
+ANNOUNCE_DATA_POINTS = 200_000
+#: Share of the machine's physical memory above which a case is warned about (it may swap, or
+#: not fit beside other programs); above all of it, it is refused.
+MEMORY_WARNING_SHARE = 0.5
 
 _MESH = {"shape", "size", "divisions", "origin", "radius", "center", "refine", "path", "degree", "refine_near"}
 _HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus", "poisson_ratio", "grading"}
@@ -279,14 +291,72 @@ def _datasets(doc: dict, base_dir: Path, k: int, materials: list) -> list[Materi
     return out
 
 
+def _data_points(doc: dict, base_dir: Path, k: int) -> int:
+    """The data points the ``[data]`` tables will hold, counted before any is built: ``points^k``
+    of a Hookean grid, the lines of a file (0 for what cannot be read: its parser says why)."""
+    total = 0
+    for table in _tables(doc, "data"):
+        hookean = table.get("hookean") if isinstance(table, dict) else None
+        if isinstance(hookean, dict) and isinstance(hookean.get("points"), int) and hookean["points"] > 0:
+            total += int(hookean["points"]) ** k
+        elif isinstance(table, dict) and isinstance(table.get("path"), str):
+            try:
+                with open(base_dir / table["path"], "rb") as f:
+                    total += sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b""))
+            except OSError:
+                pass
+    return total
+
+
+def check_size(size, *, source: str) -> None:
+    """Announce, warn about or refuse a continuum before it is built, from its estimated size.
+
+    Parameters
+    ----------
+    size : BuildSize
+        :func:`~ddcm_casadi.models.continuum.fem.estimate_size` of the case.
+    source : str
+        The case file, named in the messages.
+
+    Raises
+    ------
+    InputError
+        The estimate exceeds the machine's physical memory (one line: what, how big, what to reduce).
+
+    Warns
+    -----
+    PhysicsWarning
+        The estimate exceeds :data:`MEMORY_WARNING_SHARE` of the machine's memory.
+    """
+    from ddcm_casadi import parallel
+
+    have = parallel.physical_memory()
+    gib = size.bytes / 2**30
+    if have is not None and size.bytes > have:
+        raise InputError(f"{source}: this case needs about {gib:.3g} GiB ({size.describe()}) but the machine has "
+                         f"{have / 2**30:.3g} GiB of memory: use a coarser mesh (divisions, refine, refine_near) "
+                         "or fewer data points")
+    if have is not None and size.bytes > MEMORY_WARNING_SHARE * have:
+        warnings.warn(f"{source}: this case needs about {gib:.3g} GiB, more than half of the machine's "
+                      f"{have / 2**30:.3g} GiB: it may swap; a coarser mesh or fewer data points would fit",
+                      PhysicsWarning, stacklevel=2)
+    if (max(size.dofs, size.stress_unknowns if size.data_points else 0) >= ANNOUNCE_UNKNOWNS
+            or size.data_points >= ANNOUNCE_DATA_POINTS):
+        BUILD_LOG.info("building %s", size.describe())
+
+
 def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     """Validate a ``[mesh]`` document and build its :class:`Case`."""
     from ddcm_casadi.models.continuum.model import BodyForce, Contact, Material, Support, Traction, continuum_model
+
+    from ddcm_casadi.models.continuum.fem import estimate_size
 
     mesh, degree = _shape_mesh(doc, base_dir)
     d = mesh.p.shape[0]
     k = COMPONENTS[d]
     n_data = len(_tables(doc, "data"))
+    # before the data and the model are built: what cannot fit is refused, what is big announced
+    check_size(estimate_size(mesh, degree, _data_points(doc, base_dir, k)), source=source)
 
     materials = []
     mats = _tables(doc, "material")

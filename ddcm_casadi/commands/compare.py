@@ -16,9 +16,12 @@ the document before it is validated; see ddcm_casadi/casefiles/overrides.py) and
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
 import sys
 import time
 import warnings
+from typing import Iterator
 
 from ddcm_casadi import formulations as registry
 from ddcm_casadi.commands.base import (  # noqa: F401 - EXIT_INPUT: the API
@@ -112,6 +115,33 @@ class _Progress:
             self._last = (run, now)
 
 
+@contextlib.contextmanager
+def _build_notices(quiet: bool) -> Iterator[None]:
+    """While a case is read and built: its physics warnings as one line each on stderr, and
+    (unless ``quiet``) what a large build is and how big (``ddcm_casadi.build``'s INFO lines)."""
+    log = logging.getLogger("ddcm_casadi.build")
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("ddcm-compare: %(message)s"))
+    level, propagate = log.level, log.propagate
+    if not quiet:
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+        log.propagate = False
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", PhysicsWarning)
+            yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)
+        log.propagate = propagate
+    for w in caught:
+        if issubclass(w.category, PhysicsWarning):
+            print(f"ddcm-compare: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+
+
 def run(argv: list[str] | None = None) -> int:
     """``ddcm-compare ARGS``: run the case (:func:`ddcm_casadi.run.run_case`), print the table and
     the warnings; returns the exit status."""
@@ -119,10 +149,11 @@ def run(argv: list[str] | None = None) -> int:
     if args.overrides and not args.config:
         raise InputError("--set needs --config CASE (the paper's built-in example has no case file to override)")
     overrides: dict = {}
-    if args.config:
-        case, overrides = load_case_with_overrides(args.config, args.overrides)
-    else:
-        case = default_case()
+    with _build_notices(args.quiet):
+        if args.config:
+            case, overrides = load_case_with_overrides(args.config, args.overrides)
+        else:
+            case = default_case()
     names = select_formulations(_split(args.formulations, "--formulations"))
     variants = select_variants(_split(args.variants, "--variants"), case)
     for message in case.model.path_warnings():  # refuses a meaningless path before anything is written
