@@ -367,3 +367,19 @@ def test_a_large_continuum_build_is_announced_and_warned_about(tmp_path, capsys,
     assert "ddcm-compare: warning: " in err and "more than half of the machine's" in err
     code, _, err = run_cli([*FAST, "--config", str(cfg)], capsys)  # -q: no notice, the warning stays
     assert code == 0 and "building" not in err and "more than half" in err
+
+
+# ------------------------------------------------------------------------- 15: --help tells the truth
+def test_compare_help_is_plain_and_names_every_case_kind(capsys):
+    """--help never mentioned continua and showed raw RST (``...``)."""
+    from ddcm_casadi.commands.compare import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    assert exit_.value.code == 0
+    text = capsys.readouterr().out
+    for needed in ("[bar]", "[structure]", 'kinematics = "finite"', "[mesh]", "continuum", "docs/meshes.md",
+                   "ddcm_casadi.casefiles.config", "examples/cases/", "Case files"):
+        assert needed in text, needed
+    for markup in ("``", ":func:", ":mod:", ":class:"):
+        assert markup not in text, markup

@@ -35,8 +35,37 @@ from ddcm_casadi.run import CaseRun, run_case, select_formulations, select_varia
 from ddcm_casadi.version import __version__
 
 
+#: ``ddcm-compare --help``: plain text (the module's docstring is for the API documentation).
+HELP = """\
+Run every contact formulation (penalty, augmented Lagrangian, Fischer-Burmeister, MPCC),
+classical and data-driven (DDCM), on one load path, and print a summary table.
+
+With no arguments: the paper's example (a bar against a rigid stop). With --config CASE: a
+case file, TOML or JSON, of one of these kinds:
+
+  [bar]         the paper's bar, or an N-element bar with stops
+  [structure]   a 1-D, 2-D or 3-D truss against rigid obstacles; kinematics = "finite" for
+                large displacements (a von Mises truss that snaps through)
+  [mesh]        a 2-D (plane strain) or 3-D continuum, generated (rectangle, box, disc,
+                half_disc, ball) or read from a mesh file (.msh, .vtu, .xdmf), pressed
+                against rigid obstacles (plane, circle, sphere, cylinder, punch), with
+                optional Hertz validation and material data for DDCM
+
+The case format: the README's "Case files" section, and in full the documentation of
+ddcm_casadi.casefiles.config (python -m pydoc ddcm_casadi.casefiles.config); mesh files and
+their named boundaries: docs/meshes.md. Examples: examples/cases/ (hertz2d.toml, hertz3d.toml,
+truss2d.toml, von_mises.toml, bar_stops.toml, ...).
+
+--out DIR writes results.csv, results.json and the figures that suit the model (VTU series and
+pressure profiles for continua), all or none, in a folder locked against a second run.
+--set KEY=VALUE overrides one value of the case file and is recorded in results.json.
+Large continua are announced before they are built, and refused when they cannot fit in memory.
+Exit status: 0 done, 2 bad input, 3 with --strict a step that did not converge, 130 Ctrl-C.
+"""
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = Parser(prog="ddcm-compare", description=__doc__,
+    p = Parser(prog="ddcm-compare", description=HELP,
                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", metavar="CASE", help="case file, .toml or .json (default: the paper's example)")
     p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], dest="overrides",
