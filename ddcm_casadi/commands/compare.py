@@ -44,8 +44,8 @@ With no arguments: the paper's example (a bar against a rigid stop). With --conf
 case file, TOML or JSON, of one of these kinds:
 
   [bar]         the paper's bar, or an N-element bar with stops
-  [structure]   a 1-D, 2-D or 3-D truss against rigid obstacles; kinematics = "finite" for
-                large displacements (a von Mises truss that snaps through)
+  [structure]   a 1-D, 2-D or 3-D truss against rigid obstacles; the top-level key
+                kinematics = "finite" for large displacements (a von Mises truss that snaps)
   [mesh]        a 2-D (plane strain) or 3-D continuum, generated (rectangle, box, disc,
                 half_disc, ball) or read from a mesh file (.msh, .vtu, .xdmf), pressed
                 against rigid obstacles (plane, circle, sphere, cylinder, punch), with
