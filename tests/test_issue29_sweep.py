@@ -146,3 +146,88 @@ def test_cases_are_submitted_in_batches(tmp_path, monkeypatch):
     runner._run(client, spec, todo, out, report, None)
     assert report.ran == 100 and len(list((out / runner.CASES).iterdir())) == 100
     assert client.most == runner.MIN_BATCH
+
+
+# ------------------------------------------------------------------------------ quiet Ctrl-C
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="process groups and SIGINT")
+def test_ctrl_c_prints_the_one_line_message_only(tmp_path):
+    """Ctrl-C (SIGINT to the terminal's process group) printed ~90 lines of worker tracebacks."""
+    values = ", ".join(f"{3e11 + i:.1f}" for i in range(40))
+    path = write_spec(tmp_path / "spec", f'base = "base.toml"\nformulations = ["fischer_burmeister"]\n'
+                                         f'[grid]\n"ddcm.c" = [{values}]\n')
+    log = tmp_path / "stderr.txt"
+    with open(log, "w") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "ddcm_casadi.commands.sweep", str(path), "--out",
+                                 str(tmp_path / "out"), "--workers", "2", "--no-plots"],
+                                stdout=subprocess.DEVNULL, stderr=err, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while " 2/40 " not in log.read_text():
+            assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
+            time.sleep(0.05)
+        lines_before = len(log.read_text().splitlines())
+        os.killpg(proc.pid, signal.SIGINT)  # as the terminal does: the whole foreground group
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    after = log.read_text().splitlines()[lines_before:]
+    after = [line for line in after if not line.startswith("ddcm-sweep: ") or "interrupted" in line]
+    assert code == 130 and after == ["ddcm-sweep: interrupted; finished cases are kept, rerun the same command "
+                                     "to resume"], "\n".join(after)
+
+
+# ---------------------------------------------------------------------- bounded handshake
+def test_a_scheduler_that_never_answers_is_given_up_in_bounded_time(tmp_path):
+    """A peer that accepts TCP and never answers made ddcm-sweep --scheduler hang forever."""
+    path = write_spec(tmp_path / "spec", 'base = "base.toml"\n[grid]\n"ddcm.c" = [3e11]\n')
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    accepted = []
+
+    def accept() -> None:
+        try:
+            while True:
+                accepted.append(server.accept()[0])  # and never answer
+        except OSError:
+            return
+
+    threading.Thread(target=accept, daemon=True).start()
+    port = server.getsockname()[1]
+    code = ("import sys, ddcm_casadi.sweep.runner as r; r.HANDSHAKE_TIMEOUT = 1.0; "
+            "from ddcm_casadi.commands.sweep import main; sys.exit(main(sys.argv[1:]))")
+    t0 = time.monotonic()
+    try:
+        proc = subprocess.run([sys.executable, "-c", code, str(path), "--out", str(tmp_path / "out"), "-q",
+                               "--scheduler", f"tcp://127.0.0.1:{port}"], capture_output=True, text=True, timeout=90)
+    finally:
+        server.close()
+        for conn in accepted:
+            conn.close()
+    assert accepted, "the client never connected"
+    assert proc.returncode == 2 and time.monotonic() - t0 < 60, proc.stderr
+    assert proc.stderr.splitlines() == [f"ddcm-sweep: error: the Dask scheduler at tcp://127.0.0.1:{port} did not "
+                                        "answer within 1 s (is it a Dask scheduler?)"]
+
+
+# ---------------------------------------------------------------------------- no dashboard
+def _listening(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.settimeout(1.0)
+        return probe.connect_ex(("127.0.0.1", port)) == 0
+
+
+def test_a_local_cluster_opens_nothing_on_8787(tmp_path):
+    """dashboard_address=None turned the dashboard's pages off, but the scheduler still listened on 8787."""
+    from ddcm_casadi.sweep.runner import dask_client
+
+    if _listening(8787):
+        pytest.skip("something else listens on 8787")
+    with dask_client(workers=1) as client:
+        during = _listening(8787)
+        port = client.scheduler_info()["services"].get("dashboard")
+        ignored = set(client.run(lambda: signal.getsignal(signal.SIGINT)).values())
+    assert not during and port != 8787
+    assert ignored == {signal.SIG_IGN}  # the workers ignore the terminal's Ctrl-C

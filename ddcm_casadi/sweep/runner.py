@@ -158,25 +158,88 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
+#: Seconds to wait for a ``--scheduler`` to answer Dask's handshake (a peer that accepts TCP and
+#: never answers made ``distributed.Client`` wait forever: its handshake read has no timeout).
+HANDSHAKE_TIMEOUT = 10.0
+#: What the worker processes run first: they ignore SIGINT, so Ctrl-C on the terminal (sent to the
+#: whole foreground process group) reaches the client only, which cancels the tasks and closes the
+#: cluster; the workers then print no tracebacks.
+_IGNORE_SIGINT = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+
+
+def check_scheduler(address: str, timeout: float | None = None) -> None:
+    """Connect to the Dask scheduler at ``address`` and complete Dask's handshake within
+    ``timeout`` seconds (default :data:`HANDSHAKE_TIMEOUT`), or raise.
+
+    Raises
+    ------
+    InputError
+        Nothing listens there, the address is malformed, or the peer does not answer in time.
+    """
+    import asyncio
+
+    from distributed.comm import connect
+
+    timeout = HANDSHAKE_TIMEOUT if timeout is None else timeout
+
+    async def handshake() -> None:
+        comm = await asyncio.wait_for(connect(address, timeout=timeout), timeout)
+        await comm.close()
+
+    try:
+        asyncio.run(handshake())
+    except asyncio.TimeoutError:
+        raise InputError(f"the Dask scheduler at {address} did not answer within {timeout:g} s "
+                         "(is it a Dask scheduler?)") from None
+    except (OSError, ValueError, TypeError) as exc:
+        raise InputError(f"cannot connect to the Dask scheduler at {address}: {_message(exc)}") from None
+
+
+@contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while processes start: an ignored signal stays ignored across ``exec``, so
+    the spawned worker processes ignore it from their first instruction (their preload keeps it so)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 @contextmanager
 def dask_client(*, workers: int | None = None, scheduler: str | None = None) -> Iterator:
-    """A ``distributed.Client``: on an existing scheduler, or on a LocalCluster of ``workers``
-    single-threaded worker processes (CasADi, IPOPT and MUMPS run one solve per process)."""
+    """A ``distributed.Client``: on an existing scheduler (its handshake bounded by
+    :data:`HANDSHAKE_TIMEOUT`), or on a LocalCluster of ``workers`` single-threaded worker
+    processes on the loopback interface (CasADi, IPOPT and MUMPS run one solve per process).
+
+    The LocalCluster opens no dashboard: ``dashboard_address=None`` only turns the dashboard's
+    pages off, the scheduler still starts its HTTP server on the default port 8787, so it is
+    given an ephemeral loopback port. Its workers ignore SIGINT (Ctrl-C stops the client only)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
         raise InputError("ddcm-sweep needs dask.distributed: pip install 'ddcm-casadi[sweep]'") from None
     if scheduler is not None:
+        check_scheduler(scheduler)
         try:
-            client = Client(scheduler, timeout="10s")
+            client = Client(scheduler, timeout=f"{HANDSHAKE_TIMEOUT}s")
         except (OSError, ValueError) as exc:
             raise InputError(f"cannot connect to the Dask scheduler at {scheduler}: {_message(exc)}") from None
         with client:
             yield client
         return
     n = workers or default_workers()
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+    with _sigint_ignored():
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, scheduler_kwargs=dict(dashboard_address="127.0.0.1:0"),
+                               preload=[_IGNORE_SIGINT], silence_logs=logging.ERROR)
+    with cluster, Client(cluster) as client:
         yield client
 
 
