@@ -231,3 +231,31 @@ def test_a_local_cluster_opens_nothing_on_8787(tmp_path):
         ignored = set(client.run(lambda: signal.getsignal(signal.SIGINT)).values())
     assert not during and port != 8787
     assert ignored == {signal.SIG_IGN}  # the workers ignore the terminal's Ctrl-C
+
+
+# ------------------------------------------------------------- data range and --strict
+def test_data_range_and_non_converged_steps_reach_sweep_csv_warnings_and_strict(tmp_path, capsys):
+    """A case beyond its data (DATA RANGE EXCEEDED) or with a non-converged step exited 0 with no word."""
+    from ddcm_casadi.commands.sweep import main as sweep_main
+
+    path = write_spec(tmp_path / "spec", 'base = "base.toml"\nvariants = ["classical", "ddcm"]\n'
+                                         'formulations = ["fischer_burmeister"]\n[generate]\n'
+                                         '[grid]\n"generate.strain_min" = [-0.01, -0.001]\n')
+    out = tmp_path / "out"
+    assert sweep_main([str(path), "--out", str(out), "--workers", "1", "-q", "--no-plots"]) == 0
+    err = capsys.readouterr().err
+    rows = read_csv(out / "sweep.csv")
+    ddcm = [r for r in rows if r["variant"] == "ddcm"]
+    assert [r["extrapolated_steps"] for r in ddcm][0] == "0" and int(ddcm[1]["extrapolated_steps"]) > 0
+    assert int(ddcm[1]["max_extrapolated_states"]) >= 1
+    assert "WARNING: DATA RANGE EXCEEDED in 1 cases" in err and ddcm[1]["case"] in err
+    assert sweep_main([str(path), "--out", str(out), "--workers", "1", "-q", "--strict"]) == 3  # (nothing reruns)
+    capsys.readouterr()
+    # a non-converged step: the warning and --strict (two outer iterations of DDCM are not enough)
+    path = write_spec(tmp_path / "nc", 'base = "base.toml"\nvariants = ["ddcm"]\nformulations = ["fischer_burmeister"]\n'
+                                       '[grid]\n"ddcm.max_outer" = [2]\n')
+    code = sweep_main([str(path), "--out", str(tmp_path / "nc_out"), "--workers", "1", "-q", "--strict", "--no-plots"])
+    err = capsys.readouterr().err
+    row = read_csv(tmp_path / "nc_out" / "sweep.csv")[0]
+    assert row["converged_steps"] != row["steps"], row
+    assert code == 3 and "WARNING: 1 cases have non-converged steps" in err

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from ddcm_casadi.commands.base import EXIT_NOT_CONVERGED, Parser, run_guarded
 from ddcm_casadi.errors import InputError
@@ -34,7 +35,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--retry-failed", action="store_true", help="rerun the cases that failed")
     p.add_argument("--no-plots", action="store_true", help="do not draw the figures")
     p.add_argument("--strict", action="store_true",
-                   help=f"exit with status {EXIT_NOT_CONVERGED} if a case failed or a step did not converge")
+                   help=f"exit with status {EXIT_NOT_CONVERGED} if a case failed or was lost, a step did not "
+                        "converge, or states went beyond the material data (DATA RANGE EXCEEDED)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return p
@@ -98,16 +100,38 @@ def run(argv: list[str] | None = None) -> int:
               file=sys.stderr)
     if report.failed:
         print(f"WARNING: {len(report.failed)} cases failed (see the message column of sweep.csv)", file=sys.stderr)
-    if args.strict and (report.failed or report.lost or _not_converged(report.out)):
+    flags = case_flags(report.out)
+    if flags["not_converged"]:
+        print(f"WARNING: {len(flags['not_converged'])} cases have non-converged steps (converged_steps < steps "
+              f"in sweep.csv): {_listing(flags['not_converged'])}", file=sys.stderr)
+    if flags["extrapolated"]:
+        print(f"WARNING: DATA RANGE EXCEEDED in {len(flags['extrapolated'])} cases: states beyond the material data, "
+              f"DDCM stresses stop at the data's edge (extrapolated_steps in sweep.csv): "
+              f"{_listing(flags['extrapolated'])}", file=sys.stderr)
+    if args.strict and (report.failed or report.lost or flags["not_converged"] or flags["extrapolated"]):
         return EXIT_NOT_CONVERGED
     return 0
 
 
-def _not_converged(out) -> bool:
+def _listing(cases: list[str], most: int = 5) -> str:
+    return ", ".join(cases[:most]) + (f" and {len(cases) - most} more" if len(cases) > most else "")
+
+
+def case_flags(out: Path) -> dict[str, list[str]]:
+    """The cases of ``out/sweep.csv`` (finished, ``status = ok``) with non-converged steps
+    (``not_converged``) and with states beyond the material data (``extrapolated``), by id."""
     import csv
 
-    with open(out / "sweep.csv", newline="", encoding="utf-8") as fh:
-        return any(r["status"] == "ok" and r["steps"] != r["converged_steps"] for r in csv.DictReader(fh))
+    flags: dict[str, list[str]] = dict(not_converged=[], extrapolated=[])
+    with open(Path(out) / "sweep.csv", newline="", encoding="utf-8") as fh:
+        for row in csv.DictReader(fh):
+            if row["status"] != "ok":
+                continue
+            for flag, raised in (("not_converged", row["steps"] != row["converged_steps"]),
+                                 ("extrapolated", row.get("extrapolated_steps") not in (None, "", "0"))):
+                if raised and flags[flag][-1:] != [row["case"]]:  # a case's rows are consecutive
+                    flags[flag].append(row["case"])
+    return flags
 
 
 def main(argv: list[str] | None = None) -> int:

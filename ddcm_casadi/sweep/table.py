@@ -9,7 +9,10 @@ plus what a study plots:
   against the classical run of the same formulation in the same case (models without a closed form);
 - ``distance_mean``, ``distance_max`` (DDCM): the objective, the distance to the data;
 - ``local_minimum_steps`` (DDCM): how many steps stopped at a local, not the global, minimum;
-- ``steps``, ``converged_steps``, iterations, residuals, ``data_points``, build and solve seconds.
+- ``steps``, ``converged_steps``, iterations, residuals, ``data_points``, build and solve seconds;
+- ``extrapolated_steps`` (DDCM): the steps with states beyond the material data (DATA RANGE
+  EXCEEDED in the table of ``ddcm-compare``), ``max_extrapolated_states`` the most such states
+  in one step; 0 for a run inside its data.
 
 Wall times (``build_seconds``, ``solve_seconds``, ``case_seconds``) are measurements: they differ
 between two runs of the same case, every other value is reproducible.
@@ -27,12 +30,13 @@ from ddcm_casadi.drivers.harness import _relative_error
 METRICS = ("steps", "converged_steps", "max_error_u", "max_error_p", "max_error_u_vs_exact", "max_error_p_vs_exact",
            "error_u_vs_classical", "error_p_vs_classical", "distance_mean", "distance_max", "local_minimum_steps",
            "iterations_mean", "iterations_max", "outer_iterations_mean", "max_residual", "max_complementarity",
-           "data_points", "build_seconds", "solve_seconds")
+           "data_points", "extrapolated_steps", "max_extrapolated_states", "build_seconds", "solve_seconds")
 #: Columns that are wall-time measurements (not reproducible from run to run).
 TIMINGS = ("build_seconds", "solve_seconds", "case_seconds")
 _FROM_SUMMARY = ("steps", "converged_steps", "max_error_u", "max_error_p", "max_error_u_vs_exact",
                  "max_error_p_vs_exact", "iterations_mean", "iterations_max", "outer_iterations_mean",
-                 "max_residual", "max_complementarity", "build_seconds", "solve_seconds")
+                 "max_residual", "max_complementarity", "extrapolated_steps", "max_extrapolated_states",
+                 "build_seconds", "solve_seconds")
 
 
 def _finite_stat(values: np.ndarray, stat) -> float | None:
