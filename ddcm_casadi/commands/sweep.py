@@ -93,6 +93,8 @@ def run(argv: list[str] | None = None) -> int:
     for fit in report.fits:
         print(f"fitted slope {fit['slope']:.3f} of {fit['y']} against {fit['x']} ({fit['series']}, "
               f"{fit['points']} points)")
+    for note in report.skipped_figures:
+        print(f"ddcm-sweep: figure not drawn: {note}", file=sys.stderr)
     written = ["sweep.csv", "sweep.json", *report.figures]
     print(f"wrote {', '.join(written)} and cases/ to {report.out}", file=sys.stderr)
     if report.lost:

@@ -56,6 +56,17 @@ def figure(spec_figure, rows: list[dict], columns: list[str]) -> Figure:
     return fig
 
 
-def save_figures(spec, rows: list[dict], out: Path) -> list[Path]:
-    """Draw every figure of the spec into ``out`` (atomically); returns the paths written."""
-    return [save_figure(figure(f, rows, spec.columns), Path(out) / f.file) for f in spec.figures]
+def save_figures(spec, rows: list[dict], out: Path, skipped: list[str] | None = None) -> list[Path]:
+    """Draw every figure of the spec into ``out`` (atomically); returns the paths written.
+
+    A figure with nothing to draw (no finished run with a finite ``y`` and ``x``, e.g. a Hertz
+    metric of a case without a ``[hertz]`` reference) is not written: ``"file: reason"`` is
+    appended to ``skipped``."""
+    written = []
+    for f in spec.figures:
+        if not series(rows, f.x, f.y, spec.columns):
+            if skipped is not None:
+                skipped.append(f"{f.file}: no finished case has a value of {f.y} (empty column of sweep.csv)")
+            continue
+        written.append(save_figure(figure(f, rows, spec.columns), Path(out) / f.file))
+    return written

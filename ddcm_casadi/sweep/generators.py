@@ -19,7 +19,8 @@ case (so a noise Monte Carlo or a data-size study needs no files):
 Missing ``strain_min``, ``strain_max``, ``points`` and ``youngs_modulus`` are taken from that
 table's ``hookean`` entry when it has one. The data reach the case as a CSV file (written to a
 temporary folder on the worker, read back by the case file's own ``path`` reader), so they are
-validated exactly as any data file.
+validated exactly as any data file. A continuum case (one with a ``[mesh]``) is refused: its data
+have 3 or 6 Mandel components, which these one-dimensional laws do not make.
 """
 
 from __future__ import annotations
@@ -137,6 +138,10 @@ def generator_from_dict(table: Any, case_doc: dict) -> DataGenerator:
     """
     if not isinstance(table, dict):
         raise InputError("[generate] must be a table")
+    if "mesh" in case_doc:
+        raise InputError("[generate] makes one-component data (bars and trusses); this case is a continuum, "
+                         "whose data have 3 or 6 Mandel components: give them in the case's [data] table "
+                         "(hookean = {...} or path = \"FILE.csv\")")
     unknown = sorted(set(table) - set(KEYS))
     if unknown:
         raise InputError(f"unknown key {unknown[0]!r} in [generate]; known: {', '.join(sorted(KEYS))}")

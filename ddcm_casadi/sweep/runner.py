@@ -79,7 +79,7 @@ def run_case(task: dict) -> dict:
         overrides = task.get("overrides", sweep_case.params)
         run = run_library_case(case, formulations=task["formulations"], variants=task["variants"],
                                overrides=overrides)
-        out = dict(status="ok", error=None, rows=summary_rows(run.comparison, run.document["summary"]),
+        out = dict(status="ok", error=None, rows=summary_rows(run.comparison, run.document["summary"], run.rows),
                    results_rows=run.rows, results=run.document)
     except Exception as exc:  # noqa: BLE001 - any failure of a case is recorded and the sweep goes on
         out = dict(status="failed", error=_message(exc), rows=[], results_rows=None, results=None)
@@ -263,6 +263,8 @@ class SweepReport:
     seconds: float = 0.0
     fits: list[dict] = field(default_factory=list)
     figures: list[str] = field(default_factory=list)
+    #: Figures not drawn, with why (no finite value of their ``y``): ``"file: reason"``.
+    skipped_figures: list[str] = field(default_factory=list)
 
 
 #: ``progress(done, total, case, record_or_None, error_or_None)`` after each case of this run.
@@ -418,7 +420,7 @@ def _write_summary(spec: SweepSpec, out: Path, into: Path, report: SweepReport, 
     if figures and spec.figures and rows:
         from ddcm_casadi.sweep.figures import save_figures
 
-        report.figures = [p.name for p in save_figures(spec, rows, into)]
+        report.figures = [p.name for p in save_figures(spec, rows, into, skipped=report.skipped_figures)]
     doc = dict(spec=spec.document, spec_path=str(spec.path), base=str(spec.base), columns=spec.columns,
                cases=len(spec.cases), finished=sum(s != "missing" for s in status.values()),
                failed=sum(s == "failed" for s in status.values()), missing=sum(s == "missing" for s in status.values()),

@@ -408,8 +408,14 @@ def build_case(case: SweepCase, spec_or_base: SweepSpec | Path):
     base = spec_or_base.base if isinstance(spec_or_base, SweepSpec) else Path(spec_or_base)
     doc = case.doc
     with tempfile.TemporaryDirectory(prefix="ddcm-sweep-") as tmp:
-        if case.generate is not None:
-            gen = DataGenerator(**case.generate)
-            doc = attach(doc, gen, gen.write_csv(Path(tmp) / "data.csv"))
-        # The data are read eagerly, so the temporary file may go once the case is built.
-        return case_from_dict(doc, base_dir=base.parent, source=str(base))
+        if case.generate is None:
+            return case_from_dict(doc, base_dir=base.parent, source=str(base))
+        gen = DataGenerator(**case.generate)
+        csv = gen.write_csv(Path(tmp) / "data.csv")
+        doc = attach(doc, gen, csv)
+        try:
+            # The data are read eagerly, so the temporary file may go once the case is built.
+            return case_from_dict(doc, base_dir=base.parent, source=str(base))
+        except InputError as exc:  # a message names the generated data, not a file that is gone
+            raise InputError(one_line(exc).replace(f"data file {csv}", "the generated data ([generate])")
+                             .replace(str(csv), "the generated data ([generate])")) from None

@@ -12,7 +12,10 @@ plus what a study plots:
 - ``steps``, ``converged_steps``, iterations, residuals, ``data_points``, build and solve seconds;
 - ``extrapolated_steps`` (DDCM): the steps with states beyond the material data (DATA RANGE
   EXCEEDED in the table of ``ddcm-compare``), ``max_extrapolated_states`` the most such states
-  in one step; 0 for a run inside its data.
+  in one step; 0 for a run inside its data;
+- ``hertz_force``, ``hertz_error_p0``, ``hertz_error_a``, ``hertz_error_l2`` (continuum cases
+  with a ``[hertz]`` reference): the contact force and the errors against Hertz at the last step
+  (the columns of ``results.csv``), so a mesh-refinement sweep can be plotted.
 
 Wall times (``build_seconds``, ``solve_seconds``, ``case_seconds``) are measurements: they differ
 between two runs of the same case, every other value is reproducible.
@@ -30,7 +33,10 @@ from ddcm_casadi.drivers.harness import _relative_error
 METRICS = ("steps", "converged_steps", "max_error_u", "max_error_p", "max_error_u_vs_exact", "max_error_p_vs_exact",
            "error_u_vs_classical", "error_p_vs_classical", "distance_mean", "distance_max", "local_minimum_steps",
            "iterations_mean", "iterations_max", "outer_iterations_mean", "max_residual", "max_complementarity",
-           "data_points", "extrapolated_steps", "max_extrapolated_states", "build_seconds", "solve_seconds")
+           "data_points", "extrapolated_steps", "max_extrapolated_states", "hertz_force", "hertz_error_p0", "hertz_error_a", "hertz_error_l2",
+           "build_seconds", "solve_seconds")
+#: The per-step columns of ``results.csv`` whose last step is a metric of ``sweep.csv``.
+LAST_STEP = ("hertz_force", "hertz_error_p0", "hertz_error_a", "hertz_error_l2")
 #: Columns that are wall-time measurements (not reproducible from run to run).
 TIMINGS = ("build_seconds", "solve_seconds", "case_seconds")
 _FROM_SUMMARY = ("steps", "converged_steps", "max_error_u", "max_error_p", "max_error_u_vs_exact",
@@ -45,15 +51,21 @@ def _finite_stat(values: np.ndarray, stat) -> float | None:
     return float(stat(values)) if values.size else None
 
 
-def summary_rows(cmp, summary: list[dict]) -> list[dict]:
+def summary_rows(cmp, summary: list[dict], step_rows: list[dict] | None = None) -> list[dict]:
     """The metrics of every variant x formulation of a :class:`~ddcm_casadi.drivers.harness.Comparison`
-    (``summary``: its :meth:`~ddcm_casadi.drivers.harness.Comparison.summary`, computed once)."""
+    (``summary``: its :meth:`~ddcm_casadi.drivers.harness.Comparison.summary`, computed once;
+    ``step_rows``: the rows of ``results.csv``, for the :data:`LAST_STEP` columns)."""
     dataset = cmp.model.dataset
+    last: dict[tuple, dict] = {}
+    for step in step_rows or []:
+        last[(step.get("variant"), step.get("formulation"))] = step  # in step order: the last one stays
     rows = []
     for rec in summary:
         variant, name = rec["variant"], rec["formulation"]
         row = dict(variant=variant, formulation=name)
         row.update({k: rec.get(k) for k in _FROM_SUMMARY})
+        final = last.get((variant, name), {})
+        row.update({k: final[k] for k in LAST_STEP if k in final})
         if variant == "ddcm":
             r = cmp.results[(variant, name)]
             distance = r.array("distance")
