@@ -35,6 +35,14 @@ distributed = pytest.importorskip("distributed")
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def sweep_cli(*args: str) -> tuple[int, str]:
+    """``ddcm-sweep ARGS`` in a child process (a LocalCluster leaves threads in the process that
+    ran it, which makes later forked runs of the test session serial): exit status and stderr."""
+    proc = subprocess.run([sys.executable, "-m", "ddcm_casadi.commands.sweep", *args], capture_output=True,
+                          text=True, timeout=300)
+    return proc.returncode, proc.stderr
+
+
 # ---------------------------------------------------------------- every case validated up front
 def test_a_bad_value_anywhere_in_the_grid_is_refused_before_any_work(tmp_path, capsys):
     """A bad value was refused up front only in the first case; later it failed its case at run time."""
@@ -185,16 +193,18 @@ def test_a_scheduler_that_never_answers_is_given_up_in_bounded_time(tmp_path):
     server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     server.bind(("127.0.0.1", 0))
     server.listen(8)
-    accepted = []
+    server.settimeout(0.1)
+    accepted, stop = [], threading.Event()
 
-    def accept() -> None:
-        try:
-            while True:
-                accepted.append(server.accept()[0])  # and never answer
-        except OSError:
-            return
+    def accept() -> None:  # and never answer
+        while not stop.is_set():
+            try:
+                accepted.append(server.accept()[0])
+            except socket.timeout:
+                continue
 
-    threading.Thread(target=accept, daemon=True).start()
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
     port = server.getsockname()[1]
     code = ("import sys, ddcm_casadi.sweep.runner as r; r.HANDSHAKE_TIMEOUT = 1.0; "
             "from ddcm_casadi.commands.sweep import main; sys.exit(main(sys.argv[1:]))")
@@ -203,6 +213,8 @@ def test_a_scheduler_that_never_answers_is_given_up_in_bounded_time(tmp_path):
         proc = subprocess.run([sys.executable, "-c", code, str(path), "--out", str(tmp_path / "out"), "-q",
                                "--scheduler", f"tcp://127.0.0.1:{port}"], capture_output=True, text=True, timeout=90)
     finally:
+        stop.set()
+        thread.join(timeout=10)  # no thread outlives the test (forked runs need a single-threaded process)
         server.close()
         for conn in accepted:
             conn.close()
@@ -213,48 +225,55 @@ def test_a_scheduler_that_never_answers_is_given_up_in_bounded_time(tmp_path):
 
 
 # ---------------------------------------------------------------------------- no dashboard
-def _listening(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+_PROBE = """
+import json, signal, socket
+from ddcm_casadi.sweep.runner import dask_client
+
+def listening():
+    with socket.socket() as probe:
         probe.settimeout(1.0)
-        return probe.connect_ex(("127.0.0.1", port)) == 0
+        return probe.connect_ex(("127.0.0.1", 8787)) == 0
+
+if __name__ == "__main__":
+    before = listening()  # another program (or a concurrent test run) may hold it
+    with dask_client(workers=1) as client:
+        during = listening()
+        port = client.scheduler_info()["services"].get("dashboard")
+        ignored = sorted({int(v) for v in client.run(lambda: signal.getsignal(signal.SIGINT)).values()})
+    print(json.dumps(dict(before=before, during=during, port=port, ignored=ignored)))
+"""
 
 
 def test_a_local_cluster_opens_nothing_on_8787(tmp_path):
     """dashboard_address=None turned the dashboard's pages off, but the scheduler still listened on 8787."""
-    from ddcm_casadi.sweep.runner import dask_client
-
-    before = _listening(8787)  # another program (or a concurrent test run) may hold it
-    with dask_client(workers=1) as client:
-        during = _listening(8787)
-        port = client.scheduler_info()["services"].get("dashboard")
-        ignored = set(client.run(lambda: signal.getsignal(signal.SIGINT)).values())
-    assert port != 8787 and (before or not during)
-    assert ignored == {signal.SIG_IGN}  # the workers ignore the terminal's Ctrl-C
+    script = tmp_path / "probe.py"
+    script.write_text(_PROBE)
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    seen = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert seen["port"] != 8787 and (seen["before"] or not seen["during"])
+    assert seen["ignored"] == [int(signal.SIG_IGN)]  # the workers ignore the terminal's Ctrl-C
 
 
 # ------------------------------------------------------------- data range and --strict
-def test_data_range_and_non_converged_steps_reach_sweep_csv_warnings_and_strict(tmp_path, capsys):
+def test_data_range_and_non_converged_steps_reach_sweep_csv_warnings_and_strict(tmp_path):
     """A case beyond its data (DATA RANGE EXCEEDED) or with a non-converged step exited 0 with no word."""
-    from ddcm_casadi.commands.sweep import main as sweep_main
-
     path = write_spec(tmp_path / "spec", 'base = "base.toml"\nvariants = ["classical", "ddcm"]\n'
                                          'formulations = ["fischer_burmeister"]\n[generate]\n'
                                          '[grid]\n"generate.strain_min" = [-0.01, -0.001]\n')
     out = tmp_path / "out"
-    assert sweep_main([str(path), "--out", str(out), "--workers", "1", "-q", "--no-plots"]) == 0
-    err = capsys.readouterr().err
+    code, err = sweep_cli(str(path), "--out", str(out), "--workers", "1", "-q", "--no-plots")
+    assert code == 0, err
     rows = read_csv(out / "sweep.csv")
     ddcm = [r for r in rows if r["variant"] == "ddcm"]
     assert [r["extrapolated_steps"] for r in ddcm][0] == "0" and int(ddcm[1]["extrapolated_steps"]) > 0
     assert int(ddcm[1]["max_extrapolated_states"]) >= 1
     assert "WARNING: DATA RANGE EXCEEDED in 1 cases" in err and ddcm[1]["case"] in err
-    assert sweep_main([str(path), "--out", str(out), "--workers", "1", "-q", "--strict"]) == 3  # (nothing reruns)
-    capsys.readouterr()
+    assert sweep_cli(str(path), "--out", str(out), "--workers", "1", "-q", "--strict")[0] == 3  # (nothing reruns)
     # a non-converged step: the warning and --strict (two outer iterations of DDCM are not enough)
     path = write_spec(tmp_path / "nc", 'base = "base.toml"\nvariants = ["ddcm"]\nformulations = ["fischer_burmeister"]\n'
                                        '[grid]\n"ddcm.max_outer" = [2]\n')
-    code = sweep_main([str(path), "--out", str(tmp_path / "nc_out"), "--workers", "1", "-q", "--strict", "--no-plots"])
-    err = capsys.readouterr().err
+    code, err = sweep_cli(str(path), "--out", str(tmp_path / "nc_out"), "--workers", "1", "-q", "--strict", "--no-plots")
     row = read_csv(tmp_path / "nc_out" / "sweep.csv")[0]
     assert row["converged_steps"] != row["steps"], row
     assert code == 3 and "WARNING: 1 cases have non-converged steps" in err
@@ -278,25 +297,23 @@ def test_generate_on_a_continuum_is_one_line_without_a_temporary_file(tmp_path):
     assert "ddcm-sweep-" not in str(exc.value) and "continuum" in str(exc.value) and "\n" not in str(exc.value)
 
 
-def test_hertz_metrics_reach_sweep_csv_and_an_empty_figure_is_not_written(tmp_path, capsys):
+def test_hertz_metrics_reach_sweep_csv_and_an_empty_figure_is_not_written(tmp_path):
     """The Hertz metrics of continuum cases did not reach sweep.csv, and their figure was written empty."""
-    from ddcm_casadi.commands.sweep import main as sweep_main
-
     spec = ('base = "base.toml"\nvariants = ["classical"]\nformulations = ["fischer_burmeister"]\n'
             '[grid]\n"mesh.divisions" = [[4, 4], [6, 6]]\n'
             '[[figures]]\nkind = "band"\nx = "mesh.divisions"\ny = "hertz_error_p0"\nfile = "p0.png"\n')
     out = tmp_path / "out"
-    assert sweep_main([str(write_spec(tmp_path / "hertz", spec, _hertz_base())), "--out", str(out), "--workers", "1",
-                       "-q"]) == 0
+    code, err = sweep_cli(str(write_spec(tmp_path / "hertz", spec, _hertz_base())), "--out", str(out), "--workers", "1",
+                          "-q")
+    assert code == 0, err
     rows = read_csv(out / "sweep.csv")
     assert len(rows) == 2 and all(float(r["hertz_force"]) > 0 for r in rows)
     assert all(0 < float(r[k]) < 1 for r in rows for k in ("hertz_error_p0", "hertz_error_a", "hertz_error_l2"))
-    capsys.readouterr()
     # a bar has no Hertz reference: its figure of hertz_error_p0 is skipped with a note, not written empty
     bar = ('base = "base.toml"\nformulations = ["fischer_burmeister"]\n[grid]\n"ddcm.c" = [3e11, 4e11]\n'
            '[[figures]]\nkind = "rate"\nx = "ddcm.c"\ny = "hertz_error_p0"\nfile = "p0.png"\n')
     out = tmp_path / "bar_out"
-    assert sweep_main([str(write_spec(tmp_path / "bar", bar)), "--out", str(out), "--workers", "1", "-q"]) == 0
-    err = capsys.readouterr().err
+    code, err = sweep_cli(str(write_spec(tmp_path / "bar", bar)), "--out", str(out), "--workers", "1", "-q")
+    assert code == 0, err
     assert not (out / "p0.png").exists() and "figure not drawn: p0.png: no finished case has a value" in err
     assert json.loads((out / "sweep.json").read_text())["figures"] == []
