@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import signal
@@ -28,7 +27,7 @@ import pytest
 
 from ddcm_casadi.errors import InputError
 
-from .test_sweep import BASE, read_csv, write_spec
+from .test_sweep import read_csv, write_spec
 
 distributed = pytest.importorskip("distributed")
 
