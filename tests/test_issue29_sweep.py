@@ -23,6 +23,7 @@ import time
 import tracemalloc
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ddcm_casadi.errors import InputError
@@ -285,15 +286,48 @@ def _hertz_base() -> str:
     return "\n".join(line for line in text.splitlines() if not line.startswith("refine_near"))
 
 
-def test_generate_on_a_continuum_is_one_line_without_a_temporary_file(tmp_path):
-    """[generate] on a continuum case failed with a message about a deleted temporary data file."""
+def test_generate_makes_mandel_data_for_a_continuum(tmp_path):
+    """[generate] on a continuum case failed with a message about a deleted temporary data file;
+    it now makes the case's Mandel data (3 components in plane strain), noise on every component."""
+    from ddcm_casadi.data.dataset import MaterialDataset
+    from ddcm_casadi.data.metric import isotropic_elasticity
+    from ddcm_casadi.sweep.generators import DataGenerator
     from ddcm_casadi.sweep.spec import load_spec
 
-    path = write_spec(tmp_path, 'base = "base.toml"\n[generate]\nyoungs_modulus = 200e9\npoints = 5\n'
-                                '[grid]\n"generate.noise" = [0.0]\n', _hertz_base())
-    with pytest.raises(InputError) as exc:
-        load_spec(path)
-    assert "ddcm-sweep-" not in str(exc.value) and "continuum" in str(exc.value) and "\n" not in str(exc.value)
+    base = _hertz_base()
+    spec = ('base = "base.toml"\nvariants = ["ddcm"]\nformulations = ["fischer_burmeister"]\n'
+            '[generate]\npoints = 7\n[grid]\n"generate.noise" = [0.0, 0.01]\n')
+    path = write_spec(tmp_path, spec, base)
+    cases = list(load_spec(path).cases)
+    generator = DataGenerator(**cases[0].generate)  # the resolved generator a case carries
+    assert generator.components == 3 and generator.poisson_ratio == 0.3 and generator.grading == 2
+    strain, stress = generator.sample()
+    C = isotropic_elasticity(200e9, 0.3, 2)[0]
+    reference = MaterialDataset.hookean_grid(C, -0.012, 0.012, 7, c=C, grading=2)
+    np.testing.assert_array_equal(strain, reference.strain)
+    np.testing.assert_allclose(stress, reference.stress, rtol=1e-15, atol=0)
+    noisy = DataGenerator(**cases[1].generate).sample()[1]
+    # multiplicative noise, 1 %: every nonzero component moves, by a few percent at most (5 sigma)
+    moved = stress != 0
+    assert np.all(noisy[moved] != stress[moved]) and np.max(np.abs(noisy - stress)) <= 0.05 * np.max(np.abs(stress))
+    out = tmp_path / "out"
+    code, err = sweep_cli(str(path), "--out", str(out), "--workers", "1", "-q")
+    assert code == 0, err
+    rows = read_csv(out / "sweep.csv")
+    assert len(rows) == 2 and all(r["status"] == "ok" and int(r["converged_steps"]) == int(r["steps"]) for r in rows)
+
+
+def test_generate_refuses_what_mandel_data_cannot_be(tmp_path):
+    """One line, before any work: a one-dimensional law, or a mesh file without components."""
+    from ddcm_casadi.sweep.spec import load_spec
+
+    for generate, message in (('law = "tanh"\nstress_scale = 1e9', "makes one-component data"),
+                              ("components = 4", "components must be 3 (plane strain) or 6 (3-D)")):
+        path = write_spec(tmp_path / generate.split()[0], f'base = "base.toml"\n[generate]\npoints = 5\n{generate}\n'
+                          '[grid]\n"generate.noise" = [0.0]\n', _hertz_base())
+        with pytest.raises(InputError) as exc:
+            load_spec(path)
+        assert message in str(exc.value) and "\n" not in str(exc.value) and "ddcm-sweep-" not in str(exc.value)
 
 
 def test_hertz_metrics_reach_sweep_csv_and_an_empty_figure_is_not_written(tmp_path):
