@@ -2,8 +2,9 @@
 
 Every module of ``ddcm_casadi`` (and of ``formulations/``, installed as ``ddcm_casadi.formulations``) is
 parsed with :mod:`ast`; every ``import`` and ``from ... import`` at any depth counts (an import inside a
-function is still a dependency, only a later one), except those under ``if TYPE_CHECKING:``, which never
-run. A cycle among the resulting module graph fails the test and is named.
+function is still a dependency, only a later one), those under ``if TYPE_CHECKING:`` included: a type
+that needs a module above is a dependency on it too (a seam, such as a protocol, breaks it). A cycle
+among the resulting module graph fails the test and is named.
 """
 
 from __future__ import annotations
@@ -29,23 +30,12 @@ def package_modules() -> dict[str, Path]:
     return modules
 
 
-def _is_type_checking(test: ast.expr) -> bool:
-    """Whether an ``if`` test is ``TYPE_CHECKING`` or ``typing.TYPE_CHECKING``."""
-    if isinstance(test, ast.Name):
-        return test.id == "TYPE_CHECKING"
-    return isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
-
-
 def _imported_names(tree: ast.AST, module: str, is_package: bool, modules: dict[str, Path]) -> list[str]:
-    """The absolute dotted names imported anywhere in ``tree`` (``if TYPE_CHECKING:`` bodies skipped)."""
+    """The absolute dotted names imported anywhere in ``tree`` (``if TYPE_CHECKING:`` bodies included)."""
     names: list[str] = []
     package = module if is_package else module.rpartition(".")[0]
 
     def visit(node: ast.AST) -> None:
-        if isinstance(node, ast.If) and _is_type_checking(node.test):
-            for child in node.orelse:  # only the else branch runs
-                visit(child)
-            return
         if isinstance(node, ast.Import):
             names.extend(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):

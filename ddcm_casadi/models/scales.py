@@ -10,7 +10,7 @@ caches them. The same solves estimate the strain the obstacles impose, which
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -18,8 +18,39 @@ import scipy.sparse as sp
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import SingularMatrix, factorize
 
-if TYPE_CHECKING:
-    from ddcm_casadi.models.base import ContactModel
+
+
+class ContactModel(Protocol):
+    """What the scales read of a :class:`~ddcm_casadi.models.base.ContactModel` (a protocol, so
+    that this module, which the model class calls, does not import it back)."""
+
+    strain_operator: sp.csr_matrix
+    volumes: np.ndarray
+    gap_operator: sp.csr_matrix
+    contact_area: np.ndarray
+    gap_offsets: np.ndarray
+    loads: np.ndarray
+    load_parameter: np.ndarray
+    load_parameter_name: str
+    youngs_modulus: np.ndarray | None
+    dataset: Any
+    length_scale: float
+    strain_components: int
+    kinematics: str
+    _cache: dict
+
+    @property
+    def n_dofs(self) -> int: ...
+
+    @property
+    def n_points(self) -> int: ...
+
+    @property
+    def n_contacts(self) -> int: ...
+
+    def point_stiffness(self, kind: str) -> np.ndarray: ...
+
+    def scales_for(self, kind: str) -> dict: ...
 
 #: Imposed strain beyond which :func:`load_path_warnings` warns: small-strain kinematics then
 #: differ from finite-strain ones by more than ~5 % (Green-Lagrange ``e + e^2/2`` vs ``e``).

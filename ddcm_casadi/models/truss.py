@@ -37,34 +37,15 @@ from ddcm_casadi.data.dataset import MaterialDataset, check_positive
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import to_casadi
 from ddcm_casadi.models.base import ContactModel, FigureSpec, drawn_formulation
-from ddcm_casadi.models.truss_assembly import (AXES, check_not_mechanism, contact_areas,
+from ddcm_casadi.models.truss_assembly import (AXES, Obstacle, check_not_mechanism, contact_areas,
                                                contact_pairs, fixed_directions, gap_operator, load_path,
                                                member_data, member_geometry, node_coordinates, per_member,
                                                reference_loads, strain_operator)
 
-#: The names importers use; the assembly pieces (supports' axis letters, the mechanism check, the
-#: member data) are re-exported from :mod:`ddcm_casadi.models.truss_assembly`.
+#: The names importers use; the assembly pieces (supports' axis letters, the obstacle record, the
+#: mechanism check, the member data) are re-exported from :mod:`ddcm_casadi.models.truss_assembly`.
 __all__ = ["AXES", "Obstacle", "StoppedBarModel", "TrussModel", "bar_chain",
            "check_not_mechanism", "member_data", "truss_model", "warren_truss"]
-
-
-@dataclass(frozen=True)
-class Obstacle:
-    """A rigid plane ``n . x = d`` acting on ``nodes``; the admissible side is ``n . x >= d``.
-
-    Parameters
-    ----------
-    normal : sequence of float
-        Outward normal of the obstacle (normalised here).
-    offset : float or sequence of float
-        ``d`` (m): a constant, or one value per load step (a moving obstacle).
-    nodes : sequence of int
-        Nodes that may touch this obstacle (one contact pair each).
-    """
-
-    normal: Sequence[float]
-    offset: float | Sequence[float]
-    nodes: Sequence[int]
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,7 +15,7 @@ Every operator is built from index arrays, without a loop over members.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -24,8 +24,25 @@ import scipy.sparse.linalg as spla
 from ddcm_casadi.data.dataset import MaterialDataset, PointData
 from ddcm_casadi.errors import InputError
 
-if TYPE_CHECKING:
-    from ddcm_casadi.models.truss import Obstacle
+@dataclass(frozen=True)
+class Obstacle:
+    """A rigid plane ``n . x = d`` acting on ``nodes``; the admissible side is ``n . x >= d``.
+
+    Parameters
+    ----------
+    normal : sequence of float
+        Outward normal of the obstacle (normalised here).
+    offset : float or sequence of float
+        ``d`` (m): a constant, or one value per load step (a moving obstacle).
+    nodes : sequence of int
+        Nodes that may touch this obstacle (one contact pair each).
+    """
+
+    normal: Sequence[float]
+    offset: float | Sequence[float]
+    nodes: Sequence[int]
+
+
 
 #: Axis letters of supports (``"xy"``, ``"z"``, ...).
 AXES = "xyz"

@@ -22,8 +22,8 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
-    "continuum_model": "model", "ContinuumModel": "model", "Material": "model", "Support": "model",
-    "Traction": "model", "BodyForce": "model", "Contact": "model",
+    "continuum_model": "model", "ContinuumModel": "model", "Material": "inputs", "Support": "inputs",
+    "Traction": "inputs", "BodyForce": "inputs", "Contact": "inputs",
     "Plane": "obstacles", "Ball": "obstacles", "Circle": "obstacles", "Sphere": "obstacles",
     "Cylinder": "obstacles", "FlatPunch": "obstacles", "SignedDistance": "obstacles",
     "HertzReference": "hertz",

@@ -12,7 +12,7 @@ Each checks its own input with a one-line :class:`~ddcm_casadi.errors.InputError
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -23,10 +23,8 @@ from ddcm_casadi.data.metric import isotropic_elasticity
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.models.continuum import fem
 from ddcm_casadi.models.continuum.mesh import select_facets
-
-if TYPE_CHECKING:
-    from ddcm_casadi.models.continuum.model import BodyForce, Contact, Material, Support, Traction
-    from ddcm_casadi.models.continuum.obstacles import Obstacle
+from ddcm_casadi.models.continuum.inputs import BodyForce, Contact, Material, Support, Traction
+from ddcm_casadi.models.continuum.obstacles import Obstacle
 
 #: Axis letters of support components.
 AXES = "xyz"

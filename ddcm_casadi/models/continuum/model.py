@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -37,8 +37,8 @@ from ddcm_casadi.models.base import ContactModel, FigureSpec, drawn_formulation
 from ddcm_casadi.models.continuum import fem
 from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, isotropic_law,
                                                    point_data, reference_loads, step_count)
+from ddcm_casadi.models.continuum.inputs import BodyForce, Contact, Material, Support, Traction
 from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
-from ddcm_casadi.models.continuum.obstacles import Obstacle
 
 #: Above this Poisson's ratio, linear (P1) elements lock (:meth:`ContinuumModel.path_warnings`):
 #: the bulk modulus over the shear modulus, ``2 (1 + nu) / (3 (1 - 2 nu))``, passes 9.7 at 0.45
@@ -46,63 +46,6 @@ from ddcm_casadi.models.continuum.obstacles import Obstacle
 #: dominate; measured on a Hertz contact: P1 gives 2.75 x P2's force at nu = 0.4999. The usual
 #: threshold of thumb in finite-element practice.
 LOCKING_POISSON = 0.45
-
-#: A boundary: its name in ``mesh.boundaries``, or a predicate on facet midpoints ``(d, nf)``.
-Where = str | Callable[[np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class Material:
-    """The material of one region.
-
-    Parameters
-    ----------
-    region : str or None
-        A subdomain name of the mesh; ``None``: every element no other material claims.
-    youngs_modulus, poisson_ratio : float, optional
-        The isotropic law (the classical variant needs it in every region).
-    data : int, optional
-        Index of this region's data set in the ``datasets`` of :func:`continuum_model` (the
-        data-driven variant needs one in every region).
-    """
-
-    region: str | None = None
-    youngs_modulus: float | None = None
-    poisson_ratio: float | None = None
-    data: int | None = None
-
-
-@dataclass(frozen=True)
-class Support:
-    """Fix the displacement components ``components`` (e.g. ``"xy"``, ``"z"``) on a boundary."""
-
-    where: Where
-    components: str
-
-
-@dataclass(frozen=True)
-class Traction:
-    """A constant traction (Pa) on a boundary, scaled by the load factor of each step."""
-
-    where: Where
-    traction: Sequence[float]
-
-
-@dataclass(frozen=True)
-class BodyForce:
-    """A constant body force (N/m^3) on a region (``None``: everywhere), scaled by the load factor."""
-
-    force_density: Sequence[float]
-    region: str | None = None
-
-
-@dataclass(frozen=True)
-class Contact:
-    """A rigid ``obstacle`` that the dofs of the boundary ``where`` may touch."""
-
-    obstacle: Obstacle
-    where: Where
-
 
 @dataclass(frozen=True, eq=False)
 class ContinuumModel(ContactModel):

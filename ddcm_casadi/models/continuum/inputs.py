@@ -1,0 +1,68 @@
+"""What a continuum model is built from (:func:`~ddcm_casadi.models.continuum.model.continuum_model`):
+the records of its materials, supports, loads and contacts, shared by the builder and its checked
+pieces (:mod:`ddcm_casadi.models.continuum.assembly`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ddcm_casadi.models.continuum.obstacles import Obstacle
+
+#: A boundary: its name in ``mesh.boundaries``, or a predicate on facet midpoints ``(d, nf)``.
+Where = str | Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Material:
+    """The material of one region.
+
+    Parameters
+    ----------
+    region : str or None
+        A subdomain name of the mesh; ``None``: every element no other material claims.
+    youngs_modulus, poisson_ratio : float, optional
+        The isotropic law (the classical variant needs it in every region).
+    data : int, optional
+        Index of this region's data set in the ``datasets`` of :func:`continuum_model` (the
+        data-driven variant needs one in every region).
+    """
+
+    region: str | None = None
+    youngs_modulus: float | None = None
+    poisson_ratio: float | None = None
+    data: int | None = None
+
+
+@dataclass(frozen=True)
+class Support:
+    """Fix the displacement components ``components`` (e.g. ``"xy"``, ``"z"``) on a boundary."""
+
+    where: Where
+    components: str
+
+
+@dataclass(frozen=True)
+class Traction:
+    """A constant traction (Pa) on a boundary, scaled by the load factor of each step."""
+
+    where: Where
+    traction: Sequence[float]
+
+
+@dataclass(frozen=True)
+class BodyForce:
+    """A constant body force (N/m^3) on a region (``None``: everywhere), scaled by the load factor."""
+
+    force_density: Sequence[float]
+    region: str | None = None
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A rigid ``obstacle`` that the dofs of the boundary ``where`` may touch."""
+
+    obstacle: Obstacle
+    where: Where
