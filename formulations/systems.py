@@ -9,8 +9,10 @@ expressions (``psi``, ``l``) once and do not know which builder they use. Here t
 
 .. math::  r(z; P) = A z + A_P P + N(z; P) + \sum_o L_o\, \psi_o(y(z; P))
 
-is one ``SX`` expression and its Jacobian ``dr/dz`` comes by CasADi's sparse automatic
-differentiation. The projection's saddle point is the stationarity of
+is one ``SX`` expression (``N`` the problem's own nonlinear residual, in the systems of
+:meth:`ExpressionPairSystem.mcp`, :meth:`~ExpressionPairSystem.eliminated` and
+:meth:`~ExpressionPairSystem.saddle`) and its Jacobian ``dr/dz`` comes by CasADi's sparse
+automatic differentiation. The projection's saddle point is the stationarity of
 ``f(x) + eta^T h(x, p) + sum_i l(y_i)`` with exact second derivatives of ``f`` and ``h``.
 """
 
@@ -138,18 +140,14 @@ class ExpressionPairSystem(SystemBuilder):
         return sum(ca.mtimes(to_casadi(sp.csr_matrix(L)), v) for (_, L), v in zip(outputs, values))
 
     def build(self, name: str, *, linear=None, linear_params=None, rows: int | None = None,
-              outputs=(), nonlinear: ca.SX | None = None) -> SystemFunctions:
-        """The system ``r = A z + A_P P + N + sum_o L_o psi_o`` (see
-        :meth:`PairSystem.build <ddcm_casadi.formulations.pairs.PairSystem.build>`); ``nonlinear``
-        is ``N``, an expression of the system's symbols."""
-        rows = linear.shape[0] if linear is not None else (nonlinear.size1() if nonlinear is not None else int(rows))
-        r = ca.SX(rows, 1)
+              outputs=()) -> SystemFunctions:
+        """The system ``r = A z + A_P P + sum_o L_o psi_o`` (see
+        :meth:`PairSystem.build <ddcm_casadi.formulations.pairs.PairSystem.build>`)."""
+        r = ca.SX(linear.shape[0] if linear is not None else int(rows), 1)
         if linear is not None:
             r += _product(linear, self._z, self.nz)
         if linear_params is not None:
             r += _product(linear_params, self._P, self.parameters.size)
-        if nonlinear is not None:
-            r += nonlinear
         return self._finish(name, r + self._scattered(outputs))
 
     # ------------------------------------------------------------------ the systems of the formulations

@@ -6,6 +6,7 @@ parameters (the load step, the assigned data, the previous step's history)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import casadi as ca
 import numpy as np
@@ -114,14 +115,27 @@ def distance_weight(model: ContactModel) -> sp.csr_matrix:
     return block_diagonal(blocks[material] * np.asarray(model.volumes, float)[:, None, None])
 
 
-def _internal_force(model: ContactModel, s: dict, uh: ca.SX, stress: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """``(E(u), B(u)^T W stress, |B(u)|^T W |stress|)`` with ``u = s_d uh`` and ``B(u) = dE/du``
-    by automatic differentiation: the internal forces of a nonlinear strain measure, whose
-    virtual work is ``sum_i w_i stress_i . dE_i``."""
+def _point_major(mk: int, k: int) -> np.ndarray:
+    """The rows of ``[strains; stresses]`` (each ``m k`` long) in point-major order
+    ``[e_1; s_1; e_2; s_2; ...]``, ``k`` components each: the order of :func:`distance_weight`."""
+    point, c = np.divmod(np.arange(2 * mk), 2 * k)
+    return np.where(c < k, point * k + c, mk + point * k + c - k)
+
+
+def _equilibrium(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, f: ca.SX, GtA: ca.DM,
+                 stress_of: Callable[[ca.SX], ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """``(E, r, t)``: the strains ``E(u)`` (``u = s_d uh``), the scaled equilibrium residual
+    ``r = (B(u)^T W stress - G^T a p - f) / s_f`` with ``stress = stress_of(E)``, ``p = s_s ph`` and
+    ``B(u) = dE/du`` by automatic differentiation (the virtual work ``sum_i w_i stress_i . dE_i``
+    of a nonlinear strain measure), and ``t`` the size of its terms (for relative residuals)."""
     E = model.strain_expression(s["displacement"] * uh)
+    stress = stress_of(E)
     B = ca.jacobian(E, uh) / s["displacement"]
     w = ca.DM(np.repeat(np.asarray(model.volumes, float), model.strain_components))
-    return E, ca.mtimes(B.T, w * stress), ca.mtimes(ca.fabs(B).T, w * ca.fabs(stress))
+    r = (ca.mtimes(B.T, w * stress) - s["stress"] * ca.mtimes(GtA, ph) - f) / s["force"]
+    t = (ca.mtimes(ca.fabs(B).T, w * ca.fabs(stress)) + s["stress"] * ca.mtimes(ca.fabs(GtA), ca.fabs(ph))
+         + ca.fabs(f)) / s["force"]
+    return E, r, t
 
 
 def _build_nonlinear(model: ContactModel) -> ProblemPair:
@@ -135,17 +149,13 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
     """
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
     GtA = to_casadi((model.gap_operator.T @ sp.diags(model.contact_area)).tocsr())
-    absGtA = ca.fabs(GtA)
     classical = projection = None
     if model.youngs_modulus is not None:
         s = model.scales_for("classical")
         P = Parameters(gap0=nc, f=n, **model.history_sizes())
         z, Ps = ca.SX.sym("z", n + nc), ca.SX.sym("P", P.size)
-        uh, ph, f = z[:n], z[n:], Ps[P.slice("f")]
-        E = model.strain_expression(s["displacement"] * uh)
-        _, internal, size = _internal_force(model, s, uh, to_casadi(model.material_matrix()) @ E)
-        F = (internal - s["stress"] * ca.mtimes(GtA, ph) - f) / s["force"]
-        terms = (size + s["stress"] * ca.mtimes(absGtA, ca.fabs(ph)) + ca.fabs(f)) / s["force"]
+        D = to_casadi(model.material_matrix())
+        _, F, terms = _equilibrium(model, s, z[:n], z[n:], Ps[P.slice("f")], GtA, lambda E: ca.mtimes(D, E))
         classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),),
                                            residual_map=NonlinearMap.of(F, z, Ps, terms, "residual"), distance=None,
                                            **_common(model, s, 1.0 / s["modulus"], n + nc, P))
@@ -154,13 +164,10 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
         mk = m * k
         P = Parameters(gap0=nc, f=n, strain_star=mk, stress_star=mk, **model.history_sizes())
         z, Ps = ca.SX.sym("z", n + mk + nc), ca.SX.sym("P", P.size)
-        uh, stress, ph, f = z[:n], s["stress"] * z[n:n + mk], z[n + mk:], Ps[P.slice("f")]
-        E, internal, size = _internal_force(model, s, uh, stress)
-        h = (internal - s["stress"] * ca.mtimes(GtA, ph) - f) / s["force"]
-        terms = (size + s["stress"] * ca.mtimes(absGtA, ca.fabs(ph)) + ca.fabs(f)) / s["force"]
+        stress = s["stress"] * z[n:n + mk]
+        E, h, terms = _equilibrium(model, s, z[:n], z[n + mk:], Ps[P.slice("f")], GtA, lambda E: stress)
         stacked = ca.vertcat(E - Ps[P.slice("strain_star")], stress - Ps[P.slice("stress_star")])
-        point, c = np.divmod(np.arange(2 * mk), 2 * k)
-        d = stacked[np.where(c < k, point * k + c, mk + point * k + c - k).tolist()]
+        d = stacked[_point_major(mk, k).tolist()]
         W = to_casadi(distance_weight(model) / s["energy"])
         objective = NonlinearObjective(ca.Function("distance", [z, Ps], [0.5 * ca.dot(d, ca.mtimes(W, d))]))
         projection = ComplementarityProblem(
@@ -201,8 +208,7 @@ def build_problems(model: ContactModel) -> ProblemPair:
         stacked = Affine(sp.vstack([sp.hstack([model.strain_operator * s["displacement"], sp.csr_matrix((mk, mk + nc))]),
                                     _selection(mk, n, nz, s["stress"])]),
                          sp.vstack([_selection(mk, nc + n, P.size, -1.0), _selection(mk, nc + n + mk, P.size, -1.0)]))
-        point, c = np.divmod(np.arange(2 * mk), 2 * k)
-        order = np.where(c < k, point * k + c, mk + point * k + c - k)
+        order = _point_major(mk, k)
         d = Affine(stacked.z[order], stacked.params[order])
         projection = ComplementarityProblem(
             kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=h,
