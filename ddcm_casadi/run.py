@@ -102,7 +102,7 @@ def estimate_bytes(model, runs: int = 1) -> int:
     per_run = factor_bytes(n, nnz_k, model.strain_components >= 6) + 12.0 * (B.nnz + model.gap_operator.nnz)
     data = 0.0
     if model.dataset is not None:
-        data = DATA_BYTES_PER_VALUE * sum(np.asarray(d.strain).size for d in getattr(model.dataset, "datasets", []))
+        data = DATA_BYTES_PER_VALUE * sum(np.asarray(d.strain).size for d in model.dataset.datasets)
     return int(per_run * max(int(runs), 1) + data)
 
 

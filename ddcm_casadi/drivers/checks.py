@@ -139,8 +139,7 @@ def equilibrium_error(step: StepResult, model, force_floor: float = 0.0) -> floa
     Defined for small kinematics, the normal (Signorini) contact law and models whose steps carry
     no history (their load is ``model.loads[step]``), with the step's stress known; ``None`` else.
     """
-    if (step.stress is None or getattr(model, "kinematics", "small") != "small"
-            or getattr(model, "contact_law", "signorini") != "signorini" or model.history_sizes()):
+    if step.stress is None or model.kinematics != "small" or model.contact_law != "signorini" or model.history_sizes():
         return None
     B = model.strain_operator
     stress = np.asarray(step.stress, dtype=float).reshape(-1)
