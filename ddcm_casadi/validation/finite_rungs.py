@@ -74,7 +74,7 @@ def snap_table(cmp) -> str:
     return "\n".join(lines)
 
 
-def _penalty_tolerances(cmp, u_ref: np.ndarray, p_ref: np.ndarray) -> tuple[float, float]:
+def penalty_tolerances(cmp, u_ref: np.ndarray, p_ref: np.ndarray) -> tuple[float, float]:
     """Relative bounds of the penalty's error: penetration ``max p / gamma`` in ``u``, and
     ``max |F'(w)| max p / (gamma a)`` in ``p`` (10 % allowance for the penalty's own pressure)."""
     m = cmp.model
@@ -91,7 +91,7 @@ def _penalty_tolerances(cmp, u_ref: np.ndarray, p_ref: np.ndarray) -> tuple[floa
 def _classical_checks(cmp) -> list[Check]:
     m = cmp.model
     u_ref, p_ref = _closed_form(m)
-    tol_u, tol_p = _penalty_tolerances(cmp, u_ref, p_ref)
+    tol_u, tol_p = penalty_tolerances(cmp, u_ref, p_ref)
     ref_status = contact_status(m, p_ref)
     out = []
     for f in registry.available():
