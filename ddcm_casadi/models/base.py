@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
 
+import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
@@ -287,6 +288,12 @@ class ContactModel:
         """Classical stresses ``D strain`` (flat, point-major, as :meth:`strain` gives them)."""
         return self.material_matrix() @ np.asarray(strain)
 
+    def stress_expression(self, strain):
+        """:meth:`stress` for a CasADi symbol ``strain`` (the classical law of the nonlinear
+        problems): ``D strain``. A model kind with a nonlinear law (hyperelastic continua)
+        overrides both."""
+        return ca.mtimes(to_casadi(self.material_matrix()), strain)
+
     def stiffness(self) -> sp.csr_matrix:
         """Classical stiffness ``K = B^T W D B`` (sparse; ``W`` the volumes on every component)."""
         B = self.strain_operator
@@ -299,6 +306,29 @@ class ContactModel:
         ``gap0`` and ``f`` (none here; a frictional law adds the previous tangential
         displacements, a follower load the previous configuration)."""
         return {}
+
+    def step_sizes(self) -> dict[str, int]:
+        """Names and sizes of a load step's parameters, in order: ``gap0`` and ``f``, those a
+        model kind adds (:meth:`load_names`: e.g. an obstacle's travel per pair for gaps at the
+        current configuration), then :meth:`history_sizes`."""
+        return dict(gap0=self.n_contacts, f=self.n_dofs, **self.history_sizes())
+
+    def load_names(self) -> tuple[str, ...]:
+        """The step parameters that grow with the load (linear in the load parameter between two
+        steps, so that a sub-step interpolates them): ``gap0`` and ``f``."""
+        return ("gap0", "f")
+
+    def gap_expression(self, u, values):
+        """The gaps (physical, ``nc``) for a CasADi symbol ``u`` (free displacements) with the
+        step's parameters ``values(name)`` (symbols): ``G u + gap0``, affine. A model kind whose
+        gaps are nonlinear (finite kinematics against curved obstacles) overrides this; the
+        contact forces are then ``(dg/du)^T a p``."""
+        return ca.mtimes(to_casadi(self.gap_operator), u) + values("gap0")
+
+    def inadmissible(self, u: np.ndarray) -> str | None:
+        """Why a displacement cannot be a solution although it solves the equations (e.g. an
+        inverted element, ``det F <= 0``), or ``None``. The drivers reject such a step."""
+        return None
 
     def step_values(self, step: int, previous: dict | None = None) -> dict[str, np.ndarray]:
         """The parameter values of load step ``step`` by name: ``gap0``, ``f`` and those of

@@ -122,57 +122,72 @@ def _point_major(mk: int, k: int) -> np.ndarray:
     return np.where(c < k, point * k + c, mk + point * k + c - k)
 
 
-def _equilibrium(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, f: ca.SX, GtA: ca.DM,
-                 stress_of: Callable[[ca.SX], ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """``(E, r, t)``: the strains ``E(u)`` (``u = s_d uh``), the scaled equilibrium residual
-    ``r = (B(u)^T W stress - G^T a p - f) / s_f`` with ``stress = stress_of(E)``, ``p = s_s ph`` and
-    ``B(u) = dE/du`` by automatic differentiation (the virtual work ``sum_i w_i stress_i . dE_i``
-    of a nonlinear strain measure), and ``t`` the size of its terms (for relative residuals)."""
-    E = model.strain_expression(s["displacement"] * uh)
+def _equilibrium(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, P: Parameters, Ps: ca.SX,
+                 stress_of: Callable[[ca.SX], ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """``(E, r, t, g)``: the strains ``E(u)`` (``u = s_d uh``), the scaled equilibrium residual
+    ``r = (B(u)^T W stress - N(u)^T a p - f) / s_f`` with ``stress = stress_of(E)``, ``p = s_s ph``,
+    ``B(u) = dE/du`` and ``N(u) = dg/du`` by automatic differentiation (the virtual work
+    ``sum_i w_i stress_i . dE_i`` of a nonlinear strain measure, and of the contact forces on
+    the gaps ``g(u)`` of :meth:`~ddcm_casadi.models.base.ContactModel.gap_expression`), ``t``
+    the size of its terms (for relative residuals) and ``g`` the scaled gaps ``g / s_d``."""
+    u = s["displacement"] * uh
+    values = lambda name: Ps[P.slice(name)]  # noqa: E731 - the step's parameters by name
+    E = model.strain_expression(u)
     stress = stress_of(E)
     B = ca.jacobian(E, uh) / s["displacement"]
+    gap = model.gap_expression(u, values)
+    N = ca.jacobian(gap, uh) / s["displacement"]
+    ap = ca.DM(model.contact_area) * ph
+    f = values("f")
     w = ca.DM(np.repeat(np.asarray(model.volumes, float), model.strain_components))
-    r = (ca.mtimes(B.T, w * stress) - s["stress"] * ca.mtimes(GtA, ph) - f) / s["force"]
-    t = (ca.mtimes(ca.fabs(B).T, w * ca.fabs(stress)) + s["stress"] * ca.mtimes(ca.fabs(GtA), ca.fabs(ph))
+    r = (ca.mtimes(B.T, w * stress) - s["stress"] * ca.mtimes(N.T, ap) - f) / s["force"]
+    t = (ca.mtimes(ca.fabs(B).T, w * ca.fabs(stress)) + s["stress"] * ca.mtimes(ca.fabs(N).T, ca.fabs(ap))
          + ca.fabs(f)) / s["force"]
-    return E, r, t
+    return E, r, t, gap / s["displacement"]
 
 
 def _build_nonlinear(model: ContactModel) -> ProblemPair:
     """Both problems of a model with nonlinear kinematics, as CasADi expressions
     (:class:`NonlinearMap`, :class:`NonlinearObjective`).
 
-    Classical: ``F = (B(u)^T W D E(u) - G^T a p - f) / s_f``. Projection: ``h = (B(u)^T W stress -
-    G^T a p - f) / s_f`` and ``f = d^T W d / (2 energy)`` with ``d = [E(u) - E*; stress - S*]`` point
-    by point. The gaps stay affine: a plane obstacle's gap ``n . (X + u) - d`` is exact at any
-    displacement.
+    Classical: ``F = (B(u)^T W S(E(u)) - N(u)^T a p - f) / s_f`` with the model's law ``S``
+    (:meth:`~ddcm_casadi.models.base.ContactModel.stress_expression`). Projection: ``h = (B(u)^T W
+    stress - N(u)^T a p - f) / s_f`` and ``f = d^T W d / (2 energy)`` with ``d = [E(u) - E*; stress -
+    S*]`` point by point. The gaps ``g(u)`` are the model's
+    (:meth:`~ddcm_casadi.models.base.ContactModel.gap_expression`): kept affine where they are (a
+    plane obstacle's gap ``n . (X + u) - d`` is exact at any displacement), nonlinear otherwise
+    (a curved obstacle at the current configuration).
     """
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
-    GtA = to_casadi((model.gap_operator.T @ sp.diags(model.contact_area)).tocsr())
     classical = projection = None
+
+    def gap_map(z: ca.SX, Ps: ca.SX, gap: ca.SX, common: dict) -> dict:
+        if nc and ca.depends_on(ca.jacobian(gap, z), z):
+            common["gap_map"] = NonlinearMap.of(gap, z, Ps, name="gap")
+        return common
+
     if model.youngs_modulus is not None:
         s = model.scales_for("classical")
-        P = Parameters(gap0=nc, f=n, **model.history_sizes())
+        P = Parameters(**model.step_sizes())
         z, Ps = ca.SX.sym("z", n + nc), ca.SX.sym("P", P.size)
-        D = to_casadi(model.material_matrix())
-        _, F, terms = _equilibrium(model, s, z[:n], z[n:], Ps[P.slice("f")], GtA, lambda E: ca.mtimes(D, E))
+        _, F, terms, gap = _equilibrium(model, s, z[:n], z[n:], P, Ps, model.stress_expression)
         classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),),
                                            residual_map=NonlinearMap.of(F, z, Ps, terms, "residual"), distance=None,
-                                           **_common(model, s, 1.0 / s["modulus"], n + nc, P))
+                                           **gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], n + nc, P)))
     if model.dataset is not None:
         s = model.scales_for("ddcm")
         mk = m * k
-        P = Parameters(gap0=nc, f=n, strain_star=mk, stress_star=mk, **model.history_sizes())
+        P = Parameters(**model.step_sizes(), strain_star=mk, stress_star=mk)
         z, Ps = ca.SX.sym("z", n + mk + nc), ca.SX.sym("P", P.size)
         stress = s["stress"] * z[n:n + mk]
-        E, h, terms = _equilibrium(model, s, z[:n], z[n + mk:], Ps[P.slice("f")], GtA, lambda E: stress)
+        E, h, terms, gap = _equilibrium(model, s, z[:n], z[n + mk:], P, Ps, lambda E: stress)
         stacked = ca.vertcat(E - Ps[P.slice("strain_star")], stress - Ps[P.slice("stress_star")])
         d = stacked[_point_major(mk, k).tolist()]
         W = to_casadi(distance_weight(model) / s["energy"])
         objective = NonlinearObjective(ca.Function("distance", [z, Ps], [0.5 * ca.dot(d, ca.mtimes(W, d))]))
         projection = ComplementarityProblem(
             kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=NonlinearMap.of(h, z, Ps, terms, "h"),
-            distance=objective, **_common(model, s, 1.0 / s["metric"], n + mk + nc, P))
+            distance=objective, **gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], n + mk + nc, P)))
     return ProblemPair(model=model, classical=classical, projection=projection)
 
 
@@ -187,7 +202,7 @@ def build_problems(model: ContactModel) -> ProblemPair:
     classical = None
     if model.youngs_modulus is not None:
         s = model.scales_for("classical")
-        P = Parameters(gap0=nc, f=n, **model.history_sizes())
+        P = Parameters(**model.step_sizes())
         # F = (K u - G^T a p - f) / s_f with u = s_d u_hat, p = s_s p_hat
         # (scaled in the order the arithmetic of F does it: each term times its scale, over s_f)
         F = Affine(sp.hstack([model.stiffness() * s["displacement"] / s["force"], GtA * -s["stress"] / s["force"]]),
@@ -198,7 +213,7 @@ def build_problems(model: ContactModel) -> ProblemPair:
     projection = None
     if model.dataset is not None:
         s = model.scales_for("ddcm")
-        P = Parameters(gap0=nc, f=n, strain_star=m * k, stress_star=m * k, **model.history_sizes())
+        P = Parameters(**model.step_sizes(), strain_star=m * k, stress_star=m * k)
         nz, mk = n + m * k + nc, m * k
         BtW = model.strain_operator.T @ sp.diags(np.repeat(model.volumes, k))
         # h = (B^T W stress - G^T a p - f) / s_f with stress = s_s stress_hat

@@ -182,6 +182,31 @@ def strain_operator(disc: Discretisation) -> tuple[sp.csr_matrix, np.ndarray]:
     return B, np.asarray(basis.dx, dtype=float).ravel().copy()
 
 
+def gradient_operator(disc: Discretisation) -> sp.csr_matrix:
+    """``H = G u``: the displacement gradient ``H_ab = du_a / dX_b`` at every quadrature point,
+    sparse ``(m d^2, N)``, rows point-major (``i d^2 + a d + b``), points as in
+    :func:`strain_operator` (finite kinematics: ``F = I + H``)."""
+    basis, d = disc.basis, disc.dimension
+    ne, nq = basis.nelems, disc.points_per_element
+    rows_base = np.arange(ne * nq).reshape(ne, nq) * d * d
+    rows, cols, vals = [], [], []
+    for i, phi in enumerate(basis.basis):
+        G = phi[0].grad  # (d, d, ne, nq)
+        col = np.broadcast_to(basis.element_dofs[i][:, None], (ne, nq))
+        for a in range(d):
+            for b in range(d):
+                v = G[a, b]
+                keep = v != 0.0
+                if np.any(keep):
+                    rows.append((rows_base + a * d + b)[keep])
+                    cols.append(col[keep])
+                    vals.append(v[keep])
+    H = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(ne * nq * d * d, disc.n_dofs))
+    H.sum_duplicates()
+    return H
+
+
 def body_load(disc: Discretisation, force_density, elements: np.ndarray | None = None) -> np.ndarray:
     """``int b . v dx`` over ``elements`` (all by default): a constant body force (N/m^3)."""
     b = np.asarray(force_density, dtype=float)

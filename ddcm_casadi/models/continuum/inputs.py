@@ -28,12 +28,16 @@ class Material:
     data : int, optional
         Index of this region's data set in the ``datasets`` of :func:`continuum_model` (the
         data-driven variant needs one in every region).
+    law : str
+        The classical law (:data:`~ddcm_casadi.data.hyperelastic.LAWS`): ``"linear"`` (small
+        kinematics), ``"saint_venant_kirchhoff"`` or ``"neo_hookean"`` (finite kinematics).
     """
 
     region: str | None = None
     youngs_modulus: float | None = None
     poisson_ratio: float | None = None
     data: int | None = None
+    law: str = "linear"
 
 
 @dataclass(frozen=True)

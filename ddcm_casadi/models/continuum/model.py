@@ -30,11 +30,14 @@ import scipy.sparse as sp
 import skfem
 from scipy.sparse.csgraph import connected_components
 
+import casadi as ca
+
+from ddcm_casadi.data import hyperelastic
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import block_diagonal, isotropic_elasticity
 from ddcm_casadi.models.base import ContactModel, FigureSpec, drawn_formulation
-from ddcm_casadi.models.continuum import fem
+from ddcm_casadi.models.continuum import fem, finite
 from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, isotropic_law,
                                                    point_data, reference_loads, step_count)
 from ddcm_casadi.models.continuum.inputs import BodyForce, Contact, Material, Support, Traction
@@ -62,6 +65,173 @@ class ContinuumModel(ContactModel):
     contact_normals: np.ndarray | None = None    # (nc, d)
     contact_obstacle: np.ndarray | None = None   # (nc,) obstacle index
     reference: object | None = None               # e.g. a HertzReference
+    laws: tuple = ()                              # the classical law of each region (hyperelastic.LAWS)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for law in set(self.laws):
+            if hyperelastic.get_law(law).finite != (self.kinematics == "finite") and self.youngs_modulus is not None:
+                want = ("\"saint_venant_kirchhoff\" or \"neo_hookean\"" if self.kinematics == "finite"
+                        else "\"linear\" (or kinematics = \"finite\")")
+                raise InputError(f"material law {law!r} does not fit kinematics = {self.kinematics!r}: use law = {want}")
+
+    # ------------------------------------------------------- finite kinematics
+    @property
+    def finite(self) -> bool:
+        """Whether the kinematics are finite (total Lagrangian, :mod:`~ddcm_casadi.models.continuum.finite`)."""
+        return self.kinematics == "finite"
+
+    def gradient_operator(self) -> sp.csr_matrix:
+        """``H = G u`` at every material point from the free displacements (cached)."""
+        G = self._cache.get("gradient_operator")
+        if G is None:
+            G = fem.gradient_operator(self.discretisation)[:, self.free_dofs].tocsr()
+            self._cache["gradient_operator"] = G
+        return G
+
+    def displacement_gradient(self, u: np.ndarray) -> np.ndarray:
+        """``(m, d, d)`` ``H = du/dX`` at the material points."""
+        return finite.displacement_gradient(self.gradient_operator(), u, self.dimension)
+
+    def strain(self, u: np.ndarray) -> np.ndarray:
+        """Mandel strains (flat, point-major): ``B u`` (small), Green-Lagrange ``E`` (finite)."""
+        if not self.finite:
+            return super().strain(u)
+        return finite.green_lagrange(self.displacement_gradient(u)).reshape(-1)
+
+    def strain_expression(self, u):
+        if not self.finite:
+            return super().strain_expression(u)
+        return finite.green_lagrange_expression(self.gradient_operator(), u, self.dimension)
+
+    def _law_groups(self) -> list[tuple[str, np.ndarray]]:
+        """``(law, points)`` for every law the regions use."""
+        law_of_point = np.asarray(self.laws, dtype=object)[self.point_region]
+        return [(law, np.flatnonzero(law_of_point == law)) for law in sorted(set(self.laws))]
+
+    def stress(self, strain: np.ndarray) -> np.ndarray:
+        """Classical stresses: ``C eps`` (linear) or ``S = dW/dE`` of each region's law
+        (:mod:`ddcm_casadi.data.hyperelastic`), flat and point-major like ``strain``."""
+        if not self.finite:
+            return super().stress(strain)
+        k = self.strain_components
+        E = np.asarray(strain, float).reshape(-1, self.n_points, k)
+        out = np.empty_like(E)
+        for law, points in self._law_groups():
+            for i in range(E.shape[0]):
+                out[i, points] = hyperelastic.second_piola(law, E[i, points], self.youngs_modulus[points],
+                                                           self.poisson_ratio[points], self.dimension)
+        return out.reshape(np.shape(strain))
+
+    def stress_expression(self, strain):
+        if not self.finite:
+            return super().stress_expression(strain)
+        m, k = self.n_points, self.strain_components
+        E = ca.reshape(strain, k, m)
+        columns, order = [], []
+        for law, points in self._law_groups():
+            lam, mu = hyperelastic.lame(self.youngs_modulus[points], self.poisson_ratio[points])
+            S = hyperelastic.stress_function(law, self.dimension).map(points.size)
+            columns.append(S(E[:, points.tolist()], ca.DM(lam).T, ca.DM(mu).T))
+            order.append(points)
+        S = ca.horzcat(*columns)[:, np.argsort(np.concatenate(order)).tolist()]
+        return ca.reshape(S, m * k, 1)
+
+    def _contact_selection(self) -> sp.csr_matrix:
+        """``(nc d, n)``: each pair's displacement vector (fixed components zero) from the free dofs."""
+        sel = self._cache.get("contact_selection")
+        if sel is None:
+            d, nc = self.dimension, self.n_contacts
+            vd = self.discretisation.vector_dofs()[:, self.contact_dofs].T  # (nc, d)
+            index_of = np.full(self.discretisation.n_dofs, -1, dtype=np.int64)
+            index_of[self.free_dofs] = np.arange(self.free_dofs.size)
+            cols = index_of[vd].ravel()
+            rows = np.arange(nc * d)
+            keep = cols >= 0
+            sel = sp.csr_matrix((np.ones(int(keep.sum())), (rows[keep], cols[keep])), shape=(nc * d, self.n_dofs))
+            self._cache["contact_selection"] = sel
+        return sel
+
+    def _directions(self) -> np.ndarray:
+        """``(nc, d)`` the direction of travel of each pair's obstacle."""
+        return np.stack([self.obstacles[o].offset(1.0) for o in self.contact_obstacle]) if self.n_contacts \
+            else np.zeros((0, self.dimension))
+
+    def gap_expression(self, u, values):
+        """Small kinematics: ``G u + gap0``. Finite: ``phi(X + u - s_t d)`` per pair, exact at the
+        current configuration (``s_t``: the parameter ``travel``, per pair)."""
+        if not self.finite or not self.n_contacts:
+            return super().gap_expression(u, values)
+        from ddcm_casadi.linalg import to_casadi
+
+        d, nc = self.dimension, self.n_contacts
+        disp = ca.reshape(ca.mtimes(to_casadi(self._contact_selection()), u), d, nc).T
+        x = ca.DM(self.contact_points) + disp - ca.repmat(values("travel"), 1, d) * ca.DM(self._directions())
+        gaps = [None] * nc
+        for o, ob in enumerate(self.obstacles):
+            rows = np.flatnonzero(self.contact_obstacle == o)
+            if rows.size:
+                g = ob.phi_expression(x[rows.tolist(), :])
+                for j, r in enumerate(rows):
+                    gaps[r] = g[j]
+        return ca.vertcat(*gaps)
+
+    def step_sizes(self) -> dict[str, int]:
+        if not self.finite or not self.n_contacts:
+            return super().step_sizes()
+        return dict(gap0=self.n_contacts, f=self.n_dofs, travel=self.n_contacts, **self.history_sizes())
+
+    def load_names(self) -> tuple[str, ...]:
+        if not self.finite or not self.n_contacts:
+            return super().load_names()
+        return ("gap0", "f", "travel")
+
+    def pair_travels(self, step: int) -> np.ndarray:
+        """``s_t`` of each pair's obstacle at ``step``."""
+        return np.array([self.obstacles[o].travels(self.n_steps)[step] for o in self.contact_obstacle], float)
+
+    def step_values(self, step: int, previous: dict | None = None) -> dict[str, np.ndarray]:
+        out = super().step_values(step, previous)
+        if self.finite and self.n_contacts:
+            out["travel"] = self.pair_travels(step)
+        return out
+
+    def current_gap(self, u: np.ndarray, step: int) -> np.ndarray:
+        """The gaps at ``step`` for free displacements ``u``: linearised (small) or exact (finite)."""
+        if not self.finite:
+            return self.gap(u, step)
+        x = self.contact_points + (self._contact_selection() @ np.asarray(u, float)).reshape(-1, self.dimension)
+        x = x - self.pair_travels(step)[:, None] * self._directions()
+        out = np.empty(self.n_contacts)
+        for o, ob in enumerate(self.obstacles):
+            rows = self.contact_obstacle == o
+            if np.any(rows):
+                out[rows] = ob.phi(x[rows])
+        return out
+
+    def current_normals(self, u: np.ndarray, step: int) -> np.ndarray:
+        """``(nc, d)`` the obstacle normals the pressures act along: at the reference
+        configuration (small), at the current contact points (finite)."""
+        if not self.finite:
+            return self.contact_normals
+        x = self.contact_points + (self._contact_selection() @ np.asarray(u, float)).reshape(-1, self.dimension)
+        x = x - self.pair_travels(step)[:, None] * self._directions()
+        out = np.empty((self.n_contacts, self.dimension))
+        for o, ob in enumerate(self.obstacles):
+            rows = self.contact_obstacle == o
+            if np.any(rows):
+                out[rows] = ob.grad_phi(x[rows])
+        return out
+
+    def inadmissible(self, u: np.ndarray) -> str | None:
+        """Finite kinematics: an inverted material point (``J = det F <= 0``) is no solution."""
+        if not self.finite:
+            return None
+        J = finite.jacobian(self.displacement_gradient(u))
+        bad = int(np.sum(~(J > 0)))
+        if bad:
+            return f"{bad} material point(s) inverted (J = det F <= 0; smallest {float(np.nanmin(J)):.3g})"
+        return None
 
     # --------------------------------------------------------------- geometry
     @property
@@ -166,7 +336,7 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
                     contacts: Sequence[Contact] = (), degree: int = 1, tractions: Sequence[Traction] = (),
                     body_forces: Sequence[BodyForce] = (), load_factors: Sequence[float] | None = None,
                     datasets: Sequence[MaterialDataset] = (), name: str = "continuum",
-                    reference=None) -> ContinuumModel:
+                    reference=None, kinematics: str = "small") -> ContinuumModel:
     """Build a :class:`ContinuumModel`.
 
     Parameters
@@ -192,6 +362,10 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
     reference : optional
         An independent reference the model reports against (e.g.
         :class:`~ddcm_casadi.models.continuum.hertz.HertzReference`).
+    kinematics : {"small", "finite"}
+        ``"finite"``: total Lagrangian, Green-Lagrange strains, hyperelastic laws
+        (``Material.law``) and gaps at the current configuration
+        (:mod:`~ddcm_casadi.models.continuum.finite`).
     """
     check_mesh(mesh)
     disc = fem.Discretisation.create(mesh, int(degree) if degree in (1, 2) else _bad_degree(degree))
@@ -218,7 +392,7 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
         length_scale=size, name=name, load_parameter_name=lp_name, strain_components=k, discretisation=disc,
         poisson_ratio=nu, free_dofs=free, point_region=point_region,
         region_names=tuple(m.region or "(rest)" for m in materials), obstacles=tuple(obstacles),
-        reference=reference, **contact)
+        reference=reference, laws=tuple(m.law for m in materials), kinematics=kinematics, **contact)
     _check_held(model)
     return model
 

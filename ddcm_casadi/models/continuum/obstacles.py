@@ -1,4 +1,4 @@
-r"""Rigid obstacles for node-to-surface contact (frictionless, small deformation).
+r"""Rigid obstacles for node-to-surface contact (frictionless; linearised or at the current configuration).
 
 An obstacle is a rigid body described by a signed distance ``phi(x)``: positive outside the
 obstacle (where the deformable body may be), zero on its surface, negative inside. It moves by
@@ -13,6 +13,8 @@ the normal taken at the reference configuration (body undeformed, obstacle at it
 position), so that the gap operator is one constant sparse matrix and the obstacle's motion enters
 only through ``phi`` (``gap0``, a parameter of the problems). This is the small-deformation
 assumption: the obstacle's travel and the displacements are small against its curvature radius.
+With finite kinematics the gap is exact instead, ``g = phi(X + u - s_t d)``
+(:meth:`Obstacle.phi_expression`), its normal ``grad phi`` at the current point: large sliding.
 
 Obstacles: :class:`Plane`, :class:`Ball` (a circle in 2-D, i.e. a cylinder in plane strain; a
 sphere in 3-D), :class:`Cylinder` (3-D, a finite axis direction, infinite length) and
@@ -25,9 +27,11 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
+import casadi as ca
 import numpy as np
 
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.models.continuum.finite import safe_norm
 
 
 def _vector(name: str, value, dimension: int | None = None) -> np.ndarray:
@@ -86,6 +90,12 @@ class Obstacle:
     def grad_phi(self, x: np.ndarray) -> np.ndarray:
         """Unit outward normal ``grad phi`` at points ``x`` (n, d)."""
         raise NotImplementedError  # pragma: no cover
+
+    def phi_expression(self, x: ca.SX) -> ca.SX:
+        """:meth:`phi` for a CasADi symbol ``x`` ``(n, d)`` (rows: points): the exact gap at the
+        current configuration (finite kinematics), its normal by automatic differentiation."""
+        raise InputError(f"obstacle {self.name!r} ({self.kind}) has no symbolic signed distance: finite "
+                         f"kinematics needs a plane, circle, sphere, cylinder or punch")
 
     # -- motion
     def travels(self, n_steps: int) -> np.ndarray:
@@ -150,6 +160,9 @@ class Plane(Obstacle):
     def grad_phi(self, x):
         return np.broadcast_to(self.normal, np.shape(x)).copy()
 
+    def phi_expression(self, x):
+        return ca.mtimes(x - ca.repmat(ca.DM(self.point).T, x.size1(), 1), ca.DM(self.normal))
+
     def describe(self) -> dict:
         return dict(super().describe(), point=self.point.tolist(), normal=self.normal.tolist())
 
@@ -176,6 +189,9 @@ class Ball(Obstacle):
 
     def phi(self, x):
         return np.linalg.norm(np.asarray(x) - self.center, axis=-1) - self.radius
+
+    def phi_expression(self, x):
+        return safe_norm(x - ca.repmat(ca.DM(self.center).T, x.size1(), 1)) - self.radius
 
     def grad_phi(self, x):
         r = np.asarray(x) - self.center
@@ -244,6 +260,14 @@ ho - (a - r),\; h + r) .
         q, _, _ = self._local(np.atleast_2d(x))
         return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0) - self.edge_radius
 
+    def phi_expression(self, x):
+        v = x - ca.repmat(ca.DM(self.center).T, x.size1(), 1)
+        h = ca.mtimes(v, ca.DM(self.normal))
+        rho = safe_norm(v - ca.mtimes(h, ca.DM(self.normal).T))
+        q1, q2 = rho - (self.half_width - self.edge_radius), h + self.edge_radius
+        outside = safe_norm(ca.horzcat(ca.fmax(q1, 0), ca.fmax(q2, 0)))
+        return outside + ca.fmin(ca.fmax(q1, q2), 0) - self.edge_radius
+
     def grad_phi(self, x):
         q, lateral, rho = self._local(np.atleast_2d(x))
         out = np.maximum(q, 0.0)
@@ -310,6 +334,11 @@ class Cylinder(Obstacle):
 
     def phi(self, x):
         return np.linalg.norm(self._radial(x), axis=-1) - self.radius
+
+    def phi_expression(self, x):
+        r = x - ca.repmat(ca.DM(self.point).T, x.size1(), 1)
+        a = ca.DM(self.axis)
+        return safe_norm(r - ca.mtimes(ca.mtimes(r, a), a.T)) - self.radius
 
     def grad_phi(self, x):
         r = self._radial(x)

@@ -1,0 +1,72 @@
+r"""Finite-strain kinematics of continua (total Lagrangian), for numbers and CasADi symbols.
+
+With the displacement gradient ``H = du/dX`` at a quadrature point (:func:`~ddcm_casadi.models.continuum.fem.gradient_operator`):
+
+.. math::  F = I + H ,\qquad C = F^T F ,\qquad E = (C - I)/2 = (H + H^T + H^T H)/2 ,\qquad J = \det F ,
+
+``E`` in Mandel notation (``k = 3`` in plane strain, ``k = 6`` in 3-D; plane strain: ``F_33 = 1``,
+``E_33 = 0``). The strains are written once per form: :func:`green_lagrange` for numbers,
+:func:`green_lagrange_expression` for symbols (both from the same component formula,
+:func:`_components`). The stresses of a law come from
+:mod:`ddcm_casadi.data.hyperelastic` (``S = dW/dE``), the gaps at the current configuration from
+the obstacles' :meth:`~ddcm_casadi.models.continuum.obstacles.Obstacle.phi_expression`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+_SQRT2 = math.sqrt(2.0)
+#: Mandel components ``(a, b)`` per dimension (shear ones scaled by ``sqrt 2``).
+MANDEL_PAIRS = {2: [(0, 0), (1, 1), (0, 1)], 3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
+
+
+def _components(H, d: int) -> list:
+    """Mandel components of ``E = (H + H^T + H^T H) / 2`` from ``H[a][b]`` (arrays or symbols of
+    equal shape, one entry per point)."""
+    out = []
+    for a, b in MANDEL_PAIRS[d]:
+        e = 0.5 * (H[a][b] + H[b][a] + sum(H[c][a] * H[c][b] for c in range(d)))
+        out.append(e if a == b else _SQRT2 * e)
+    return out
+
+
+def displacement_gradient(gradient_operator, u: np.ndarray, d: int) -> np.ndarray:
+    """``(m, d, d)`` ``H`` of free displacements ``u``."""
+    return (gradient_operator @ np.asarray(u, float)).reshape(-1, d, d)
+
+
+def green_lagrange(H: np.ndarray) -> np.ndarray:
+    """Mandel ``E`` ``(m, k)`` of displacement gradients ``(m, d, d)``."""
+    d = H.shape[-1]
+    return np.stack(_components([[H[:, a, b] for b in range(d)] for a in range(d)], d), axis=1)
+
+
+def green_lagrange_expression(gradient_operator, u, d: int) -> ca.SX:
+    """Mandel ``E`` (``m k``, point-major) for a CasADi symbol ``u``."""
+    from ddcm_casadi.linalg import to_casadi
+
+    h = ca.mtimes(to_casadi(gradient_operator), u)
+    m = h.numel() // (d * d)
+    rows = ca.reshape(h, d * d, m)  # column i: point i's H, row-major
+    E = ca.vertcat(*_components([[rows[a * d + b, :] for b in range(d)] for a in range(d)], d))  # (k, m)
+    return ca.reshape(E, E.numel(), 1)
+
+
+def deformation_gradient(H: np.ndarray) -> np.ndarray:
+    """``F = I + H`` ``(m, d, d)``."""
+    return H + np.eye(H.shape[-1])
+
+
+def jacobian(H: np.ndarray) -> np.ndarray:
+    """``J = det F`` per point."""
+    return np.linalg.det(deformation_gradient(H))
+
+
+def safe_norm(v: ca.SX) -> ca.SX:
+    """Row norms of an ``(n, d)`` symbol, with a zero (not NaN) derivative at zero."""
+    s = ca.sum2(v * v)
+    return ca.if_else(s > 0, ca.sqrt(ca.if_else(s > 0, s, 1.0)), 0.0)
