@@ -163,7 +163,9 @@ def test_every_formulation_and_variant_on_a_small_body(dim, tmp_path):
     written = save_outputs(cmp, tmp_path)
     names = {p.name for p in written}
     assert "classical_fischer_burmeister.pvd" in names and "pressure_profile.png" in names
-    assert len([n for n in names if n.endswith(".vtu")]) == len(cmp.results) * model.n_steps
+    # a mesh file and a material-point file per step and run
+    assert len([n for n in names if n.endswith(".vtu")]) == 2 * len(cmp.results) * model.n_steps
+    assert "ddcm_fischer_burmeister_points.pvd" in names
     kept = model.results_fields(cmp.fields("ddcm", "fischer_burmeister"))
     assert set(kept) == {"contact_coordinates", "contact_obstacle", "contact_pressure", "total_contact_force",
                          "converged"}

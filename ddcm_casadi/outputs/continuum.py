@@ -39,7 +39,7 @@ __all__ = ["figure_convergence", "figure_deformed_body", "figure_pressure_profil
 # Tensor index of each Mandel component; off-diagonal components carry a factor sqrt(2).
 _MANDEL_INDEX = {2: [(0, 0), (1, 1), (0, 1)],
                  3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
-_NODES_PER_CELL = {"line": 2, "triangle": 3, "quad": 4, "tetra": 4, "hexahedron": 8,
+_NODES_PER_CELL = {"vertex": 1, "line": 2, "triangle": 3, "quad": 4, "tetra": 4, "hexahedron": 8,
                    "triangle6": 6, "tetra10": 10}
 
 
@@ -195,8 +195,8 @@ def write_vtu_series(out_dir: str | os.PathLike, *, points: Any, cells: Sequence
         Reference node coordinates, d = 2 or 3 (2-D points are written with z = 0).
     cells : list of (str, array_like)
         Cell blocks as meshio takes them, e.g. ``[("triangle", conn)]``; types ``"triangle"``,
-        ``"tetra"``, ``"triangle6"``, ``"tetra10"`` (also ``"line"``, ``"quad"``,
-        ``"hexahedron"``), node order as in meshio / VTK.
+        ``"tetra"``, ``"triangle6"``, ``"tetra10"`` (also ``"vertex"`` for point clouds,
+        ``"line"``, ``"quad"``, ``"hexahedron"``), node order as in meshio / VTK.
     steps : list of dict
         One per load step: ``{"time": float, "point_data": {name: array}, "cell_data":
         {name: array}}``. Point arrays have nn rows, cell arrays one row per cell of all blocks in

@@ -1,19 +1,33 @@
 """Outputs of a continuum comparison: VTU series for ParaView and the figures.
 
-For every run (variant x formulation) one VTU file per step and a ``.pvd`` collection
-(``vtu/<variant>_<formulation>.pvd``) with the nodal ``displacement`` and ``contact_pressure``
-and, per element (the mean over its quadrature points), ``strain`` and ``stress`` (tensors),
-``von_mises``, and for DDCM ``data_stress`` (the assigned data) and ``ddcm_distance`` (the local
-distance ``sqrt(d^2)`` of the states to their data). Figures: the contact pressure of every run
-at the last step against Hertz (when the model has a Hertz reference) and the deformed body
-coloured by the von Mises stress (the contact history is :func:`ddcm_casadi.outputs.plots.figure_contact_history`).
+For every run (variant x formulation) two series in ``vtu/``, one VTU file per step each:
+
+- the mesh, ``<variant>_<formulation>.pvd``: point data ``displacement`` (at every node, P2
+  midpoints included), and on the contact nodes ``contact_pressure`` (zero elsewhere: no contact
+  traction acts there), ``contact_gap`` (NaN elsewhere: a gap has no meaning off the contact
+  surfaces, and a zero would read as touching; ParaView leaves NaN out of the colour range and
+  draws it in its NaN colour) and ``contact_node`` (1 on a contact node, for *Threshold*); a node
+  with pairs to several obstacles shows their summed pressure and its smallest gap. Cell data
+  where one value per element is the truth, i.e. P1 (one material point per element): ``strain``
+  and ``stress`` (tensors), ``von_mises``, and for DDCM ``data_stress`` (the assigned datum) and
+  ``ddcm_distance`` (the distance ``sqrt(d^2)`` of the state to it). On P2 an element holds several
+  material points, each with its own datum, and their mean is no datum: the cell data are then
+  ``strain_element_mean``, ``stress_element_mean``, ``von_mises_element_mean`` (means over the
+  element's points, for a look at the body), with no data fields;
+- the material points, ``<variant>_<formulation>_points.pvd``
+  (:mod:`ddcm_casadi.outputs.point_cloud`): every quadrature point at its position with its state,
+  and for DDCM its datum (data set, row, strain, stress), its distance to it and the data-range flag.
+
+Figures: the contact pressure of every run at the last step against Hertz (when the model has a
+Hertz reference) and the deformed body coloured by the von Mises stress (the contact history is
+:func:`ddcm_casadi.outputs.plots.figure_contact_history`).
 
 Plane strain (2-D): the out-of-plane stress ``sigma_zz`` is no part of the 2-D Mandel state. For a
 classical run it is ``nu (sigma_11 + sigma_22)`` (``e_zz = 0`` with the isotropic law), written in
 the ``stress`` tensor and used in ``von_mises``. A DDCM run has no law, and its 2-D data carry only
-the three in-plane components, so its ``sigma_zz`` is unknown: NaN in the ``stress`` tensor and in
-``von_mises``; the VTU adds ``von_mises_in_plane`` (``sigma_zz = 0``, plane-stress formula), and
-the DDCM figure is coloured by it and says so.
+the three in-plane components, so its ``sigma_zz`` is unknown: NaN in the ``stress`` and
+``data_stress`` tensors and in ``von_mises``; the VTU adds ``von_mises_in_plane`` (``sigma_zz =
+0``, plane-stress formula), and the DDCM figure is coloured by it and says so.
 
 The output layer of :class:`~ddcm_casadi.models.continuum.model.ContinuumModel`: the writer and the
 drawings are registered (:mod:`ddcm_casadi.outputs.drawings`) under the names the model declares
@@ -26,11 +40,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ddcm_casadi.data.extrapolation import DataCoverage
 from ddcm_casadi.outputs.drawings import register_drawing, register_field_writer
-from ddcm_casadi.outputs.continuum import (
-    figure_deformed_body, figure_pressure_profile, mandel_to_tensor, plane_strain_sigma_zz, von_mises,
-    write_vtu_series,
-)
+from ddcm_casadi.outputs.continuum import figure_deformed_body, figure_pressure_profile, von_mises, write_vtu_series
+from ddcm_casadi.outputs.point_cloud import point_fields, sigma_zz, write_point_cloud
+
+#: The cell fields of the mesh file on elements of one material point (P1), as the points have them.
+CELL_FIELDS = ("strain", "stress", "von_mises", "von_mises_in_plane", "data_stress", "ddcm_distance")
+#: On elements of several material points (P2): the means of these over each element's points, ...
+MEAN_FIELDS = ("strain", "stress", "von_mises", "von_mises_in_plane")
+#: ... named with this suffix: means, not data.
+ELEMENT_MEAN = "_element_mean"
 
 
 def _cells(model) -> list[tuple[str, np.ndarray]]:
@@ -48,43 +68,34 @@ def _per_element(model, values: np.ndarray) -> np.ndarray:
     return values.reshape((-1, nq) + values.shape[1:]).mean(axis=1)
 
 
-def sigma_zz(model, variant: str, stress: np.ndarray) -> np.ndarray | None:
-    """The plane-strain ``sigma_zz`` per material point of a 2-D run (``None`` in 3-D, where the
-    Mandel vector carries it): ``nu (sigma_11 + sigma_22)`` for a classical run, NaN (unknown)
-    for a DDCM run (no law; 2-D data carry no ``sigma_zz``)."""
-    if model.dimension != 2:
-        return None
-    if variant == "classical" and model.poisson_ratio is not None:
-        return plane_strain_sigma_zz(stress, model.poisson_ratio)
-    return np.full(stress.shape[0], np.nan)
+def _contact_fields(model, step) -> dict[str, np.ndarray]:
+    """Pressure (summed), gap (smallest) and a flag at every scalar dof of the mesh file; the pairs'
+    dofs only (see the module for why the gap is NaN elsewhere)."""
+    n = model.discretisation.scalar_basis.N
+    pressure, gap, node = np.zeros(n), np.full(n, np.inf), np.zeros(n, dtype=np.uint8)
+    dofs = np.asarray(model.contact_dofs, dtype=np.intp)
+    np.add.at(pressure, dofs, np.asarray(step.p, dtype=float))
+    np.minimum.at(gap, dofs, np.asarray(model.gap(step.u, step.step), dtype=float))
+    node[dofs] = 1
+    gap[node == 0] = np.nan
+    return dict(contact_pressure=pressure, contact_gap=gap, contact_node=node)
 
 
-def _step_data(model, run, step) -> dict:
-    disc, d, k = model.discretisation, model.dimension, model.strain_components
-    pressure = np.zeros(disc.scalar_basis.N)
-    np.add.at(pressure, model.contact_dofs, step.p)
-    strain = np.asarray(step.strain).reshape(-1, k)
-    stress = np.asarray(step.stress).reshape(-1, k)
-    zz = sigma_zz(model, run.variant, stress)
-    cell = dict(strain=mandel_to_tensor(_per_element(model, strain), d).reshape(-1, 9),
-                stress=mandel_to_tensor(_per_element(model, stress), d,
-                                        None if zz is None else _per_element(model, zz)).reshape(-1, 9),
-                von_mises=_per_element(model, von_mises(stress, d, zz)))
-    if zz is not None and np.isnan(zz).any():
-        cell["von_mises_in_plane"] = _per_element(model, von_mises(stress, d))
-    if step.stress_star is not None:
-        star = np.asarray(step.stress_star).reshape(-1, k)
-        d2 = model.dataset.distance2(strain, stress, step.data_index)
-        cell.update(data_stress=mandel_to_tensor(_per_element(model, star), d).reshape(-1, 9),
-                    ddcm_distance=_per_element(model, np.sqrt(np.maximum(d2, 0.0))))
-    return dict(time=float(step.load_parameter),
-                point_data=dict(displacement=model.dof_displacement(step.u), contact_pressure=pressure),
-                cell_data=cell)
+def _step_data(model, step, points: dict[str, np.ndarray]) -> dict:
+    """The mesh file's data of one step, the cell data from the step's material-point fields
+    ``points`` (:func:`~ddcm_casadi.outputs.point_cloud.point_fields`)."""
+    if model.discretisation.points_per_element == 1:  # P1: each element is its one point, exactly
+        cell = {key: points[key] for key in CELL_FIELDS if key in points}
+    else:  # a mean of P2 data is no datum: means of the states only, named so
+        cell = {key + ELEMENT_MEAN: _per_element(model, points[key]) for key in MEAN_FIELDS if key in points}
+    point = dict(displacement=model.dof_displacement(step.u), **_contact_fields(model, step))
+    return dict(time=float(step.load_parameter), point_data=point, cell_data=cell)
 
 
 @register_field_writer("vtu")
 def write_vtu(cmp, out_dir) -> list[Path]:
-    """Write the VTU series of every run of a continuum comparison into ``out_dir/vtu/``.
+    """Write the VTU series of every run of a continuum comparison into ``out_dir/vtu/``: the mesh's
+    and the material points' (:func:`~ddcm_casadi.outputs.point_cloud.write_point_cloud`).
 
     Parameters
     ----------
@@ -96,16 +107,21 @@ def write_vtu(cmp, out_dir) -> list[Path]:
     Returns
     -------
     list of Path
-        One ``.vtu`` file per step and run, and a ``.pvd`` series per run.
+        Per run: the mesh's ``.vtu`` files (one per step) and ``.pvd`` series, then the points'.
     """
     model = cmp.model
     vtu = Path(out_dir) / "vtu"
     vtu.mkdir(parents=True, exist_ok=True)
     points, cells = model.discretisation.dof_locations(), _cells(model)
     written: list[Path] = []
+    coverage = None
     for (variant, name), run in cmp.results.items():
-        steps = [_step_data(model, run, s) for s in run.steps]
+        if variant == "ddcm" and coverage is None and model.dataset is not None:
+            coverage = DataCoverage(model.dataset, model.n_points)  # once for every DDCM run
+        fields = [point_fields(model, variant, s, coverage if variant == "ddcm" else None) for s in run.steps]
+        steps = [_step_data(model, s, f) for s, f in zip(run.steps, fields)]
         written += write_vtu_series(vtu, points=points, cells=cells, steps=steps, name=f"{variant}_{name}")
+        written += write_point_cloud(model, run, vtu, stem=f"{variant}_{name}", fields=fields)
     return written
 
 
