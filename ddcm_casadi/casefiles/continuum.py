@@ -12,6 +12,7 @@ import numpy as np
 from ddcm_casadi.casefiles import common as casefile
 from ddcm_casadi.casefiles.base import Case, register_case_kind
 from ddcm_casadi.casefiles.common import integer, nonempty_list, number, positive, show, vector
+from ddcm_casadi.data import hyperelastic
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.data.metric import COMPONENTS, Metric, isotropic_elasticity
@@ -40,6 +41,8 @@ Continua
     [material]                   # or [[material]] tables with region = "<subdomain name>"
     youngs_modulus = 200e9       # Pa; with poisson_ratio the classical law (optional if DDCM only)
     poisson_ratio = 0.3
+    law = "linear"               # small kinematics; with the top-level kinematics = "finite":
+                                 # "saint_venant_kirchhoff" or "neo_hookean" (docs/maths.md)
     data = 0                     # optional: the [[data]] set of this material (default 0 if data)
 
     [[supports]]                 # fixed displacement components on a boundary
@@ -71,6 +74,9 @@ Continua
 
     [data]                       # strain_1..k,stress_1..k CSV (Mandel: k = 3 in 2-D, 6 in 3-D),
     hookean = { strain_min = -0.01, strain_max = 0.01, points = 21 }    # or a linear law on a
+    # law = "neo_hookean"        # or (E, S) pairs of a hyperelastic law (Green-Lagrange strain,
+    # grid = { strain_min = -0.3, strain_max = 0.3, points = 21 }   # second Piola-Kirchhoff
+    # samples = { strain_min = -0.3, strain_max = 0.3, count = 10000, seed = 0 }   # stress)
     c = "isotropic"              # grid of points^k states (grading = 2: denser towards zero);
                                  # c: "isotropic" (from the material),
                                  # "estimated" (from the data), a number (c I) or a k x k matrix
@@ -92,6 +98,8 @@ MEMORY_WARNING_SHARE = 0.5
 
 _MESH = {"shape", "size", "divisions", "origin", "radius", "center", "refine", "path", "degree", "refine_near"}
 _HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus", "poisson_ratio", "grading"}
+_GRID = _HOOKEAN
+_SAMPLES = {"strain_min", "strain_max", "count", "seed", "youngs_modulus", "poisson_ratio"}
 _SHAPES = ("rectangle", "box", "disc", "half_disc", "ball")
 _OBSTACLES = ("plane", "circle", "sphere", "cylinder", "punch")
 
@@ -265,13 +273,16 @@ def _datasets(doc: dict, base_dir: Path, k: int, materials: list) -> list[Materi
         if "c" not in table and ddcm_c is None:
             raise InputError(f"[{label}] needs the metric c (\"isotropic\", \"estimated\", a number or a matrix)")
         c = _metric(label, table.get("c", ddcm_c), k, users[0])
-        if ("path" in table) == ("hookean" in table):
-            raise InputError(f"[{label}] needs exactly one of 'path' or 'hookean'")
+        sources = [key for key in ("path", "hookean", "law") if key in table]
+        if len(sources) != 1:
+            raise InputError(f"[{label}] needs exactly one of 'path', 'hookean' or 'law'")
         # "estimated": fitted to the data before they are checked against it (MaterialDataset)
         if "path" in table:
             if not isinstance(table["path"], str):
                 raise InputError(f"[{label}] path must be a string")
             ds = MaterialDataset.from_file(base_dir / table["path"], c=c, components=k)
+        elif "law" in table:
+            ds = _law_data(label, table, k, c, users[0])
         else:
             hk = casefile.hookean_table(label, table["hookean"], _HOOKEAN)
             mat = users[0]
@@ -291,14 +302,56 @@ def _datasets(doc: dict, base_dir: Path, k: int, materials: list) -> list[Materi
     return out
 
 
+def _law_data(label: str, table: dict, k: int, c, material) -> MaterialDataset:
+    """``[data] law = "neo_hookean"`` with ``grid = {...}`` or ``samples = {...}``: the
+    ``(E, S)`` pairs of a hyperelastic law (:mod:`ddcm_casadi.data.hyperelastic`)."""
+    law = hyperelastic.get_law(table["law"]).name
+    if ("grid" in table) == ("samples" in table):
+        raise InputError(f"[{label}] law = {law!r} needs exactly one of 'grid' or 'samples'")
+    key = "grid" if "grid" in table else "samples"
+    known = _GRID if key == "grid" else _SAMPLES
+    t = table[key]
+    if not isinstance(t, dict):
+        raise InputError(f"[{label}] {key} must be a table {{{', '.join(sorted(known))}}}")
+    unknown = sorted(set(t) - known)
+    if unknown:
+        raise InputError(f"unknown key {unknown[0]!r} in [{label}] {key}; known: {', '.join(sorted(known))}")
+    need = ("strain_min", "strain_max", "points" if key == "grid" else "count")
+    missing = [name for name in need if name not in t]
+    if missing:
+        raise InputError(f"missing key {missing[0]!r} in [{label}] {key}")
+    E = t.get("youngs_modulus", None if material is None else material.youngs_modulus)
+    nu = t.get("poisson_ratio", None if material is None else material.poisson_ratio)
+    if E is None or nu is None:
+        raise InputError(f"[{label}] law needs youngs_modulus and poisson_ratio (in {key} or the [material] that uses it)")
+    d = {3: 2, 6: 3}[k]
+    isotropic_elasticity(positive(label, f"{key}.youngs_modulus", E), number(label, f"{key}.poisson_ratio", nu), d)
+    lo = number(label, f"{key}.strain_min", t["strain_min"])
+    hi = number(label, f"{key}.strain_max", t["strain_max"])
+    stress = hyperelastic.law_of(law, float(E), float(nu), d)
+    if key == "grid":
+        points = integer(label, "grid.points", t["points"], low=1, what="a positive integer (per axis)")
+        return MaterialDataset.from_law(stress, k, lo, hi, points, c=c,
+                                        grading=number(label, "grid.grading", t.get("grading", 1.0)))
+    count = integer(label, "samples.count", t["count"], low=1, what="a positive integer")
+    seed = integer(label, "samples.seed", t.get("seed", 0), low=0, what="a non-negative integer")
+    return MaterialDataset.from_law(stress, k, lo, hi, 1, c=c, samples=count, seed=seed)
+
+
 def _data_points(doc: dict, base_dir: Path, k: int) -> int:
     """The data points the ``[data]`` tables will hold, counted before any is built: ``points^k``
     of a Hookean grid, the lines of a file (0 for what cannot be read: its parser says why)."""
     total = 0
     for table in _tables(doc, "data"):
         hookean = table.get("hookean") if isinstance(table, dict) else None
+        grid = table.get("grid") if isinstance(table, dict) else None
+        samples = table.get("samples") if isinstance(table, dict) else None
         if isinstance(hookean, dict) and isinstance(hookean.get("points"), int) and hookean["points"] > 0:
             total += int(hookean["points"]) ** k
+        elif isinstance(grid, dict) and isinstance(grid.get("points"), int) and grid["points"] > 0:
+            total += int(grid["points"]) ** k
+        elif isinstance(samples, dict) and isinstance(samples.get("count"), int) and samples["count"] > 0:
+            total += int(samples["count"])
         elif isinstance(table, dict) and isinstance(table.get("path"), str):
             try:
                 with open(base_dir / table["path"], "rb") as f:
@@ -376,7 +429,11 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
             data = integer(label, "data", data, low=0, high=max(n_data - 1, 0), what="a data-set index")
             if not n_data:
                 raise InputError(f"[{label}] data = {data} but the case has no [data]")
-        materials.append(Material(region=region, youngs_modulus=E, poisson_ratio=nu, data=data))
+        law = t.get("law", "linear")
+        if not isinstance(law, str):
+            raise InputError(f"[{label}] law must be a string, got {show(law)}")
+        materials.append(Material(region=region, youngs_modulus=E, poisson_ratio=nu, data=data,
+                                  law=hyperelastic.get_law(law).name))
 
     supports = []
     for i, t in enumerate(_tables(doc, "supports")):
@@ -425,16 +482,20 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     max_outer, options = casefile.run_options(doc)
     model = continuum_model(mesh, materials=materials, supports=supports, contacts=contacts, degree=degree,
                             tractions=tractions, body_forces=body_forces, load_factors=load_factors,
-                            datasets=datasets, name=name, reference=reference)
+                            datasets=datasets, name=name, reference=reference,
+                            # the case's top-level kinematics replaces this; built to fit the laws
+                            # so that the model checks the pair (law, kinematics) the user wrote
+                            kinematics="finite" if any(hyperelastic.get_law(m.law).finite for m in materials)
+                            else "small")
     return Case(model=model, formulation_options=options, ddcm_max_outer=max_outer, source=source)
 
 
 register_case_kind(
     "mesh",
-    sections={"mesh": _MESH, "material": {"region", "youngs_modulus", "poisson_ratio", "data"},
+    sections={"mesh": _MESH, "material": {"region", "youngs_modulus", "poisson_ratio", "data", "law"},
               "supports": {"boundary", "fix"}, "loads": {"boundary", "traction", "body_force", "region"},
               "contact": {"boundary", "obstacle", "radius", "center", "point", "normal", "axis", "half_width",
                           "edge_radius", "direction", "travel", "name"},
               "loading": {"load_factors"}, "hertz": {"obstacle", "force_factor"}},
     arrays={"supports", "loads", "contact"}, tables={"material"}, parse=parse_case,
-    uses="[material], [[supports]] and [[contact]]", default_name="continuum")
+    uses="[material], [[supports]] and [[contact]]", default_name="continuum", kinematics=("small", "finite"))

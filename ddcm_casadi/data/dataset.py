@@ -231,19 +231,31 @@ class MaterialDataset:
 
     @classmethod
     def from_law(cls, law, components: int, strain_min: float, strain_max: float, points_per_axis: int, *,
-                 c, grading: float = 1.0) -> "MaterialDataset":
+                 c, grading: float = 1.0, samples: int | None = None, seed: int = 0) -> "MaterialDataset":
         """Any law ``stress = law(strain)`` (``(n, k) -> (n, k)``, Mandel components) sampled on a
         grid of ``points_per_axis^k`` strain states in ``[strain_min, strain_max]^k``, regular or
-        graded towards zero strain (``grading``, :func:`graded_axis`)."""
+        graded towards zero strain (``grading``, :func:`graded_axis`), or at ``samples`` states
+        drawn uniformly from that box (``seed``). States where the law is undefined (non-finite
+        stress: a finite-strain law beyond ``det C > 0``) are left out: no material reaches them."""
         k, n = int(components), int(points_per_axis)
         if n < 1 or float(n) ** k > limits.MAX_DATA_POINTS:
             raise InputError(f"points per axis must be between 1 and {int(limits.MAX_DATA_POINTS ** (1 / k))} "
                              f"for {k} components (at most {limits.MAX_DATA_POINTS} points), got {points_per_axis!r}")
         if not (math.isfinite(strain_min) and math.isfinite(strain_max)) or strain_min > strain_max:
             raise InputError(f"strain range must be finite with min <= max, got [{strain_min}, {strain_max}]")
-        axis = graded_axis(strain_min, strain_max, n, grading)
-        strain = np.stack(np.meshgrid(*([axis] * k), indexing="ij"), axis=-1).reshape(-1, k)
-        return cls(strain, law(strain), c)
+        if samples is not None:
+            count = int(samples)
+            if count < 1 or count > limits.MAX_DATA_POINTS:
+                raise InputError(f"samples must be between 1 and {limits.MAX_DATA_POINTS}, got {samples!r}")
+            strain = np.random.default_rng(seed).uniform(strain_min, strain_max, (count, k))
+        else:
+            axis = graded_axis(strain_min, strain_max, n, grading)
+            strain = np.stack(np.meshgrid(*([axis] * k), indexing="ij"), axis=-1).reshape(-1, k)
+        stress = np.asarray(law(strain), float)
+        defined = np.all(np.isfinite(stress), axis=tuple(range(1, stress.ndim)))
+        if not np.any(defined):
+            raise InputError("the law is undefined at every sampled strain state; narrow the strain range")
+        return cls(strain[defined], stress[defined], c)
 
     @classmethod
     def from_csv(cls, path: str | os.PathLike, *, c, components: int | None = None) -> "MaterialDataset":

@@ -196,10 +196,10 @@ class ContinuumModel(ContactModel):
             out["travel"] = self.pair_travels(step)
         return out
 
-    def current_gap(self, u: np.ndarray, step: int) -> np.ndarray:
+    def gap(self, u: np.ndarray, step: int) -> np.ndarray:
         """The gaps at ``step`` for free displacements ``u``: linearised (small) or exact (finite)."""
-        if not self.finite:
-            return self.gap(u, step)
+        if not self.finite or not self.n_contacts:
+            return super().gap(u, step)
         x = self.contact_points + (self._contact_selection() @ np.asarray(u, float)).reshape(-1, self.dimension)
         x = x - self.pair_travels(step)[:, None] * self._directions()
         out = np.empty(self.n_contacts)
