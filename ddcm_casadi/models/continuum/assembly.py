@@ -227,7 +227,8 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: n
         The obstacles, in the order of ``contacts``.
     contact : dict
         The :class:`ContinuumModel` fields ``contact_dofs``, ``contact_points``,
-        ``contact_normals`` and ``contact_obstacle``.
+        ``contact_normals``, ``contact_obstacle`` and ``contact_facets`` (the boundary facets of
+        each contact surface).
     """
     d = disc.dimension
     if contacts and d == 3 and disc.degree == 2:
@@ -235,7 +236,7 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: n
         # vertices, so nodal contact would leave them biactive and their pressures meaningless.
         raise InputError("contact on quadratic tetrahedra is not supported (a quadratic triangle's vertices "
                          "carry no share of a pressure); use degree = 1 in 3-D")
-    obstacles, rows_dofs, points, normals, areas, owner, g0 = [], [], [], [], [], [], []
+    obstacles, rows_dofs, points, normals, areas, owner, g0, facet_sets = [], [], [], [], [], [], [], []
     for i, c in enumerate(contacts):
         ob = c.obstacle
         if ob.dimension != d:
@@ -260,10 +261,12 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: n
         areas.append(area)
         owner.append(np.full(dofs.size, i))
         g0.append(gaps)
+        facet_sets.append(facets)
     nc = int(sum(r.size for r in rows_dofs))
     if not nc:
         contact = dict(contact_dofs=np.zeros(0, np.int64), contact_points=np.zeros((0, d)),
-                       contact_normals=np.zeros((0, d)), contact_obstacle=np.zeros(0, np.int64))
+                       contact_normals=np.zeros((0, d)), contact_obstacle=np.zeros(0, np.int64),
+                       contact_facets=tuple(facet_sets))
         return sp.csr_matrix((0, free.size)), np.zeros(0), np.zeros((n_steps, 0)), obstacles, contact
     index_of = np.full(disc.n_dofs, -1, dtype=np.int64)
     index_of[free] = np.arange(free.size)
@@ -274,5 +277,5 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: n
     _check_movable(keep, np.concatenate(g0, axis=1), np.concatenate(points), np.concatenate(owner), obstacles, size)
     G = sp.csr_matrix((N[keep], (np.nonzero(keep)[0], cols[keep])), shape=(nc, free.size))
     contact = dict(contact_dofs=cdofs, contact_points=np.concatenate(points), contact_normals=N,
-                   contact_obstacle=np.concatenate(owner))
+                   contact_obstacle=np.concatenate(owner), contact_facets=tuple(facet_sets))
     return G, np.concatenate(areas), np.concatenate(g0, axis=1), obstacles, contact

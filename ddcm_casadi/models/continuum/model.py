@@ -64,6 +64,7 @@ class ContinuumModel(ContactModel):
     contact_points: np.ndarray | None = None     # (nc, d) reference coordinates
     contact_normals: np.ndarray | None = None    # (nc, d)
     contact_obstacle: np.ndarray | None = None   # (nc,) obstacle index
+    contact_facets: tuple = ()                    # boundary facets of each contact surface
     reference: object | None = None               # e.g. a HertzReference
     laws: tuple = ()                              # the classical law of each region (hyperelastic.LAWS)
 
@@ -222,6 +223,25 @@ class ContinuumModel(ContactModel):
             if np.any(rows):
                 out[rows] = ob.grad_phi(x[rows])
         return out
+
+    def current_contact_area(self, u: np.ndarray) -> np.ndarray:
+        """``(nc,)`` each pair's tributary area in the current configuration (finite kinematics;
+        the reference areas otherwise): the same lumping (:func:`~ddcm_casadi.models.continuum.fem.tributary_areas`)
+        on the mesh whose vertices moved by ``u`` (straight-sided facets: for P2 the midside
+        nodes' own motion is not seen)."""
+        if not self.finite or not self.n_contacts:
+            return self.contact_area
+        disp = self.dof_displacement(u)[:self.mesh.p.shape[1]]
+        moved = fem.Discretisation.create(type(self.mesh)(self.mesh.p + disp.T, self.mesh.t), self.discretisation.degree)
+        area = np.zeros(self.discretisation.scalar_basis.N)
+        for facets in self.contact_facets:
+            dofs, a = fem.tributary_areas(moved, facets)
+            area[dofs] = a  # a dof on two contact surfaces has one pair per surface: same area each
+        return area[self.contact_dofs]
+
+    def true_pressure(self, u: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Contact pressure on the current area, ``a_0 p / a`` (``p``: nominal, per reference area)."""
+        return self.contact_area * np.asarray(p) / self.current_contact_area(u)
 
     def inadmissible(self, u: np.ndarray) -> str | None:
         """Finite kinematics: an inverted material point (``J = det F <= 0``) is no solution."""
