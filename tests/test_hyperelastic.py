@@ -1,0 +1,113 @@
+"""Hyperelastic laws, finite-strain kinematics and exact gaps of continua, checked against
+closed forms written independently of the package's code."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ddcm_casadi.casefiles.config import case_from_dict
+from ddcm_casadi.data import hyperelastic
+from ddcm_casadi.data.dataset import MaterialDataset
+from ddcm_casadi.data.metric import Metric, isotropic_elasticity
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.models.continuum.finite import green_lagrange
+from ddcm_casadi.models.continuum.inputs import Contact, Material, Support
+from ddcm_casadi.models.continuum.mesh import rectangle
+from ddcm_casadi.models.continuum.model import continuum_model
+from ddcm_casadi.models.continuum.obstacles import Ball, Plane
+
+K = {2: 3, 3: 6}
+# Round-off of a law evaluated at O(0.1) strains with O(1) moduli: a few ulps per operation.
+ROUNDOFF = 1e-13
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_neo_hookean_derivative_equals_its_closed_form(d):
+    """``S = dW/dE`` by automatic differentiation against ``mu (I - C^-1) + lambda ln J C^-1``."""
+    E = 0.1 * np.random.default_rng(d).standard_normal((20, K[d]))
+    S = hyperelastic.second_piola("neo_hookean", E, 3.0, 0.3, d)
+    assert np.max(np.abs(S - hyperelastic.neo_hookean_stress(E, 3.0, 0.3, d))) < ROUNDOFF
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("law", ["saint_venant_kirchhoff", "linear"])
+def test_quadratic_laws_are_the_isotropic_matrix(d, law):
+    E = 0.1 * np.random.default_rng(d).standard_normal((20, K[d]))
+    D = isotropic_elasticity(3.0, 0.3, d)[0]
+    assert np.max(np.abs(hyperelastic.second_piola(law, E, 3.0, 0.3, d) - E @ D.T)) < ROUNDOFF
+
+
+def test_green_lagrange_of_a_rigid_rotation_is_zero_and_of_a_stretch_exact():
+    c, s = np.cos(0.7), np.sin(0.7)
+    H = np.array([[[c - 1, -s], [s, c - 1]], [[0.5, 0.0], [0.0, -0.3]]])
+    E = green_lagrange(H)
+    assert np.max(np.abs(E[0])) < 1e-15
+    assert np.allclose(E[1], [(1.5**2 - 1) / 2, (0.7**2 - 1) / 2, 0.0], rtol=0, atol=1e-15)
+
+
+def test_law_data_leave_out_undefined_states():
+    law = hyperelastic.law_of("neo_hookean", 1.0, 0.3, 2)
+    ds = MaterialDataset.from_law(law, 3, -0.45, 0.45, 7, c=Metric(np.eye(3)))
+    assert 0 < len(ds) < 7**3
+    C = np.eye(3)[None] + 2 * hyperelastic._tensors(ds.strain, 2)
+    assert np.all(np.linalg.det(C[:, :2, :2]) > 0)
+
+
+def _block(law="neo_hookean", kinematics="finite", obstacle=None, travel=(0.0, 0.1)):
+    obstacle = obstacle or Plane(point=(0.0, 1.0), normal=(0.0, -1.0), direction=(0.0, -1.0), travel=list(travel))
+    return continuum_model(rectangle(1.0, 1.0, nx=2, ny=2),
+                           materials=[Material(youngs_modulus=1.0, poisson_ratio=0.3, law=law)],
+                           supports=[Support("ymin", "y"), Support("xmin", "x")],
+                           contacts=[Contact(obstacle, "ymax")], kinematics=kinematics)
+
+
+@pytest.mark.parametrize("law,kinematics", [("linear", "finite"), ("neo_hookean", "small")])
+def test_a_law_that_does_not_fit_the_kinematics_is_refused(law, kinematics):
+    with pytest.raises(InputError, match="does not fit kinematics"):
+        _block(law, kinematics)
+
+
+def test_unknown_law_is_one_line():
+    with pytest.raises(InputError, match="unknown material law 'rubber'"):
+        _block("rubber")
+
+
+def test_exact_gap_of_a_ball_at_the_current_configuration():
+    """``phi(X + u - s d)`` for a circle: moved nodes against ``|x - c| - R`` computed here."""
+    ball = Ball(center=(0.5, 3.0), radius=2.0, direction=(0.0, -1.0), travel=[0.0, 0.25])
+    m = _block(obstacle=ball)
+    u = 0.05 * np.random.default_rng(1).standard_normal(m.n_dofs)
+    x = m.contact_points + m.dof_displacement(u)[m.contact_dofs] - np.array([0.0, -0.25])
+    expected = np.linalg.norm(x - [0.5, 3.0], axis=1) - 2.0
+    assert np.max(np.abs(m.gap(u, 1) - expected)) < 1e-14
+
+
+def test_inverted_point_is_inadmissible():
+    m = _block()
+    u = np.zeros(m.n_dofs)
+    assert m.inadmissible(u) is None
+    # every node mirrored through y = 0.5 ... only the free components move: flip y of free y dofs
+    vd = m.discretisation.vector_dofs()
+    y = m.discretisation.dof_locations()[:, 1]
+    full = np.zeros(m.discretisation.n_dofs)
+    full[vd[1]] = -2.0 * y
+    assert "inverted" in m.inadmissible(full[m.free_dofs])
+
+
+def test_case_file_law_keys_and_errors():
+    doc = {"kinematics": "finite",
+           "mesh": {"shape": "rectangle", "size": [1.0, 1.0], "divisions": [1, 1]},
+           "material": {"youngs_modulus": 1.0, "poisson_ratio": 0.3, "law": "neo_hookean"},
+           "supports": [{"boundary": "ymin", "fix": "xy"}],
+           "data": {"law": "neo_hookean", "grid": {"strain_min": -0.1, "strain_max": 0.1, "points": 3},
+                    "c": "isotropic"}}
+    case = case_from_dict(doc)
+    assert case.model.kinematics == "finite" and case.model.laws == ("neo_hookean",)
+    assert len(case.model.dataset) == 27
+    bad = dict(doc, data=dict(doc["data"], samples={"strain_min": 0, "strain_max": 1, "count": 2}))
+    with pytest.raises(InputError, match="exactly one of 'grid' or 'samples'"):
+        case_from_dict(bad)
+    small = {k: v for k, v in doc.items() if k != "kinematics"}
+    with pytest.raises(InputError, match="does not fit kinematics = 'small'"):
+        case_from_dict(small)
