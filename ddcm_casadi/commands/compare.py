@@ -30,6 +30,7 @@ from ddcm_casadi.commands.base import (  # noqa: F401 - EXIT_INPUT: the API
 from ddcm_casadi.casefiles.config import default_case, load_case_with_overrides
 from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.drivers.harness import VARIANTS, Comparison, coarse_data_warning
+from ddcm_casadi.outputs.point_cloud import POINTS_SUFFIX
 from ddcm_casadi.parallel import resolve_jobs
 from ddcm_casadi.run import CaseRun, run_case, select_formulations, select_variants
 from ddcm_casadi.version import __version__
@@ -204,8 +205,32 @@ def run(argv: list[str] | None = None) -> int:
                           jobs=jobs, overrides=overrides, progress=progress, on_start=start,
                           on_compared=lambda cmp: print(cmp.table()), tool="ddcm-compare")
     if result.out_dir is not None:
-        print(f"wrote {', '.join(result.files)} to {result.out_dir}", file=sys.stderr)
+        print(f"wrote {written_summary(result.files)} to {result.out_dir}", file=sys.stderr)
     return _final_warnings(result, strict=args.strict)
+
+
+def written_summary(files: list[str]) -> str:
+    """The files of a run for its ``wrote ...`` line: every file by name but the VTU series, which
+    are summarised per folder (``vtu/: 8 mesh series and 8 point-cloud series, 80 files (64 .vtu,
+    16 .pvd)``) where the folder's first file stands in the list; ``results.json`` lists them all."""
+    parts: list[str] = []
+    folders: dict[str, list[str]] = {}
+    for name in files:
+        folder, sep, rest = name.partition("/")
+        if not (sep and rest.endswith((".vtu", ".pvd"))):
+            parts.append(name)
+            continue
+        if folder not in folders:
+            folders[folder] = []
+            parts.append(folder + "/")  # its place in the list; filled in below
+        folders[folder].append(rest)
+    for folder, names in folders.items():
+        series = [n for n in names if n.endswith(".pvd")]
+        clouds = sum(n.endswith(f"{POINTS_SUFFIX}.pvd") for n in series)
+        parts[parts.index(folder + "/")] = (
+            f"{folder}/: {len(series) - clouds} mesh series and {clouds} point-cloud series, {len(names)} files "
+            f"({len(names) - len(series)} .vtu, {len(series)} .pvd)")
+    return ", ".join(parts)
 
 
 def _final_warnings(result: CaseRun, *, strict: bool) -> int:

@@ -46,7 +46,7 @@ def _mm_label(label: str) -> str:
 
 def figure_pressure_profile(runs: Sequence[Mapping[str, Any]], *,
                             hertz: Mapping[str, Any] | None = None, xlabel: str = "x (m)",
-                            title: str = "") -> Figure:
+                            ylabel: str = "contact pressure (MPa)", title: str = "") -> Figure:
     """Contact pressure along the contact surface, several runs and optionally the Hertz solution.
 
     Parameters
@@ -60,6 +60,8 @@ def figure_pressure_profile(runs: Sequence[Mapping[str, Any]], *,
         ``{"x": array, "pressure": array, "label": str}``: a dashed black line.
     xlabel : str
         Label of the coordinate; the axis is in mm, so a trailing "(m)" is shown as "(mm)".
+    ylabel : str
+        Label of the pressure axis (in MPa), e.g. which pressure at finite strain (nominal or true).
     title : str
         Axes title.
 
@@ -87,7 +89,7 @@ def figure_pressure_profile(runs: Sequence[Mapping[str, Any]], *,
         if not run["converged"]:
             ax.plot(x * 1e3, p * 1e-6, "o", ms=9, mfc="none", mec="red", mew=1.5, zorder=3)
     ax.set_xlabel(_mm_label(xlabel))
-    ax.set_ylabel("contact pressure (MPa)")
+    ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
     if ax.get_legend_handles_labels()[1]:

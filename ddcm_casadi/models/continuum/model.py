@@ -316,9 +316,18 @@ class ContinuumModel(ContactModel):
         return out
 
     def step_summary(self, u: np.ndarray, p: np.ndarray) -> dict:
+        """:meth:`ContactModel.step_summary` (``total_contact_force`` is ``sum a_0 p``, the sum of
+        the nodal contact forces' magnitudes), the reference's columns, and at finite strain
+        ``min_J`` (the smallest ``det F`` of the material points) and ``max_contact_pressure_true``
+        (the largest pressure per current area, :meth:`true_pressure`)."""
         out = super().step_summary(u, p)
         if self.reference is not None:
             out.update(self.reference.step_summary(self, p))
+        if self.finite:
+            finite_u = bool(np.all(np.isfinite(u)))
+            out["min_J"] = float(np.min(finite.jacobian(self.displacement_gradient(u)))) if finite_u else float("nan")
+            true = self.true_pressure(u, p) if finite_u and self.n_contacts else np.zeros(0)
+            out["max_contact_pressure_true"] = float(np.max(true)) if true.size else float("nan")
         return out
 
     def contact_pair_labels(self) -> list[str]:
@@ -326,12 +335,59 @@ class ContinuumModel(ContactModel):
                 for o, x in zip(self.contact_obstacle, self.contact_points)]
 
     def results_fields(self, fields: dict) -> dict:
-        """What ``results.json`` keeps of a run's fields: the contact only (coordinates,
-        pressures per step, total force per step); the full fields go to the VTU files."""
-        p = np.asarray(fields["contact_pressure"])
-        return dict(contact_coordinates=self.contact_points, contact_obstacle=self.contact_obstacle,
-                    contact_pressure=p, total_contact_force=np.sum(self.contact_area * p, axis=-1),
-                    converged=fields["converged"])
+        """What ``results.json`` keeps of a run's fields: the contact only; the full fields go to
+        the VTU files.
+
+        Small kinematics: ``contact_coordinates``, ``contact_obstacle``, ``contact_pressure`` and
+        ``total_contact_force`` (``sum a p``) per step, ``converged``. Finite strain (every number
+        named by what it is; ``notes`` says it in words): ``contact_pressure_nominal`` (the solver's
+        ``p``, force per reference area) and ``contact_pressure_true`` (per current area,
+        :meth:`true_pressure`) per step and pair, ``contact_area_reference`` and
+        ``contact_area_current`` (the lumped areas, :meth:`current_contact_area`),
+        ``total_contact_force`` (``sum a_0 p``), and per step and obstacle (``obstacle_names``,
+        ``obstacle_travel_directions``) the force on the body as modelled, ``sum a_0 p n`` with
+        the obstacle normals at the current contact points (:meth:`current_normals`):
+        ``contact_force_vector_as_modelled`` ``(n_steps, n_obstacles, d)`` and
+        ``contact_force_along_travel_as_modelled`` ``(n_steps, n_obstacles)``. Non-finite fields
+        (a failed step) give NaN (``null``)."""
+        p = np.asarray(fields["contact_pressure"], dtype=float)
+        out = dict(contact_coordinates=self.contact_points, contact_obstacle=self.contact_obstacle)
+        if not self.finite:
+            return dict(out, contact_pressure=p, total_contact_force=np.sum(self.contact_area * p, axis=-1),
+                        converged=fields["converged"])
+        u = np.asarray(fields["u"], dtype=float)
+        n_steps, d, n_obstacles = p.shape[0], self.dimension, len(self.obstacles)
+        true, area = np.full(p.shape, np.nan), np.full(p.shape, np.nan)
+        vectors = np.full((n_steps, n_obstacles, d), np.nan)
+        pair_obstacle = np.asarray(self.contact_obstacle, dtype=int)
+        for k in range(n_steps):
+            if not (np.all(np.isfinite(u[k])) and np.all(np.isfinite(p[k]))):
+                continue
+            area[k] = self.current_contact_area(u[k])
+            true[k] = self.true_pressure(u[k], p[k])
+            pair_forces = (self.contact_area * p[k])[:, None] * self.current_normals(u[k], k)
+            for o in range(n_obstacles):
+                vectors[k, o] = pair_forces[pair_obstacle == o].sum(axis=0)
+        directions = np.array([ob.offset(1.0) for ob in self.obstacles], dtype=float).reshape(n_obstacles, d)
+        unit = "N per unit thickness" if d == 2 else "N"
+        notes = dict(
+            contact_pressure_nominal="Pa; the solver's p: contact force per reference (undeformed) area",
+            contact_pressure_true="Pa; contact force per current (deformed) area: a_0 p / a",
+            contact_area_reference="the lumped area a_0 of each pair in the reference configuration",
+            contact_area_current="the same lumping on the deformed mesh, per step: a",
+            total_contact_force=f"{unit}; sum of a_0 p over the pairs (the magnitudes of the nodal forces)",
+            contact_force_vector_as_modelled=f"{unit}; per step and obstacle: sum of a_0 p n over its pairs, "
+                                             "n the obstacle normal at the current contact point (force on the body)",
+            contact_force_along_travel_as_modelled=f"{unit}; that vector resolved along the obstacle's direction "
+                                                   "of travel (positive: pushing the body the way it moves)",
+        )
+        return dict(out, contact_pressure_nominal=p, contact_pressure_true=true,
+                    contact_area_reference=self.contact_area, contact_area_current=area,
+                    total_contact_force=np.sum(self.contact_area * p, axis=-1),
+                    obstacle_names=[ob.name for ob in self.obstacles], obstacle_travel_directions=directions,
+                    contact_force_vector_as_modelled=vectors,
+                    contact_force_along_travel_as_modelled=np.einsum("kod,od->ko", vectors, directions),
+                    converged=fields["converged"], notes=notes)
 
     def field_outputs(self) -> tuple[str, ...]:
         """One VTU file per step and run with a ``.pvd`` series each
@@ -340,14 +396,19 @@ class ContinuumModel(ContactModel):
 
     def figures(self, runs) -> dict[str, FigureSpec]:
         """``pressure_profile.png`` (with contact pairs), ``deformed_<variant>.png`` (last step,
-        Fischer-Burmeister if it was run, else the first formulation of that variant) and
-        ``contact_history.png``; drawn by :mod:`ddcm_casadi.outputs.continuum_results`."""
+        Fischer-Burmeister if it was run, else the first formulation of that variant),
+        ``force_indentation.png`` (when an obstacle with contact pairs moves: the contact force
+        along its travel against the travel, every run) and ``contact_history.png``; drawn by
+        :mod:`ddcm_casadi.outputs.continuum_results`."""
         runs = list(runs)
         specs = {"pressure_profile.png": FigureSpec("pressure_profile")} if self.n_contacts else {}
         for variant in ("classical", "ddcm"):
             name = drawn_formulation(runs, variant)
             if name is not None:
                 specs[f"deformed_{variant}.png"] = FigureSpec("deformed_body", {"variant": variant, "formulation": name})
+        held = set(np.asarray(self.contact_obstacle, dtype=int).tolist()) if self.n_contacts else set()
+        if any(float(np.ptp(ob.travels(self.n_steps))) > 0 for o, ob in enumerate(self.obstacles) if o in held):
+            specs["force_indentation.png"] = FigureSpec("force_indentation")
         return {**specs, **super().figures(runs)}
 
 
