@@ -189,14 +189,16 @@ def parameters(case: Case, cmp: Comparison) -> dict:
         model its ``name``, sizes, ``load_parameter_name`` and values, and the moduli, for trusses
         also ``dimension``, ``n_nodes``, ``n_members``), ``data`` (:func:`describe_dataset`),
         ``ddcm_max_outer``, ``ddcm`` (the search options,
-        :meth:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions.describe`) and ``formulations``
-        (options with their problem-dependent defaults resolved, e.g. ``gamma_used``).
+        :meth:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions.describe`), ``min_substep`` (the
+        smallest sub-step of the step bisection, :mod:`~ddcm_casadi.drivers.substeps`) and
+        ``formulations`` (options with their problem-dependent defaults resolved, e.g. ``gamma_used``).
     """
     m = case.model
     forms = {f.name: f.resolved_options(cmp.problems.classical) for f in cmp.formulations}
     # A dict display, not keywords: a model record may not clash with the run's own keys.
     return {"case": case.source, **m.describe(), "data": describe_dataset(m.dataset),
-            "ddcm_max_outer": case.ddcm_max_outer, "ddcm": case.ddcm_options.describe(), "formulations": forms}
+            "ddcm_max_outer": case.ddcm_max_outer, "ddcm": case.ddcm_options.describe(),
+            "min_substep": case.min_substep, "formulations": forms}
 
 
 def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
@@ -236,7 +238,9 @@ def results_document(case: Case, cmp: Comparison, *, files: Sequence[str],
     -------
     dict
         ``parameters`` (:func:`parameters`), ``versions``, ``summary``
-        (:meth:`~ddcm_casadi.drivers.harness.Comparison.summary`), ``warnings`` (physically odd input),
+        (:meth:`~ddcm_casadi.drivers.harness.Comparison.summary`: per run, also the steps reached
+        through sub-steps, ``bisected_steps``, and per step ``substeps`` and ``smallest_substep``),
+        ``warnings`` (physically odd input),
         ``fields`` (:func:`fields`; not for the one-unknown bar), ``files`` and ``format``
         (:data:`RESULTS_FORMAT`: the identity by which a rerun trusts the manifest).
     """
@@ -256,10 +260,11 @@ def results_document(case: Case, cmp: Comparison, *, files: Sequence[str],
 def compare_case(case: Case, formulations: Sequence[str], variants: Sequence[str], *,
                  progress: Progress | None = None, jobs: int | None = 1) -> Comparison:
     """Run the formulations ``formulations`` of a case in ``variants``, with the case's formulation
-    options and DDCM settings, in ``jobs`` processes (nothing written)."""
+    options, DDCM settings and step bisection (``min_substep``), in ``jobs`` processes (nothing
+    written)."""
     selection = {n: case.formulation_options.get(n, {}) for n in formulations}
     return compare(case.model, selection, variants=list(variants), ddcm_max_outer=case.ddcm_max_outer,
-                   ddcm=case.ddcm_options, progress=progress, jobs=jobs)
+                   ddcm=case.ddcm_options, progress=progress, jobs=jobs, min_substep=case.min_substep)
 
 
 def write_results(case: Case, cmp: Comparison, out_dir: str | Path, *, rows: list[dict] | None = None,

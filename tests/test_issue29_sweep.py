@@ -270,9 +270,10 @@ def test_data_range_and_non_converged_steps_reach_sweep_csv_warnings_and_strict(
     assert int(ddcm[1]["max_extrapolated_states"]) >= 1
     assert "WARNING: DATA RANGE EXCEEDED in 1 cases" in err and ddcm[1]["case"] in err
     assert sweep_cli(str(path), "--out", str(out), "--workers", "1", "-q", "--strict")[0] == 3  # (nothing reruns)
-    # a non-converged step: the warning and --strict (two outer iterations of DDCM are not enough)
+    # a non-converged step: the warning and --strict (two outer iterations of DDCM are not enough
+    # for the whole steps; without step bisection, which reaches them in sub-steps)
     path = write_spec(tmp_path / "nc", 'base = "base.toml"\nvariants = ["ddcm"]\nformulations = ["fischer_burmeister"]\n'
-                                       '[grid]\n"ddcm.max_outer" = [2]\n')
+                                       '[grid]\n"ddcm.max_outer" = [2]\nmin_substep = [0]\n')
     code, err = sweep_cli(str(path), "--out", str(tmp_path / "nc_out"), "--workers", "1", "-q", "--strict", "--no-plots")
     row = read_csv(tmp_path / "nc_out" / "sweep.csv")[0]
     assert row["converged_steps"] != row["steps"], row

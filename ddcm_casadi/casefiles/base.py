@@ -12,6 +12,11 @@ kind shares:
   (:class:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions`);
 - ``[formulations.NAME]``: options of one contact formulation (checked against the registry).
 
+Top-level keys (before any section), shared by every kind: ``kinematics`` (``"small"`` or
+``"finite"``, where the kind offers it) and ``min_substep`` (the smallest sub-step of the automatic
+bisection of a failed load step, a fraction of a step, both variants; default 1/16, 0 or 1 turns
+it off: :mod:`ddcm_casadi.drivers.substeps`).
+
 A model kind registers itself with :func:`register_case_kind` (its section, the keys of its
 sections and a ``parse`` function that builds the :class:`Case`); :func:`case_from_dict` checks
 the sections of every kind and dispatches to the one named. The public entry point is
@@ -45,10 +50,12 @@ from ddcm_casadi.casefiles.overrides import apply_overrides
 from ddcm_casadi.models.base import KINEMATICS, ContactModel
 from ddcm_casadi.drivers.ddcm_options import KEYS as DDCM_OPTION_KEYS
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.substeps import DEFAULT_MIN_SUBSTEP, check_min_substep
 
 #: Keys of the sections every kind shares (``None``: checked elsewhere, here against the registry).
-#: Top-level keys (not sections): ``kinematics = "small" | "finite"`` (default the kind's first).
-TOP_LEVEL_KEYS = ("kinematics",)
+#: Top-level keys (not sections): ``kinematics = "small" | "finite"`` (default the kind's first) and
+#: ``min_substep`` (the automatic step bisection of both variants, :mod:`ddcm_casadi.drivers.substeps`).
+TOP_LEVEL_KEYS = ("kinematics", "min_substep")
 
 COMMON_SECTIONS: dict[str, set[str] | None] = {
     "data": {"path", "hookean", "c"},
@@ -68,6 +75,9 @@ class Case:
     source: str = "paper example"
     #: ``[ddcm]`` start, seed, restarts, improve, ... (:class:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions`).
     ddcm_options: DDCMOptions = field(default_factory=DDCMOptions)
+    #: The top-level ``min_substep``: failed load steps are bisected down to this fraction of a
+    #: step, in both variants (:mod:`ddcm_casadi.drivers.substeps`; 0 or 1: off).
+    min_substep: float = DEFAULT_MIN_SUBSTEP
 
 
 #: ``parse(doc, *, base_dir, source, name) -> Case`` of a model kind.
@@ -317,9 +327,11 @@ def case_from_dict(doc: dict, *, base_dir: Path = Path("."), source: str = "<dic
         raise InputError(f"kinematics = {kinematics!r} is not available for [{kind.section}] cases "
                          f"(available: {', '.join(map(repr, kind.kinematics))})")
     ddcm = DDCMOptions.from_mapping(doc.get("ddcm", {}))  # checked before any work
+    min_substep = check_min_substep(top.get("min_substep", DEFAULT_MIN_SUBSTEP))
     name = Path(source).stem if source != "<dict>" else None
     case = kind.parse(doc, base_dir=base_dir, source=source, name=name or kind.default_name)
     if kinematics != case.model.kinematics:
         case.model = dataclasses.replace(case.model, kinematics=kinematics)
     case.ddcm_options = ddcm
+    case.min_substep = min_substep
     return case

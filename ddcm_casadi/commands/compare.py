@@ -30,6 +30,7 @@ from ddcm_casadi.commands.base import (  # noqa: F401 - EXIT_INPUT: the API
 from ddcm_casadi.casefiles.config import default_case, load_case_with_overrides
 from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.drivers.harness import VARIANTS, Comparison, coarse_data_warning
+from ddcm_casadi.drivers.substeps import fraction_text
 from ddcm_casadi.outputs.point_cloud import POINTS_SUFFIX
 from ddcm_casadi.parallel import resolve_jobs
 from ddcm_casadi.run import CaseRun, run_case, select_formulations, select_variants
@@ -60,6 +61,8 @@ truss2d.toml, von_mises.toml, bar_stops.toml, ...).
 --out DIR writes results.csv, results.json and the figures that suit the model (VTU series and
 pressure profiles for continua), all or none, in a folder locked against a second run.
 --set KEY=VALUE overrides one value of the case file and is recorded in results.json.
+A load step that fails is retried in sub-steps (halved down to the top-level case key
+min_substep, default 0.0625 = 1/16 of a step; --set min_substep=0 turns it off).
 Large continua are announced before they are built, and refused when they cannot fit in memory.
 Exit status: 0 done, 2 bad input, 3 with --strict a step that did not converge, 130 Ctrl-C.
 """
@@ -107,12 +110,24 @@ def _split(arg: str | None, option: str) -> list[str] | None:
     return names
 
 
+def _bisection(step) -> str:
+    """What the step bisection did at a step, for its progress line (``""``: nothing):
+    ``  bisected: 5 sub-steps, smallest 1/8`` or, for a step that failed at the smallest,
+    ``  bisected down to 1/16``."""
+    if not step.bisected:
+        return ""
+    if step.converged:
+        return f"  bisected: {step.substeps} sub-steps, smallest {fraction_text(step.smallest_substep)}"
+    return f"  bisected down to {fraction_text(step.smallest_substep)}"
+
+
 class _Progress:
     """Progress on stderr: ``variant/formulation step k/n elapsed``.
 
     On a terminal one line per run, updated in place after every step. Otherwise (a log) a line
     after a run's first step, then at most one every :attr:`interval` seconds while it goes on,
-    and one at its last step and at every step that did not converge: a long run shows its pace.
+    and one at its last step, at every step that did not converge and at every step that was
+    bisected (``bisected: 5 sub-steps, smallest 1/8``): a long run shows its pace.
     """
 
     #: Seconds between two lines of one run when stderr is not a terminal.
@@ -129,14 +144,15 @@ class _Progress:
             return
         done = step.step + 1
         flag = "" if step.converged else "  NOT CONVERGED"
+        bisected = _bisection(step)
         now = time.perf_counter()
-        msg = f"{variant:>9}/{name:<21} step {done:>3}/{self.n}  {now - self.t0:7.2f} s{flag}"
+        msg = f"{variant:>9}/{name:<21} step {done:>3}/{self.n}  {now - self.t0:7.2f} s{flag}{bisected}"
         if self.tty:
-            end = "\n" if done == self.n or flag else ""
+            end = "\n" if done == self.n or flag or bisected else ""
             print("\r" + msg, end=end, file=sys.stderr, flush=True)
             return
         run = (variant, name)
-        if (done == self.n or flag or self._last is None or self._last[0] != run
+        if (done == self.n or flag or bisected or self._last is None or self._last[0] != run
                 or now - self._last[1] >= self.interval):
             # one write per line: the processes of ``--jobs`` share stderr, and print() writes the
             # line and its end separately

@@ -121,7 +121,8 @@ def _force_scale(problem, model) -> float:
         return 0.0
 
 
-def equilibrium_error(step: StepResult, model, force_floor: float = 0.0) -> float | None:
+def equilibrium_error(step: StepResult, model, force_floor: float = 0.0, load: np.ndarray | None = None
+                      ) -> float | None:
     """The true equilibrium error of a step's physical fields relative to its forces, or ``None``
     where it is not defined here.
 
@@ -134,7 +135,8 @@ def equilibrium_error(step: StepResult, model, force_floor: float = 0.0) -> floa
     the terms that cancel in ``r`` (the load and the element forces, as in a backward error;
     a slender structure's element forces exceed its load by orders of magnitude, and roundoff
     in ``r`` follows them), ``force_floor`` keeping a step that carries nothing from dividing
-    roundoff by zero.
+    roundoff by zero. ``load``: the step's ``f`` when it is not ``model.loads[step.step]`` (a
+    sub-step's, :mod:`~ddcm_casadi.drivers.substeps`).
 
     Defined for small kinematics, the normal (Signorini) contact law and models whose steps carry
     no history (their load is ``model.loads[step]``), with the step's stress known; ``None`` else.
@@ -148,25 +150,26 @@ def equilibrium_error(step: StepResult, model, force_floor: float = 0.0) -> floa
         return None
     weights = np.repeat(model.volumes, model.strain_components)
     contact = model.gap_operator.T @ (model.contact_area * p)
-    f = np.asarray(model.loads[step.step], dtype=float)
+    f = np.asarray(model.loads[step.step] if load is None else load, dtype=float).reshape(-1)
     r = B.T @ (weights * stress) - f - contact
     terms = abs(B).T @ (weights * np.abs(stress))
-    load = max(float(np.max(np.abs(f), initial=0.0)), float(np.max(np.abs(contact), initial=0.0)), force_floor)
+    forces = max(float(np.max(np.abs(f), initial=0.0)), float(np.max(np.abs(contact), initial=0.0)), force_floor)
     error = float(np.max(np.abs(r), initial=0.0))
-    scale = max(load, float(np.max(terms, initial=0.0)))
+    scale = max(forces, float(np.max(terms, initial=0.0)))
     return error / scale if scale > 0 else 0.0
 
 
 def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | None = None,
-                coverage=None) -> None:
+                coverage=None, load: np.ndarray | None = None) -> None:
     """What every driver does to a step before reporting it, in place: :func:`clip_roundoff`,
     :func:`physical_check` (a failure makes a converged step not converged and says why in its
     message; so does a true equilibrium error, :func:`equilibrium_error`, above :data:`PHYSICAL_TOL`)
     and, with a :class:`~ddcm_casadi.data.extrapolation.DataCoverage`, the count of states
-    beyond the data (``extrapolated``, ``data_spacings``: a flag, not a failure)."""
+    beyond the data (``extrapolated``, ``data_spacings``: a flag, not a failure). ``load``: the
+    step's ``f`` when it is not the model's (a sub-step's, :mod:`~ddcm_casadi.drivers.substeps`)."""
     clip_roundoff(step, problem)
     failure = physical_check(step, problem, model.length_scale, penalty_stiffness=penalty_stiffness)
-    error = (equilibrium_error(step, model, EQUILIBRIUM_FLOOR * _force_scale(problem, model))
+    error = (equilibrium_error(step, model, EQUILIBRIUM_FLOOR * _force_scale(problem, model), load)
              if np.all(np.isfinite(step.u)) else None)
     if error is not None and not error <= PHYSICAL_TOL:
         what = (f"true equilibrium error |B^T w sigma - f - G^T a p| {error:.3g} of the forces (load, element forces) "

@@ -14,6 +14,11 @@ scheme are chosen by :class:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions` (by 
 step starts from the data point nearest the origin and every later step from the previous one's
 material states). Every step is finished by the physical checks
 (:func:`~ddcm_casadi.drivers.checks.finish_step`) before it is reported, whatever the scheme.
+A step that fails (no fixed point, a projection that did not converge, a physical check) is
+bisected (:mod:`~ddcm_casadi.drivers.substeps`): sub-steps of its load, each an alternation from
+the previous sub-step's material states and ``Z_E`` solution, from the last converged step, down
+to ``min_substep`` of a step; restarts, greedy improvement and the certificate run at the last
+sub-step (the step's own load) only.
 For one-element problems (and, with ``exact_max``, a few elements) the global DDCM optimum is also
 found by enumerating the data assignments (closed forms, :mod:`ddcm_casadi.drivers.ddcm_search`),
 with whether the search reached it and the gap.
@@ -44,6 +49,10 @@ from ddcm_casadi.drivers.records import (
     MaterialStates, PathResult, Run, StepResult, check_convergence, count, new_tally,
 )
 from ddcm_casadi.drivers.schemes import SCHEMES
+from ddcm_casadi.drivers.substeps import (
+    DEFAULT_MIN_SUBSTEP, accepted, bisect, bisection_enabled, check_min_substep, finish_bisected, interpolate,
+    unloaded_start,
+)
 
 #: Why a method was skipped on a problem that is not affine.
 NOT_AFFINE = "the problem is not affine"
@@ -69,6 +78,9 @@ class DDCMSolver:
         Affine problems with at most this many contact pairs consult the exact branch enumeration.
     global_search : bool
         Report the global optimum where it can be enumerated.
+    min_substep : float
+        The smallest sub-step of a failed load step, as a fraction of the step
+        (:func:`~ddcm_casadi.drivers.substeps.check_min_substep`; default 1/16; 0 or 1: no bisection).
     """
 
     #: Exact projections remembered per problem (:meth:`_exact_projection`), keys and answers
@@ -76,7 +88,8 @@ class DDCMSolver:
     EXACT_CACHE_VALUES = 1_000_000
 
     def __init__(self, problems: ProblemPair, built, *, max_outer: int | None = None, enumerate_pairs: int = 4,
-                 global_search: bool = True, search: str | None = None, options: DDCMOptions | None = None) -> None:
+                 global_search: bool = True, search: str | None = None, options: DDCMOptions | None = None,
+                 min_substep: float = DEFAULT_MIN_SUBSTEP) -> None:
         if problems.projection is None:
             raise InputError("the DDCM variant needs a material data set")
         if options is not None and not isinstance(options, DDCMOptions):
@@ -85,6 +98,7 @@ class DDCMSolver:
         given = {k: v for k, v in dict(max_outer=max_outer, search=search).items() if v is not None}
         self.options = dataclasses.replace(options, **given) if given else options  # validated
         self.problems, self.built = problems, built
+        self.min_substep = check_min_substep(min_substep)
         model = problems.model
         self._check_initial(model)
         if self.options.variant == "lcdd" and model.strain_components != 1:
@@ -218,30 +232,87 @@ class DDCMSolver:
     def solve(self, *, formulation_name: str = "", raise_on_failure: bool = False,
               progress: Callable[[StepResult], None] | None = None) -> PathResult:
         """Every load step in turn, each from the previous step's material states and Z_E
-        solution (``warm``), or from its own start; ``progress(step)`` after each."""
+        solution (``warm``), or from its own start; a step that fails is bisected
+        (:meth:`_bisect`); ``progress(step)`` after each."""
         problems, model = self.problems, self.problems.model
         out = PathResult("ddcm", formulation_name, warnings=list(self.notes))
         warm = (np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None)
         start, self.projection.previous = None, None
+        converged = None  # the last converged step: (k, its history, material states, Z_E solution)
         t_all = time.perf_counter()
         for k in range(model.n_steps):
             t0 = time.perf_counter()
             if start is None or not self.options.warm:
                 start = self.scheme.states(self.initial_assignment(k))
-            step, best, warm = self.solve_step(k, start, warm)
+            step, best, warm_out = self.solve_step(k, start, warm)
+            if not accepted(step, best.sol.x, best.sol.p) and bisection_enabled(self.min_substep):
+                step, best, warm_out = self._bisect(k, step, best, warm_out, converged)
             step.seconds = time.perf_counter() - t0
             out.steps.append(step)
             if progress is not None:
                 progress(step)
             check_convergence(step, raise_on_failure, f"ddcm/{formulation_name}")
-            start = best.star
+            start, warm = best.star, warm_out
             if step.converged:
+                converged = (k, self.projection.previous, best.star, warm_out)
                 self.projection.previous = dict(u=step.u, p=step.p, strain=step.strain, stress=step.stress)
         out.solve_seconds = time.perf_counter() - t_all
         return out
 
-    def _step_result(self, k: int, run: Run, tally: dict) -> StepResult:
-        """The record of step ``k`` from its best run, finished (:meth:`finish`)."""
+    def _bisect(self, k: int, full: StepResult, full_best: Run, full_warm: tuple,
+                converged: tuple | None) -> tuple[StepResult, Run, tuple]:
+        """Step ``k`` in sub-steps (:func:`~ddcm_casadi.drivers.substeps.bisect`) after its full
+        step (``full``, its best run and last ``Z_E`` solution) failed.
+
+        The sub-steps start from the last converged step (``converged``: its index, history,
+        material states and ``Z_E`` solution), or before any from the unloaded state
+        (:func:`~ddcm_casadi.drivers.substeps.unloaded`) with the step's initial assignment. A
+        sub-step short of the step's load is one alternation with the projections' load entries
+        interpolated, finished by the physical checks at its own load; the last one is the
+        step's full :meth:`solve_step`. Returns the last sub-step's record, run and solution
+        (converged) or the full step's (not), with the costs of every attempt.
+        """
+        problems = self.problems
+        P, names = problems.projection.parameters, problems.model.load_names()
+        previous = self.projection.previous
+        if converged is None:
+            j, history = None, None
+            star0 = self.scheme.states(self.initial_assignment(k))
+            warm0 = (np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None)
+        else:
+            j, history, star0, warm0 = converged
+        target = problems.projection_params(k, star0.strain, star0.stress, previous)
+        start = (unloaded_start(problems.projection, target, names) if j is None
+                 else problems.projection_params(j, star0.strain, star0.stress, history))
+        if start is None:  # no clean unloaded start (see substeps.unloaded_start): not bisected
+            return full, full_best, full_warm
+        tried: list[tuple[StepResult, Run, tuple]] = []
+
+        def attempt(t_from: float, t_to: float, sub: tuple) -> tuple[bool, tuple]:
+            star, warm = sub
+            if t_to == 1.0:
+                step, best, warm_out = self.solve_step(k, star, warm)
+            else:
+                self.projection.substep = lambda params: interpolate(P, start, params, t_to, names)
+                try:
+                    tally = new_tally()
+                    best, warm_out = self.alternate(k, star, *warm)
+                    count(tally, best)
+                    load = P.get(interpolate(P, start, target, t_to, names), "f")
+                    step = self._step_result(k, best, tally, load=load)
+                finally:
+                    self.projection.substep = None
+            tried.append((step, best, warm_out))
+            return accepted(step, best.sol.x, best.sol.p), (best.star, warm_out)
+
+        bisection = bisect(attempt, (star0, warm0), self.min_substep)
+        step, best, warm_out = tried[-1] if bisection.converged else (full, full_best, full_warm)
+        others = [full] + [s for s, _, _ in tried]
+        return finish_bisected(step, bisection, others), best, warm_out
+
+    def _step_result(self, k: int, run: Run, tally: dict, *, load: np.ndarray | None = None) -> StepResult:
+        """The record of step ``k`` from its best run, finished (:meth:`finish`; ``load``: a
+        sub-step's ``f``)."""
         model, sol, f, star = self.problems.model, run.sol, run.fields, run.star
         distance = run.distance
         if not np.isfinite(distance):  # a failed projection: report the distance of what it returned
@@ -256,15 +327,17 @@ class DDCMSolver:
                           projection_global=run.is_global, projection_seconds=tally["t_project"],
                           search_seconds=tally["t_search"], projections=tally["projections"], runs=tally["runs"],
                           improvements=tally["improvements"], notes="; ".join(self.notes))
-        self.finish(step)
+        self.finish(step, load=load)
         return step
 
-    def finish(self, step: StepResult) -> None:
+    def finish(self, step: StepResult, *, load: np.ndarray | None = None) -> None:
         """:func:`~ddcm_casadi.drivers.checks.finish_step` with this solver's problem, penalty
         stiffness and data range, then how coarse the data are for the step's states
-        (:meth:`~ddcm_casadi.data.extrapolation.DataCoverage.coarseness`, a flag)."""
+        (:meth:`~ddcm_casadi.data.extrapolation.DataCoverage.coarseness`, a flag). ``load``: the
+        step's ``f`` when it is a sub-step's (:mod:`~ddcm_casadi.drivers.substeps`)."""
         finish_step(step, self.problems.projection, self.problems.model,
-                    penalty_stiffness=getattr(self.built, "penalty_stiffness", None), coverage=self.coverage)
+                    penalty_stiffness=getattr(self.built, "penalty_stiffness", None), coverage=self.coverage,
+                    load=load)
         if step.data_index is not None and step.strain is not None:  # how coarse the data are here
             step.datum_share, step.datum_spread, step.state_spacings = self.coverage.coarseness(
                 step.strain, step.stress, step.data_index)

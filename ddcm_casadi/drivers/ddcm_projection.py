@@ -11,6 +11,7 @@ is reported (``projection_global``, ``projection_error``).
 from __future__ import annotations
 
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -38,6 +39,9 @@ class Projection:
         #: The last converged step's physical fields (the history a model's step may depend on,
         #: :meth:`~ddcm_casadi.models.base.ContactModel.step_values`); set by the driver.
         self.previous: dict | None = None
+        #: Applied to the parameters of every projection when set: the driver's sub-step of a load
+        #: step interpolates their load entries (:func:`~ddcm_casadi.drivers.substeps.interpolate`).
+        self.substep: Callable[[np.ndarray], np.ndarray] | None = None
 
     def solve(self, params: np.ndarray, x0, p0, state):
         """Projection onto Z_E, restarted on the exact global branch if it may have stopped elsewhere.
@@ -98,12 +102,14 @@ class Projection:
         return hit[0].copy(), hit[1].copy(), hit[2]
 
     def project(self, k: int, strain_star, stress_star, warm: tuple, cost: dict):
-        """The ``Z_E`` projection of step ``k``'s material states (warm-started from
-        ``warm = (x, p, state)``): ``(solution, is_global, error, failure)``, ``failure`` the
-        message of a projection that did not converge, else ``""``. Adds its Newton iterations
-        and seconds to ``cost["inner"]`` and ``cost["t_project"]``."""
+        """The ``Z_E`` projection of step ``k``'s material states (or of a sub-step of it, with
+        :attr:`substep` set), warm-started from ``warm = (x, p, state)``: ``(solution, is_global,
+        error, failure)``, ``failure`` the message of a projection that did not converge, else
+        ``""``. Adds its Newton iterations and seconds to ``cost["inner"]`` and ``cost["t_project"]``."""
         t0 = time.perf_counter()
         params = self.problems.projection_params(k, strain_star, stress_star, self.previous)
+        if self.substep is not None:
+            params = self.substep(params)
         sol, is_global, err = self.solve(params, *warm)
         cost["inner"] += sol.iterations
         cost["t_project"] += time.perf_counter() - t0

@@ -24,10 +24,11 @@ from ddcm_casadi.parallel import map_forked, resolve_jobs
 from ddcm_casadi.problems.build import ProblemPair, build_problems
 from ddcm_casadi.drivers.ddcm_options import KEYS, DDCMOptions
 from ddcm_casadi.drivers.path import DDCMSolver, PathResult, StepResult, solve_classical
+from ddcm_casadi.drivers.substeps import DEFAULT_MIN_SUBSTEP, check_min_substep, fraction_text
 
 VARIANTS = ("classical", "ddcm")
 _COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "max_abs_u", "total_contact_force",
-            "active_contacts", "converged", "iterations", "outer_iterations",
+            "active_contacts", "converged", "iterations", "outer_iterations", "substeps", "smallest_substep",
             "residual", "complementarity", "penetration", "strain_star", "stress_star", "data_index",
             "distance", "extrapolated", "data_spacings", "datum_share", "state_spacings", "coarse_data",
             "global_optimum", "global_distance",
@@ -190,10 +191,13 @@ class Comparison:
         The model describes each step's solution (:meth:`ContactModel.step_summary`): for the
         paper's bar ``u`` and ``p`` are the tip displacement and the contact pressure; for larger
         models the columns summarise the step (``max_abs_u``, ``total_contact_force``,
-        ``active_contacts``) and :meth:`fields` holds the full per-step fields.
+        ``active_contacts``) and :meth:`fields` holds the full per-step fields. When some step
+        was bisected (:mod:`~ddcm_casadi.drivers.substeps`), every row has ``substeps`` and
+        ``smallest_substep``.
         """
         rows = []
         m = self.model
+        bisected = any(s.bisected for r in self.results.values() for s in r.steps)
         for (variant, name), r in self.results.items():
             err = self.errors(variant, name)
             for s in r.steps:
@@ -203,6 +207,8 @@ class Comparison:
                 row.update(converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
                            residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,
                            seconds=s.seconds)
+                if bisected:  # the columns of step bisection only when some step was bisected
+                    row.update(substeps=s.substeps, smallest_substep=s.smallest_substep)
                 if variant == "ddcm":
                     if m.scalar:
                         row.update(strain_star=float(s.strain_star[0]), stress_star=float(s.stress_star[0]),
@@ -221,7 +227,9 @@ class Comparison:
         return [{c: r.get(c) for c in dict.fromkeys(columns)} for r in rows]
 
     def summary(self) -> list[dict]:
-        """Per variant x formulation: accuracy, iterations, convergence and wall time."""
+        """Per variant x formulation: accuracy, iterations, convergence and wall time; with the
+        step bisection (:mod:`~ddcm_casadi.drivers.substeps`) ``bisected_steps`` (the converged
+        steps reached through sub-steps) and, per step, ``substeps`` and ``smallest_substep``."""
         out = []
         for (variant, name), r in self.results.items():
             err = self.errors(variant, name)
@@ -235,7 +243,12 @@ class Comparison:
                        max_error_u=float(np.max(err["u"])) if err else None,
                        max_error_p=float(np.max(err["p"])) if err else None,
                        max_complementarity=float(np.max(r.array("complementarity"))),
-                       max_residual=float(np.max(r.array("residual"))))
+                       max_residual=float(np.max(r.array("residual"))),
+                       # automatic step bisection (ddcm_casadi.drivers.substeps): per step, the
+                       # sub-steps and the smallest fraction used (tried, for a step that failed)
+                       bisected_steps=[s.step for s in r.steps if s.bisected and s.converged],
+                       substeps=[s.substeps for s in r.steps],
+                       smallest_substep=[s.smallest_substep for s in r.steps])
             if err is not None and self._penalty_reference(variant, name) is not None:
                 # compared with its own (penalty) closed form above; the exact one as well here
                 ref = [self.model.closed_form(k) for k in range(self.model.n_steps)]
@@ -278,6 +291,12 @@ class Comparison:
             name = self.model.load_parameter_name
             if rec["non_converged_steps"]:
                 notes.append(_note("NOT CONVERGED", rec["non_converged_steps"]))
+            if rec["bisected_steps"]:  # steps reached only through sub-steps
+                reached = rec["bisected_steps"]
+                most = max(rec["substeps"][k] for k in reached)
+                smallest = min(rec["smallest_substep"][k] for k in reached)
+                notes.append(_note("bisected", reached)
+                             + f" (up to {most} sub-steps, smallest {fraction_text(smallest)})")
             if rec.get("extrapolated_steps"):
                 notes.append(f"DATA RANGE EXCEEDED at {rec['extrapolated_steps']} step"
                              f"{'s' if rec['extrapolated_steps'] > 1 else ''} (max {rec['max_extrapolated_states']} "
@@ -315,7 +334,8 @@ def as_ddcm_options(ddcm: DDCMOptions | Mapping | None) -> DDCMOptions:
 def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] = VARIANTS,
             raise_on_failure: bool = False, ddcm_max_outer: int | None = None, ddcm_search: str | None = None,
             ddcm: DDCMOptions | None = None,
-            progress: Callable[[str, str, StepResult], None] | None = None, jobs: int | None = 1) -> Comparison:
+            progress: Callable[[str, str, StepResult], None] | None = None, jobs: int | None = 1,
+            min_substep: float = DEFAULT_MIN_SUBSTEP) -> Comparison:
     """Run every formulation in every variant along the model's load path.
 
     Parameters
@@ -344,6 +364,9 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         (:func:`ddcm_casadi.parallel.map_forked`): 1 (default) runs them here one after the other,
         ``None`` uses every available core. Results are the same; each run's timings are its own
         (on a shared machine, runs side by side may slow each other).
+    min_substep : float
+        A load step that fails is bisected automatically, in both variants, down to sub-steps of
+        this fraction of a step (:mod:`ddcm_casadi.drivers.substeps`; default 1/16; 0 or 1: off).
 
     Returns
     -------
@@ -355,6 +378,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         raise InputError(f"unknown variant {bad[0]!r}; choose from {', '.join(VARIANTS)}")
     if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1):
         raise InputError(f"jobs must be a positive integer or None (every core), got {jobs!r}")
+    min_substep = check_min_substep(min_substep)
     ddcm = as_ddcm_options(ddcm)
     given = {k: v for k, v in dict(max_outer=ddcm_max_outer, search=ddcm_search).items() if v is not None}
     ddcm = dataclasses.replace(ddcm, **given) if given else ddcm  # checked as the options are
@@ -377,10 +401,11 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         if variant == "classical":
             built = form.build(problems.classical)
             build = time.perf_counter() - t0
-            r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb)
+            r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb,
+                                min_substep=min_substep)
         else:
             built = form.build(problems.projection)
-            solver = DDCMSolver(problems, built, options=ddcm)
+            solver = DDCMSolver(problems, built, options=ddcm, min_substep=min_substep)
             build = time.perf_counter() - t0
             r = solver.solve(formulation_name=form.name, raise_on_failure=raise_on_failure, progress=cb)
         r.build_seconds = build

@@ -56,9 +56,22 @@ class StepResult:
     datum_spread: float = float("nan")
     state_spacings: float = float("nan")
     coarse_data: str = ""
+    #: Automatic step bisection (:mod:`ddcm_casadi.drivers.substeps`): the sub-steps that converged
+    #: on the way to this step (1 when it was solved at once or not bisected; for a step that failed
+    #: under bisection, those that converged before it gave up, possibly 0) and the smallest
+    #: fraction of the step used (1.0 without bisection; for a step that failed under bisection, the
+    #: smallest fraction tried). The costs (``iterations``, ``outer_iterations``, ``projections``,
+    #: ``seconds``, ...) of a bisected step are the totals over every attempt, the failed ones included.
+    substeps: int = 1
+    smallest_substep: float = 1.0
     #: What the driver left out at this step and why (e.g. the exact enumeration of a problem
     #: that is not affine), ``"; "``-separated; ``""`` when nothing was.
     notes: str = ""
+
+    @property
+    def bisected(self) -> bool:
+        """Whether the step was bisected (reached through sub-steps, or failed at the smallest)."""
+        return self.smallest_substep < 1.0
 
     def diagnostics(self) -> dict:
         d = asdict(self)
