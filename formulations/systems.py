@@ -19,15 +19,24 @@ automatic differentiation. The projection's saddle point is the stationarity of
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.linalg import to_casadi
 from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.maps import LocalTerms
 from ddcm_casadi.problems.parameters import Parameters
 from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.newton import SparseJacobian
 
-from .pairs import PairSystem, SystemBuilder, SystemFunctions
+from .pairs import PairSystem, SystemBuilder, SystemFunctions, _columns
+
+
+def _rows(A, rows: int, offset: int = 0):
+    """``A`` placed at row ``offset`` of a matrix with ``rows`` rows."""
+    A = sp.csr_matrix(A)
+    return sp.vstack([sp.csr_matrix((offset, A.shape[1])), A,
+                      sp.csr_matrix((rows - offset - A.shape[0], A.shape[1]))]).tocsr()
 
 
 def pair_system(problem: ComplementarityProblem, n_unknowns: int, parameters: Parameters):
@@ -71,6 +80,47 @@ class ExpressionPairSystem(SystemBuilder):
     def _render(self, value) -> ca.SX:
         """A problem map (:class:`Affine` or nonlinear) at the system's symbols."""
         return value.render(self._xp(), self._problem_params())
+
+    def _split(self, value) -> tuple[ca.SX, tuple[LocalTerms, ...]]:
+        """A problem map's expression part at the system's symbols, and its local terms."""
+        local = getattr(value, "local", ())
+        if not local:
+            return self._render(value), ()
+        return value.render_expression(self._xp(), self._problem_params()), local
+
+    def _placed(self, terms: LocalTerms, rows: int, offset: int = 0, columns: int | None = None) -> LocalTerms:
+        """``terms`` (of the problem's ``[x; p]`` and parameters) in the system's unknowns (its
+        first ``columns`` of ``[x; p]``, default all), parameters and rows (at ``offset``)."""
+        Y = terms.Y if columns is None else _columns(terms.Y, columns, "local terms")
+        return LocalTerms(terms.item, _columns(Y, self.nz, "local terms"),
+                          _columns(terms.Y_P, self.parameters.size, "local terms"),
+                          _rows(terms.L, rows, offset), terms.constants, terms.terms_item)
+
+    def _lagrangian(self, terms: LocalTerms, eta: int, rows: int) -> LocalTerms:
+        """The stationarity rows of ``eta^T L psi(y)`` over ``(x, p, eta)`` as local terms: per
+        item ``l(y, zeta) = zeta^T psi(y)`` with ``zeta_i = L_i^T eta``, its gradient
+        ``[dpsi/dy^T zeta; psi]`` scattered by the local variables' maps transposed."""
+        q, qo, m = terms.q, terms.q_out, terms.count
+        y, zeta, c = ca.SX.sym("y", q), ca.SX.sym("zeta", qo), ca.SX.sym("c", terms.item.size1_in(1))
+        l = ca.dot(zeta, terms.item(y, c))
+        item = ca.Function("lagrangian_item", [ca.vertcat(y, zeta), c], [ca.gradient(l, ca.vertcat(y, zeta))])
+        Yz = _columns(terms.Y, self.nz, "local terms")
+        Z = sp.hstack([sp.csr_matrix((m * qo, eta)), terms.L.T,
+                       sp.csr_matrix((m * qo, self.nz - eta - terms.L.shape[0]))]).tocsr()
+        order = np.concatenate([np.arange(m)[:, None] * q + np.arange(q), m * q + np.arange(m)[:, None] * qo
+                                + np.arange(qo)], axis=1).ravel()
+        Yhat = sp.vstack([Yz, Z]).tocsr()[order]
+        YP = sp.vstack([_columns(terms.Y_P, self.parameters.size, "local terms"),
+                        sp.csr_matrix((m * qo, self.parameters.size))]).tocsr()[order]
+        return LocalTerms(item, Yhat, YP, _rows(Yhat.T, rows), terms.constants)
+
+    def _gradient_rows(self, terms: LocalTerms, rows: int) -> LocalTerms:
+        """The rows ``Y^T dl/dy`` of a sum of scalar items ``l`` (an objective's local terms)."""
+        y, c = ca.SX.sym("y", terms.q), ca.SX.sym("c", terms.item.size1_in(1))
+        item = ca.Function("gradient_item", [y, c], [ca.gradient(terms.item(y, c), y)])
+        Yz = _columns(terms.Y, self.nz, "local terms")
+        return LocalTerms(item, Yz, _columns(terms.Y_P, self.parameters.size, "local terms"), _rows(Yz.T, rows),
+                          terms.constants)
 
     # ------------------------------------------------------------------ local variables
     def _add(self, name: str, values: ca.SX) -> ca.SX:
@@ -123,13 +173,25 @@ class ExpressionPairSystem(SystemBuilder):
             raise ValueError(f"{name}: needs parameters beyond the first {n_params}")
         return NumericFunction(ca.Function(name, [self._z, self._P[:n_params]], out))
 
-    def _finish(self, name: str, r: ca.SX) -> SystemFunctions:
+    def _finish(self, name: str, r: ca.SX, local: tuple[LocalTerms, ...] = ()) -> SystemFunctions:
+        """The system ``r + sum of local terms``: the expression's Jacobian by automatic
+        differentiation, the local terms' assembled from their items (:meth:`LocalTerms.jacobian_map`)."""
         J = ca.jacobian(r, self._z)
         varying = ca.vertcat(self._z, self._problem_params())
-        linear = not ca.depends_on(J, varying)
-        rj = NumericFunction(ca.Function(f"{name}_rj", [self._z, self._P], [r, J]))
-        return SystemFunctions(rj=rj, r=NumericFunction(ca.Function(f"{name}_r", [self._z, self._P], [r])),
-                               jacobian=SparseJacobian(rj), linear=bool(linear))
+        linear = not ca.depends_on(J, varying) and not local
+        if not local:
+            rj = NumericFunction(ca.Function(f"{name}_rj", [self._z, self._P], [r, J]))
+            return SystemFunctions(rj=rj, r=NumericFunction(ca.Function(f"{name}_r", [self._z, self._P], [r])),
+                                   jacobian=SparseJacobian(rj), linear=bool(linear))
+        expression = ca.Function(f"{name}_expression", [self._z, self._P], [r, J])
+        z, P = ca.MX.sym("z", self.nz), ca.MX.sym("P", self.parameters.size)
+        r_all, J_all = expression(z, P)
+        for terms in local:
+            value, jacobian = terms.assembled(z, P)
+            r_all, J_all = r_all + value, J_all + jacobian
+        rj = NumericFunction(ca.Function(f"{name}_rj", [z, P], [r_all, J_all]))
+        return SystemFunctions(rj=rj, r=NumericFunction(ca.Function(f"{name}_r", [z, P], [r_all])),
+                               jacobian=SparseJacobian(rj), linear=False)
 
     def _scattered(self, outputs) -> ca.SX | int:
         """``sum_o L_o psi_o`` (0 without outputs)."""
@@ -153,17 +215,21 @@ class ExpressionPairSystem(SystemBuilder):
     # ------------------------------------------------------------------ the systems of the formulations
     def mcp(self, name: str, pair_equation: ca.SX) -> SystemFunctions:
         """The classical system ``[F(x, p); pair_equation] = 0`` in ``z = [x; p]``."""
-        F = self._render(self.problem.residual_map)
+        F, local = self._split(self.problem.residual_map)
         values = self._per_pair([pair_equation])[0]
-        return self._finish(name, ca.vertcat(F, values))
+        rows = self.problem.n_residual + self.nc
+        return self._finish(name, ca.vertcat(F, values), tuple(self._placed(t, rows) for t in local))
 
     def eliminated(self, name: str, pressure: ca.SX) -> SystemFunctions:
         """The classical residual ``F(x, p(x))`` in ``z = x``, each pair's pressure an expression
         of its local variables."""
         nx = self.problem.n_x
         p = self._per_pair([pressure])[0]
-        F = self.problem.residual_map.render(ca.vertcat(self._z[:nx], p), self._problem_params())
-        return self._finish(name, F)
+        R = self.problem.residual_map
+        local = getattr(R, "local", ())
+        F = (R.render_expression if local else R.render)(ca.vertcat(self._z[:nx], p), self._problem_params())
+        # local terms of x alone (the material): the pressures enter through the expression only
+        return self._finish(name, F, tuple(self._placed(t, R.rows, columns=nx) for t in local))
 
     def saddle(self, name: str, lagrangian: ca.SX, rows=()) -> SystemFunctions:
         """The projection's saddle-point system in ``z = [x, p, eta, ...]``: the stationarity of
@@ -172,10 +238,15 @@ class ExpressionPairSystem(SystemBuilder):
         problem = self.problem
         nxp, ne = problem.n_x + self.nc, problem.n_residual
         xp, eta = self._z[:nxp], self._z[nxp:nxp + ne]
-        h = self._render(problem.residual_map)
+        h, h_local = self._split(problem.residual_map)
+        f, f_local = self._split(problem.distance)
         pairs = self._per_pair([lagrangian, *rows])
-        L = self._render(problem.distance) + ca.dot(eta, h) + ca.sum1(pairs[0])
-        return self._finish(name, ca.vertcat(ca.gradient(L, xp), h, *pairs[1:]))
+        L = f + ca.dot(eta, h) + ca.sum1(pairs[0])
+        r = ca.vertcat(ca.gradient(L, xp), h, *pairs[1:])
+        total = r.size1()
+        local = tuple(self._lagrangian(t, nxp, total) for t in h_local) + tuple(
+            self._gradient_rows(t, total) for t in f_local)
+        return self._finish(name, r, local)
 
 
 __all__ = ["ExpressionPairSystem", "pair_system"]

@@ -58,7 +58,7 @@ from ddcm_casadi.drivers.substeps import DEFAULT_MIN_SUBSTEP, check_min_substep
 TOP_LEVEL_KEYS = ("kinematics", "min_substep")
 
 COMMON_SECTIONS: dict[str, set[str] | None] = {
-    "data": {"path", "hookean", "c"},
+    "data": {"path", "hookean", "c", "law", "grid", "samples"},
     "ddcm": {"c", "max_outer"} | DDCM_OPTION_KEYS,
     "formulations": None,
 }

@@ -163,7 +163,9 @@ def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | 
                 coverage=None, load: np.ndarray | None = None) -> None:
     """What every driver does to a step before reporting it, in place: :func:`clip_roundoff`,
     :func:`physical_check` (a failure makes a converged step not converged and says why in its
-    message; so does a true equilibrium error, :func:`equilibrium_error`, above :data:`PHYSICAL_TOL`)
+    message; so does a true equilibrium error, :func:`equilibrium_error`, above :data:`PHYSICAL_TOL`,
+    and a state the model calls inadmissible, :meth:`~ddcm_casadi.models.base.ContactModel.inadmissible`:
+    an inverted element at finite strain)
     and, with a :class:`~ddcm_casadi.data.extrapolation.DataCoverage`, the count of states
     beyond the data (``extrapolated``, ``data_spacings``: a flag, not a failure). ``load``: the
     step's ``f`` when it is not the model's (a sub-step's, :mod:`~ddcm_casadi.drivers.substeps`)."""
@@ -175,6 +177,10 @@ def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | 
         what = (f"true equilibrium error |B^T w sigma - f - G^T a p| {error:.3g} of the forces (load, element forces) "
                 f"> {PHYSICAL_TOL:g}")
         failure = f"{failure}; {what}" if failure else f"physical check failed: {what}"
+    # a state the equations admit but the body cannot take (finite strain: an inverted element)
+    inadmissible = model.inadmissible(step.u) if np.all(np.isfinite(step.u)) else None
+    if inadmissible:
+        failure = f"{failure}; {inadmissible}" if failure else f"inadmissible state: {inadmissible}"
     if failure and step.converged:
         step.converged = False
         step.message = f"{step.message}, but {failure}" if step.message else failure

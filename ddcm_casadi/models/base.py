@@ -59,6 +59,36 @@ class FigureSpec:
     options: Mapping[str, Any] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class LocalKinematics:
+    """The finite-element structure of a nonlinear model's strains, for assembly item by item
+    (:class:`~ddcm_casadi.problems.maps.LocalTerms`) instead of one expression of every point.
+
+    Attributes
+    ----------
+    dofs : (items, q) int array
+        Per item (an element), the free dof of each of its ``q`` local displacements; ``-1``
+        where it is fixed (zero).
+    geometry : (items, q_g) array
+        Per item, the constants of its strains (shape-function gradients).
+    points_per_item : int
+        Material points per item; item ``e`` holds points ``e n_q .. (e + 1) n_q - 1``.
+    strain : callable
+        ``(u_e, geometry_e) -> E_e``: CasADi symbols, the item's points' strains (``n_q k``,
+        point-major) of its local displacements.
+    laws : tuple of (items, constants, energy)
+        The classical law by groups of items: their indices, per-item constants ``(len, q_l)``,
+        and ``energy(E_e, constants_e)``, the stored energy of the item's points with their
+        quadrature weights (a symbol), whose derivative in ``E_e`` is ``w S``.
+    """
+
+    dofs: np.ndarray
+    geometry: np.ndarray
+    points_per_item: int
+    strain: Any
+    laws: tuple = ()
+
+
 def drawn_formulation(runs: Iterable[tuple[str, str]], variant: str) -> str | None:
     """The formulation whose run of ``variant`` a one-run figure shows: Fischer-Burmeister if it
     was run, else the first formulation run in that variant (``None`` if the variant was not run).
@@ -324,6 +354,12 @@ class ContactModel:
         gaps are nonlinear (finite kinematics against curved obstacles) overrides this; the
         contact forces are then ``(dg/du)^T a p``."""
         return ca.mtimes(to_casadi(self.gap_operator), u) + values("gap0")
+
+    def local_kinematics(self) -> LocalKinematics | None:
+        """The item-by-item structure of a nonlinear model (:class:`LocalKinematics`), or
+        ``None``: the problems are then built as one expression of :meth:`strain_expression` (fine
+        for a few hundred unknowns; a continuum assembles element by element instead)."""
+        return None
 
     def inadmissible(self, u: np.ndarray) -> str | None:
         """Why a displacement cannot be a solution although it solves the equations (e.g. an

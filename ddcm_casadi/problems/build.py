@@ -16,7 +16,7 @@ from ddcm_casadi.data.metric import block_diagonal, weighted_distance2
 from ddcm_casadi.linalg import to_casadi
 from ddcm_casadi.models.base import ContactModel
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.problems.maps import Affine, Distance, NonlinearMap, NonlinearObjective
+from ddcm_casadi.problems.maps import Affine, Distance, LocalTerms, NonlinearMap, NonlinearObjective
 from ddcm_casadi.problems.parameters import Parameters
 
 
@@ -92,11 +92,15 @@ def _selection(rows: int, start: int, columns: int, scale: float = 1.0) -> sp.cs
 
 
 def distance_weight(model: ContactModel) -> sp.csr_matrix:
-    """``W`` with ``sum_i w_i d_i^2 = d^T W d`` for ``d`` point-major ``[e_i - e*_i; s_i - s*_i]``.
+    """``W`` with ``sum_i w_i d_i^2 = d^T W d`` for ``d`` point-major ``[e_i - e*_i; s_i - s*_i]``:
+    the block diagonal of :func:`distance_blocks`."""
+    return block_diagonal(distance_blocks(model))
 
-    Per point, its volume times half the Hessian of :func:`~ddcm_casadi.data.metric.weighted_distance2`
-    (the one place the metric's formula is written) for one point of unit weight of its material.
-    """
+
+def distance_blocks(model: ContactModel) -> np.ndarray:
+    """``(m, 2k, 2k)``: per point, its volume times half the Hessian of
+    :func:`~ddcm_casadi.data.metric.weighted_distance2` (the one place the metric's formula is
+    written) for one point of unit weight of its material."""
     m, k = model.n_points, model.strain_components
     metrics, material = model.dataset.point_materials(m)
     nm, half = len(metrics), len(metrics) * k
@@ -112,7 +116,7 @@ def distance_weight(model: ContactModel) -> sp.csr_matrix:
         raise ValueError("the distance couples two material points")
     blocks = np.zeros((nm, 2 * k, 2 * k))
     np.add.at(blocks, (mr, br, bc), 0.5 * np.asarray(H.nonzeros()))
-    return block_diagonal(blocks[material] * np.asarray(model.volumes, float)[:, None, None])
+    return blocks[material] * np.asarray(model.volumes, float)[:, None, None]
 
 
 def _point_major(mk: int, k: int) -> np.ndarray:
@@ -191,11 +195,133 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
     return ProblemPair(model=model, classical=classical, projection=projection)
 
 
+def _gather(dofs: np.ndarray, columns: int, start: int = 0) -> sp.csr_matrix:
+    """Rows item-major: row ``i q + j`` picks column ``start + dofs[i, j]`` (none where ``-1``)."""
+    flat = np.asarray(dofs, np.int64).ravel()
+    keep = flat >= 0
+    return sp.csr_matrix((np.ones(int(keep.sum())), (np.flatnonzero(keep), start + flat[keep])),
+                         shape=(flat.size, columns))
+
+
+def _contact_expression(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, P: Parameters, Ps: ca.SX
+                        ) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """``(r, t, g)`` of the contact forces and loads: ``r = (-s_s N(u)^T a p - f) / s_f``, its terms,
+    and the scaled gaps (``N = dg/du`` by automatic differentiation; a few rows per pair)."""
+    values = lambda name: Ps[P.slice(name)]  # noqa: E731 - the step's parameters by name
+    gap = model.gap_expression(s["displacement"] * uh, values)
+    N = ca.jacobian(gap, uh) / s["displacement"]
+    ap = ca.DM(model.contact_area) * ph
+    f = values("f")
+    r = (-s["stress"] * ca.mtimes(N.T, ap) - f) / s["force"]
+    t = (s["stress"] * ca.mtimes(ca.fabs(N).T, ca.fabs(ap)) + ca.fabs(f)) / s["force"]
+    return r, t, gap / s["displacement"]
+
+
+def _build_local(model: ContactModel, lk) -> ProblemPair:
+    r"""Both problems of a model with :class:`~ddcm_casadi.models.base.LocalKinematics`, the bulk
+    as :class:`LocalTerms` (one small function per element, assembled), the contact forces, loads and
+    gaps as expressions (a few rows per pair).
+
+    Classical, per element ``e`` of a law group: ``psi_e = dW_e/du_e / s_f`` with ``W_e`` its stored
+    energy (``dW_e/du_e = B_e(u)^T w S``). Projection: ``psi_e = B_e(u)^T (w stress_e) / s_f`` and the
+    objective's items ``1/2 sum_q d_q^T W_q d_q / energy``, ``d_q = [E_q(u) - E*_q; stress_q - S*_q]``.
+    The same problems as :func:`_build_nonlinear` builds, item by item.
+    """
+    n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
+    ne, q = lk.dofs.shape
+    nq = lk.points_per_item
+    qg = lk.geometry.shape[1]
+    classical = projection = None
+
+    def gap_map(z, Ps, gap, common):
+        if nc and ca.depends_on(ca.jacobian(gap, z), z):
+            common["gap_map"] = NonlinearMap.of(gap, z, Ps, name="gap")
+        return common
+
+    if model.youngs_modulus is not None:
+        s = model.scales_for("classical")
+        P = Parameters(**model.step_sizes())
+        nz = n + nc
+        z, Ps = ca.SX.sym("z", nz), ca.SX.sym("P", P.size)
+        local = []
+        for items, constants, energy in lk.laws:
+            y, c = ca.SX.sym("u_e", q), ca.SX.sym("c", qg + constants.shape[1])
+            E = lk.strain(s["displacement"] * y, c[:qg])
+            Es, cl = ca.SX.sym("E", E.numel()), ca.SX.sym("cl", constants.shape[1])
+            wS = ca.Function("wS", [Es, cl], [ca.gradient(energy(Es, cl), Es)])(E, c[qg:])
+            scale = 1.0 / (s["displacement"] * s["force"])
+            dE = ca.jacobian(E, y)
+            item = ca.Function("element_force", [y, c], [scale * ca.mtimes(dE.T, wS)])
+            terms = ca.Function("element_terms", [y, c], [scale * ca.mtimes(ca.fabs(dE).T, ca.fabs(wS))])
+            Y = _gather(lk.dofs[items], nz)
+            local.append(LocalTerms(item, Y, sp.csr_matrix((Y.shape[0], P.size)), Y[:, :n].T,
+                                    np.concatenate([lk.geometry[items], constants], axis=1), terms))
+        r, t, gap = _contact_expression(model, s, z[:n], z[n:], P, Ps)
+        classical = ComplementarityProblem(
+            kind="mcp", unknowns=(("u", n),), residual_map=NonlinearMap.of(r, z, Ps, t, "residual", tuple(local)),
+            distance=None, **gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], nz, P)))
+    if model.dataset is not None:
+        s = model.scales_for("ddcm")
+        mk = m * k
+        P = Parameters(**model.step_sizes(), strain_star=mk, stress_star=mk)
+        nz = n + mk + nc
+        z, Ps = ca.SX.sym("z", nz), ca.SX.sym("P", P.size)
+        nk = nq * k
+        points = np.arange(ne)[:, None] * nk + np.arange(nk)  # (ne, nq k): the element's stress entries
+        Y = sp.vstack([_gather(lk.dofs, nz), _gather(points, nz, n)]).tocsr()
+        order = np.concatenate([np.arange(ne)[:, None] * q + np.arange(q), ne * q + points], axis=1).ravel()
+        Y = Y[order]
+        u_e, S_e, c = ca.SX.sym("u_e", q), ca.SX.sym("S_e", nk), ca.SX.sym("c", qg + nq)
+        E = lk.strain(s["displacement"] * u_e, c[:qg])
+        stress = s["stress"] * S_e
+        w = ca.repmat(c[qg:].T, k, 1)  # (k, nq): each point's weight on its components
+        dE = ca.jacobian(E, u_e)
+        scale = 1.0 / (s["displacement"] * s["force"])
+        item = ca.Function("element_force", [ca.vertcat(u_e, S_e), c], [scale * ca.mtimes(dE.T, ca.vec(w) * stress)])
+        terms = ca.Function("element_terms", [ca.vertcat(u_e, S_e), c],
+                            [scale * ca.mtimes(ca.fabs(dE).T, ca.vec(w) * ca.fabs(stress))])
+        weights = np.asarray(model.volumes, float).reshape(ne, nq)
+        residual_local = LocalTerms(item, Y, sp.csr_matrix((Y.shape[0], P.size)), _gather(lk.dofs, n).T,
+                                    np.concatenate([lk.geometry, weights], axis=1), terms)
+        # the objective: per element [u_e; S_e; E*_e; S*_e] and its points' weight blocks
+        stars = sp.vstack([_gather(points, P.size, P.slice("strain_star").start),
+                           _gather(points, P.size, P.slice("stress_star").start)]).tocsr()
+        star_order = np.concatenate([np.arange(ne)[:, None] * nk + np.arange(nk),
+                                     ne * nk + np.arange(ne)[:, None] * nk + np.arange(nk)], axis=1)
+        Yo = sp.vstack([Y, sp.csr_matrix((2 * ne * nk, nz))]).tocsr()
+        YPo = sp.vstack([sp.csr_matrix((Y.shape[0], P.size)), stars[star_order.ravel()]]).tocsr()
+        # item-major: [u_e; S_e] rows of element e, then its [E*_e; S*_e]
+        qy = q + nk
+        obj_order = np.concatenate([np.arange(ne)[:, None] * qy + np.arange(qy),
+                                    ne * qy + np.arange(ne)[:, None] * 2 * nk + np.arange(2 * nk)], axis=1).ravel()
+        Yo, YPo = Yo[obj_order], YPo[obj_order]
+        blocks = distance_blocks(model) / s["energy"]  # (m, 2k, 2k), point-major [e; s]
+        Es, Ss, cb = ca.SX.sym("E_star", nk), ca.SX.sym("S_star", nk), ca.SX.sym("c", qg + nq * 4 * k * k)
+        Eo = lk.strain(s["displacement"] * u_e, cb[:qg])
+        f = 0
+        for p_ in range(nq):
+            dq = ca.vertcat(Eo[p_ * k:(p_ + 1) * k] - Es[p_ * k:(p_ + 1) * k],
+                            s["stress"] * S_e[p_ * k:(p_ + 1) * k] - Ss[p_ * k:(p_ + 1) * k])
+            Wq = ca.reshape(cb[qg + p_ * 4 * k * k:qg + (p_ + 1) * 4 * k * k], 2 * k, 2 * k)
+            f += 0.5 * ca.dot(dq, ca.mtimes(Wq, dq))
+        objective_item = ca.Function("element_distance", [ca.vertcat(u_e, S_e, Es, Ss), cb], [f])
+        objective_local = LocalTerms(objective_item, Yo, YPo, sp.csr_matrix(np.ones((1, ne))),
+                                     np.concatenate([lk.geometry, blocks.reshape(ne, -1)], axis=1))
+        r, t, gap = _contact_expression(model, s, z[:n], z[n + mk:], P, Ps)
+        projection = ComplementarityProblem(
+            kind="mpcc", unknowns=(("u", n), ("stress", mk)),
+            residual_map=NonlinearMap.of(r, z, Ps, t, "h", (residual_local,)),
+            distance=NonlinearObjective(ca.Function("distance", [z, Ps], [ca.SX(1, 1)]), (objective_local,)),
+            **gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], nz, P)))
+    return ProblemPair(model=model, classical=classical, projection=projection)
+
+
 def build_problems(model: ContactModel) -> ProblemPair:
     """Build the classical MCP and the DDCM projection MPCC of ``model`` once: as sparse matrices
     for small kinematics, as CasADi expressions for finite ones (:func:`_build_nonlinear`)."""
     if model.kinematics != "small":
-        return _build_nonlinear(model)
+        lk = model.local_kinematics()
+        return _build_nonlinear(model) if lk is None else _build_local(model, lk)
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
     GtA = (model.gap_operator.T @ sp.diags(model.contact_area)).tocsr()  # contact forces G^T (a p)
 

@@ -198,18 +198,20 @@ class ComplementarityProblem:
     @cached_property
     def _nonlinear_values(self):
         """``(z, P) -> (residual, residual terms, gap, objective)`` in one Function (nonlinear form)."""
-        z, P = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
-        objective = ca.SX(1, 1) if self.distance is None else self.distance.render(z, P)
+        # MX: local terms stay one mapped call each (SX would inline every element)
+        z, P = ca.MX.sym("z", self.n_x + self.n_pairs), ca.MX.sym("P", self.parameters.size)
+        objective = ca.MX(1, 1) if self.distance is None else self.distance.render(z, P)
         return NumericFunction(ca.Function("evaluate", [z, P], [
             self.residual_map.render(z, P), self.residual_map.terms(z, P), self.gap_map.render(z, P), objective]))
 
     @cached_property
     def _tangent(self):
         """``(z, P) -> (dF/dx, gap)``: the tangent stiffness of a classical problem (scaled)."""
-        z, P = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
-        F = self.residual_map.render(z, P)
-        return NumericFunction(ca.Function("tangent", [z, P], [ca.densify(ca.jacobian(F, z[:self.n_x])),
-                                                                  ca.densify(ca.jacobian(self.gap_map.render(z, P), z[:self.n_x]))]))
+        z, P = ca.MX.sym("z", self.n_x + self.n_pairs), ca.MX.sym("P", self.parameters.size)
+        K = self.residual_map.jacobian(z, P, self.n_x)
+        zs, Ps = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
+        dg = ca.Function("gap_jacobian", [zs, Ps], [ca.jacobian(self.gap_map.render(zs, Ps), zs[:self.n_x])])
+        return NumericFunction(ca.Function("tangent", [z, P], [ca.densify(K), ca.densify(dg(z, P))]))
 
     def stability(self, x, p, params, *, contact_tol: float = 1e-9) -> float:
         """The smallest eigenvalue of the classical tangent stiffness ``dF/dx`` on the directions

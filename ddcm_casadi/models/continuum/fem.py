@@ -207,6 +207,21 @@ def gradient_operator(disc: Discretisation) -> sp.csr_matrix:
     return H
 
 
+def element_gradients(disc: Discretisation) -> np.ndarray:
+    """``(ne, nq, d^2, n_loc)``: per element and quadrature point, ``H_ab`` (index ``a d + b``)
+    from the element's ``n_loc`` local vector dofs (in ``basis.element_dofs`` order): the blocks
+    of :func:`gradient_operator`, element by element."""
+    basis, d = disc.basis, disc.dimension
+    ne, nq = basis.nelems, disc.points_per_element
+    out = np.zeros((ne, nq, d * d, len(basis.basis)))
+    for i, phi in enumerate(basis.basis):
+        G = phi[0].grad  # (d, d, ne, nq)
+        for a in range(d):
+            for b in range(d):
+                out[:, :, a * d + b, i] = G[a, b]
+    return out
+
+
 def body_load(disc: Discretisation, force_density, elements: np.ndarray | None = None) -> np.ndarray:
     """``int b . v dx`` over ``elements`` (all by default): a constant body force (N/m^3)."""
     b = np.asarray(force_density, dtype=float)

@@ -56,6 +56,19 @@ def green_lagrange_expression(gradient_operator, u, d: int) -> ca.SX:
     return ca.reshape(E, E.numel(), 1)
 
 
+def element_strain(u_e, geometry_e, d: int, n_loc: int, nq: int):
+    """Mandel ``E`` of one element's ``nq`` points (point-major) from its local displacements
+    ``u_e`` and its flattened gradient blocks (:func:`~ddcm_casadi.models.continuum.fem.element_gradients`,
+    one element: ``(nq, d^2, n_loc)`` row-major), for CasADi symbols."""
+    G = ca.reshape(geometry_e, n_loc, nq * d * d).T  # row q d^2 + a d + b
+    h = ca.mtimes(G, u_e)
+    out = []
+    for q in range(nq):
+        H = [[h[q * d * d + a * d + b] for b in range(d)] for a in range(d)]
+        out.extend(_components(H, d))
+    return ca.vertcat(*out)
+
+
 def deformation_gradient(H: np.ndarray) -> np.ndarray:
     """``F = I + H`` ``(m, d, d)``."""
     return H + np.eye(H.shape[-1])

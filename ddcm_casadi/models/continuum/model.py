@@ -36,7 +36,7 @@ from ddcm_casadi.data import hyperelastic
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import block_diagonal, isotropic_elasticity
-from ddcm_casadi.models.base import ContactModel, FigureSpec, drawn_formulation
+from ddcm_casadi.models.base import ContactModel, FigureSpec, LocalKinematics, drawn_formulation
 from ddcm_casadi.models.continuum import fem, finite
 from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, isotropic_law,
                                                    point_data, reference_loads, step_count)
@@ -104,6 +104,40 @@ class ContinuumModel(ContactModel):
         if not self.finite:
             return super().strain_expression(u)
         return finite.green_lagrange_expression(self.gradient_operator(), u, self.dimension)
+
+    def local_kinematics(self) -> LocalKinematics | None:
+        """Finite kinematics: element by element (:class:`~ddcm_casadi.models.base.LocalKinematics`),
+        the strains from each element's gradient blocks and the classical law per region as a
+        stored energy (:mod:`ddcm_casadi.data.hyperelastic`). ``None`` for small kinematics (the
+        problems are affine)."""
+        if not self.finite:
+            return None
+        cached = self._cache.get("local_kinematics")
+        if cached is not None:
+            return cached
+        disc, d, k = self.discretisation, self.dimension, self.strain_components
+        nq = disc.points_per_element
+        element_dofs = disc.basis.element_dofs.T  # (ne, n_loc) global vector dofs
+        index_of = np.full(disc.n_dofs, -1, dtype=np.int64)
+        index_of[self.free_dofs] = np.arange(self.free_dofs.size)
+        G = fem.element_gradients(disc)
+        ne, n_loc = element_dofs.shape
+        laws = ()
+        if self.youngs_modulus is not None:
+            lam, mu = hyperelastic.lame(self.youngs_modulus, self.poisson_ratio)
+            w = np.asarray(self.volumes, float)
+            constants = np.concatenate([a.reshape(ne, nq) for a in (w, lam, mu)], axis=1)
+            law_of_element = np.asarray(self.laws, dtype=object)[self.point_region[::nq]]
+            groups = []
+            for law in sorted(set(self.laws)):
+                items = np.flatnonzero(law_of_element == law)
+                if items.size:
+                    groups.append((items, constants[items], _element_energy(law, d, k, nq)))
+            laws = tuple(groups)
+        lk = LocalKinematics(dofs=index_of[element_dofs], geometry=G.reshape(ne, -1), points_per_item=nq,
+                             strain=lambda u_e, g: finite.element_strain(u_e, g, d, n_loc, nq), laws=laws)
+        self._cache["local_kinematics"] = lk
+        return lk
 
     def _law_groups(self) -> list[tuple[str, np.ndarray]]:
         """``(law, points)`` for every law the regions use."""
@@ -476,6 +510,17 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
         reference=reference, laws=tuple(m.law for m in materials), kinematics=kinematics, **contact)
     _check_held(model)
     return model
+
+
+def _element_energy(law: str, d: int, k: int, nq: int):
+    """``W_e(E_e, [w; lambda; mu])``: the stored energy of one element's ``nq`` points with their
+    weights, for :class:`~ddcm_casadi.models.base.LocalKinematics`."""
+    W = hyperelastic.energy_function(law, d)
+
+    def energy(E_e, c):
+        return sum(c[q] * W(E_e[q * k:(q + 1) * k], c[nq + q], c[2 * nq + q]) for q in range(nq))
+
+    return energy
 
 
 def _bad_degree(degree) -> int:
