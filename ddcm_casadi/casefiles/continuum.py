@@ -76,7 +76,8 @@ Continua
     hookean = { strain_min = -0.01, strain_max = 0.01, points = 21 }    # or a linear law on a
     # law = "neo_hookean"        # or (E, S) pairs of a hyperelastic law (Green-Lagrange strain,
     # grid = { strain_min = -0.3, strain_max = 0.3, points = 21 }   # second Piola-Kirchhoff
-    # samples = { strain_min = -0.3, strain_max = 0.3, count = 10000, seed = 0 }   # stress)
+    # samples = { strain_min = -0.3, strain_max = 0.3, count = 10000, seed = 0 }   # stress;
+    #                            the range bounds the principal strains)
     c = "isotropic"              # grid of points^k states (grading = 2: denser towards zero);
                                  # c: "isotropic" (from the material),
                                  # "estimated" (from the data), a number (c I) or a k x k matrix
@@ -329,13 +330,15 @@ def _law_data(label: str, table: dict, k: int, c, material) -> MaterialDataset:
     lo = number(label, f"{key}.strain_min", t["strain_min"])
     hi = number(label, f"{key}.strain_max", t["strain_max"])
     stress = hyperelastic.law_of(law, float(E), float(nu), d)
+    # the range bounds the principal strains (a Mandel box would reach det C = 0)
+    keep = lambda strain: hyperelastic.principal_strains_within(strain, d, lo, hi)  # noqa: E731
     if key == "grid":
         points = integer(label, "grid.points", t["points"], low=1, what="a positive integer (per axis)")
-        return MaterialDataset.from_law(stress, k, lo, hi, points, c=c,
+        return MaterialDataset.from_law(stress, k, lo, hi, points, c=c, keep=keep,
                                         grading=number(label, "grid.grading", t.get("grading", 1.0)))
     count = integer(label, "samples.count", t["count"], low=1, what="a positive integer")
     seed = integer(label, "samples.seed", t.get("seed", 0), low=0, what="a non-negative integer")
-    return MaterialDataset.from_law(stress, k, lo, hi, 1, c=c, samples=count, seed=seed)
+    return MaterialDataset.from_law(stress, k, lo, hi, 1, c=c, samples=count, seed=seed, keep=keep)
 
 
 def _data_points(doc: dict, base_dir: Path, k: int) -> int:

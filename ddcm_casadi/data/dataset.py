@@ -231,12 +231,16 @@ class MaterialDataset:
 
     @classmethod
     def from_law(cls, law, components: int, strain_min: float, strain_max: float, points_per_axis: int, *,
-                 c, grading: float = 1.0, samples: int | None = None, seed: int = 0) -> "MaterialDataset":
+                 c, grading: float = 1.0, samples: int | None = None, seed: int = 0,
+                 keep=None) -> "MaterialDataset":
         """Any law ``stress = law(strain)`` (``(n, k) -> (n, k)``, Mandel components) sampled on a
         grid of ``points_per_axis^k`` strain states in ``[strain_min, strain_max]^k``, regular or
         graded towards zero strain (``grading``, :func:`graded_axis`), or at ``samples`` states
-        drawn uniformly from that box (``seed``). States where the law is undefined (non-finite
-        stress: a finite-strain law beyond ``det C > 0``) are left out: no material reaches them."""
+        drawn uniformly from that box (``seed``). ``keep(strain) -> bool mask`` (optional) selects
+        the states to keep (e.g. principal strains within the range,
+        :func:`~ddcm_casadi.data.hyperelastic.principal_strains_within`). States where the law is
+        undefined (non-finite stress: a finite-strain law beyond ``det C > 0``) are left out too:
+        no material reaches them."""
         k, n = int(components), int(points_per_axis)
         if n < 1 or float(n) ** k > limits.MAX_DATA_POINTS:
             raise InputError(f"points per axis must be between 1 and {int(limits.MAX_DATA_POINTS ** (1 / k))} "
@@ -251,6 +255,8 @@ class MaterialDataset:
         else:
             axis = graded_axis(strain_min, strain_max, n, grading)
             strain = np.stack(np.meshgrid(*([axis] * k), indexing="ij"), axis=-1).reshape(-1, k)
+        if keep is not None:
+            strain = strain[np.asarray(keep(strain), bool)]
         stress = np.asarray(law(strain), float)
         defined = np.all(np.isfinite(stress), axis=tuple(range(1, stress.ndim)))
         if not np.any(defined):

@@ -176,6 +176,16 @@ def mandel_vector(T: np.ndarray, dimension: int) -> np.ndarray:
                      _SQRT2 * T[:, 0, 1]], axis=1)
 
 
+def principal_strains_within(strain: np.ndarray, dimension: int, low: float, high: float) -> np.ndarray:
+    """Which Mandel strain rows have every principal strain (eigenvalue of the tensor) in
+    ``[low, high]``: the states a strain range means for a finite-strain law. With ``low > -1/2``
+    it keeps ``det C = prod (1 + 2 E_i) >= (1 + 2 low)^d > 0``, so the stresses stay bounded (a
+    Mandel box holds states near ``det C = 0``, whose Neo-Hookean stresses grow without bound)."""
+    T = _tensors(strain, dimension)[:, :dimension, :dimension]
+    e = np.linalg.eigvalsh(T)
+    return np.all((e >= low) & (e <= high), axis=1)
+
+
 def neo_hookean_stress(strain: np.ndarray, youngs_modulus: float, poisson_ratio: float, dimension: int) -> np.ndarray:
     """``S = mu (I - C^-1) + lambda ln J C^-1`` (Mandel rows), the textbook form, for checks."""
     lam, mu = lame(youngs_modulus, poisson_ratio)

@@ -80,6 +80,10 @@ class LocalKinematics:
         The classical law by groups of items: their indices, per-item constants ``(len, q_l)``,
         and ``energy(E_e, constants_e)``, the stored energy of the item's points with their
         quadrature weights (a symbol), whose derivative in ``E_e`` is ``w S``.
+    volume_ratio : callable, optional
+        ``(u_e, geometry_e) -> J_e``: the item's points' ``J = det F`` (symbols). Where one is
+        not positive the item's terms are NaN, so that Newton's line search never steps into an
+        inverted element (``E`` cannot tell a point from its mirror image).
     """
 
     dofs: np.ndarray
@@ -87,6 +91,7 @@ class LocalKinematics:
     points_per_item: int
     strain: Any
     laws: tuple = ()
+    volume_ratio: Any = None
 
 
 def drawn_formulation(runs: Iterable[tuple[str, str]], variant: str) -> str | None:

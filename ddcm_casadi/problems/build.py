@@ -233,6 +233,12 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
     qg = lk.geometry.shape[1]
     classical = projection = None
 
+    def guarded(value, u_e, geometry):
+        """NaN where an item's point is inverted (``J <= 0``): Newton's line search backs off."""
+        if lk.volume_ratio is None:
+            return value
+        return ca.if_else(ca.mmin(lk.volume_ratio(u_e, geometry)) > 0, 1.0, np.nan) * value
+
     def gap_map(z, Ps, gap, common):
         if nc and ca.depends_on(ca.jacobian(gap, z), z):
             common["gap_map"] = NonlinearMap.of(gap, z, Ps, name="gap")
@@ -251,7 +257,8 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
             wS = ca.Function("wS", [Es, cl], [ca.gradient(energy(Es, cl), Es)])(E, c[qg:])
             scale = 1.0 / (s["displacement"] * s["force"])
             dE = ca.jacobian(E, y)
-            item = ca.Function("element_force", [y, c], [scale * ca.mtimes(dE.T, wS)])
+            item = ca.Function("element_force", [y, c],
+                               [guarded(scale * ca.mtimes(dE.T, wS), s["displacement"] * y, c[:qg])])
             terms = ca.Function("element_terms", [y, c], [scale * ca.mtimes(ca.fabs(dE).T, ca.fabs(wS))])
             Y = _gather(lk.dofs[items], nz)
             local.append(LocalTerms(item, Y, sp.csr_matrix((Y.shape[0], P.size)), Y[:, :n].T,
@@ -277,7 +284,8 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
         w = ca.repmat(c[qg:].T, k, 1)  # (k, nq): each point's weight on its components
         dE = ca.jacobian(E, u_e)
         scale = 1.0 / (s["displacement"] * s["force"])
-        item = ca.Function("element_force", [ca.vertcat(u_e, S_e), c], [scale * ca.mtimes(dE.T, ca.vec(w) * stress)])
+        item = ca.Function("element_force", [ca.vertcat(u_e, S_e), c],
+                           [guarded(scale * ca.mtimes(dE.T, ca.vec(w) * stress), s["displacement"] * u_e, c[:qg])])
         terms = ca.Function("element_terms", [ca.vertcat(u_e, S_e), c],
                             [scale * ca.mtimes(ca.fabs(dE).T, ca.vec(w) * ca.fabs(stress))])
         weights = np.asarray(model.volumes, float).reshape(ne, nq)

@@ -69,6 +69,17 @@ def element_strain(u_e, geometry_e, d: int, n_loc: int, nq: int):
     return ca.vertcat(*out)
 
 
+def element_volume_ratio(u_e, geometry_e, d: int, n_loc: int, nq: int):
+    """``J = det(I + H)`` of one element's ``nq`` points, for CasADi symbols."""
+    G = ca.reshape(geometry_e, n_loc, nq * d * d).T
+    h = ca.mtimes(G, u_e)
+    out = []
+    for q in range(nq):
+        F = ca.reshape(h[q * d * d:(q + 1) * d * d], d, d).T + ca.DM.eye(d)
+        out.append(ca.det(F))
+    return ca.vertcat(*out)
+
+
 def deformation_gradient(H: np.ndarray) -> np.ndarray:
     """``F = I + H`` ``(m, d, d)``."""
     return H + np.eye(H.shape[-1])

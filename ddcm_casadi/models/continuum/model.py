@@ -135,7 +135,8 @@ class ContinuumModel(ContactModel):
                     groups.append((items, constants[items], _element_energy(law, d, k, nq)))
             laws = tuple(groups)
         lk = LocalKinematics(dofs=index_of[element_dofs], geometry=G.reshape(ne, -1), points_per_item=nq,
-                             strain=lambda u_e, g: finite.element_strain(u_e, g, d, n_loc, nq), laws=laws)
+                             strain=lambda u_e, g: finite.element_strain(u_e, g, d, n_loc, nq), laws=laws,
+                             volume_ratio=lambda u_e, g: finite.element_volume_ratio(u_e, g, d, n_loc, nq))
         self._cache["local_kinematics"] = lk
         return lk
 
