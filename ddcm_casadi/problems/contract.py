@@ -47,8 +47,37 @@ from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
 
-#: Up to this many unknowns :meth:`ComplementarityProblem.stability` is computed (dense).
+#: Up to this many unknowns :meth:`ComplementarityProblem.stability` is computed.
 STABILITY_MAX_UNKNOWNS = 2000
+#: Up to this many, densely (an eigendecomposition on the touching pairs' null space); above,
+#: sparse (shift-invert Lanczos on ``K + rho G^T G``): a dense decomposition of a continuum's
+#: stiffness per step would cost more than its solve.
+DENSE_STABILITY = 300
+
+
+def _csc(sparsity: ca.Sparsity, values: np.ndarray) -> sp.csc_matrix:
+    colind, row = sparsity.get_ccs()
+    return sp.csc_matrix((np.asarray(values, float), row, colind), shape=(sparsity.size1(), sparsity.size2()))
+
+
+def _sparse_smallest_eigenvalue(K: sp.csc_matrix, touching: sp.spmatrix, scale: float) -> float:
+    """The smallest eigenvalue, relative to ``scale``, of ``sym(K)`` on the null space of the
+    ``touching`` rows, from ``sym(K) + rho G^T G`` (Finsler: the held directions pushed up by
+    ``rho = 1e6 scale / max |G|^2``), its eigenvalues nearest zero by shift-invert Lanczos; ``nan``
+    where Lanczos does not converge. An unstable equilibrium is a limit or bifurcation point
+    crossed: its negative eigenvalue is the one nearest zero."""
+    from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, eigsh
+
+    H = 0.5 * (K + K.T)
+    G = sp.csr_matrix(touching)
+    if G.nnz:
+        H = H + (1e6 * scale / float(abs(G).max()) ** 2) * (G.T @ G)
+    try:
+        values = eigsh(H.tocsc(), k=min(3, H.shape[0] - 1), sigma=-1e-9 * scale, which="LM",
+                       return_eigenvectors=False)
+    except (ArpackNoConvergence, ArpackError, RuntimeError):
+        return float("nan")
+    return float(np.min(values)) / scale
 
 @dataclass(frozen=True, eq=False)
 class ComplementarityProblem:
@@ -211,7 +240,7 @@ class ComplementarityProblem:
         K = self.residual_map.jacobian(z, P, self.n_x)
         zs, Ps = ca.SX.sym("z", self.n_x + self.n_pairs), ca.SX.sym("P", self.parameters.size)
         dg = ca.Function("gap_jacobian", [zs, Ps], [ca.jacobian(self.gap_map.render(zs, Ps), zs[:self.n_x])])
-        return NumericFunction(ca.Function("tangent", [z, P], [ca.densify(K), ca.densify(dg(z, P))]))
+        return NumericFunction(ca.Function("tangent", [z, P], [K, dg(z, P)]))
 
     def stability(self, x, p, params, *, contact_tol: float = 1e-9) -> float:
         """The smallest eigenvalue of the classical tangent stiffness ``dF/dx`` on the directions
@@ -223,9 +252,13 @@ class ComplementarityProblem:
         if self.kind != "mcp" or self.affine or self.n_x > STABILITY_MAX_UNKNOWNS:
             return float("nan")
         z = np.concatenate([np.ravel(x), np.ravel(p)])
-        K, dg = (np.asarray(a, float) for a in self._tangent(z, np.ravel(params)))
-        K, dg = K.reshape(self.n_x, self.n_x, order="F"), dg.reshape(self.n_pairs, self.n_x, order="F")
+        function = self._tangent
+        K, dg = (_csc(function.sparsity_out(i), a) for i, a in enumerate(function(z, np.ravel(params))))
         gap = self.gap_map.value(z, np.ravel(params))
+        scale = max(float(abs(K).max()) if K.nnz else 0.0, np.finfo(float).tiny)
+        if self.n_x > DENSE_STABILITY:
+            return _sparse_smallest_eigenvalue(K, dg[np.flatnonzero(gap <= contact_tol)], scale)
+        K, dg = K.toarray(), dg.toarray()
         touching = dg[gap <= contact_tol]
         if touching.size:
             _, sv, vt = np.linalg.svd(touching)
@@ -236,7 +269,6 @@ class ComplementarityProblem:
         if not basis.size:
             return 1.0  # every direction is held by a contact
         H = basis.T @ (0.5 * (K + K.T)) @ basis
-        scale = max(float(np.max(np.abs(K))), np.finfo(float).tiny)
         return float(np.linalg.eigvalsh(H)[0]) / scale
 
     @cached_property
