@@ -20,6 +20,9 @@ Rungs
 10. Finite kinematics: the von Mises truss pushed through its snap by a rigid plane against its
     closed form (every formulation's converged steps, contact lost and regained; DDCM's
     data-spacing rate), :mod:`ddcm_casadi.validation.finite_rungs`.
+11. Finite-strain continua: homogeneous compression against its closed form, the small-load limit
+    of Hertz, a sphere to 0.3 R on a coarse mesh, DDCM's rate on Neo-Hookean data,
+    :mod:`ddcm_casadi.validation.finite_strain_rungs` (its mesh sequence: ``python -m`` it).
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from ddcm_casadi.validation import continuum as continuum_rungs
 from ddcm_casadi.validation.quality_rungs import rung_search_quality
 from ddcm_casadi.validation.fixed_points import check_fixed_points
 from ddcm_casadi.validation.finite_rungs import rung_von_mises
+from ddcm_casadi.validation import finite_strain_rungs
 from ddcm_casadi.validation.verification import (  # noqa: F401 - as_records, markdown: ddcm-validate's API
     Check, as_records, fitted_rate, markdown,
 )
@@ -315,6 +319,7 @@ RUNGS: dict[str, Callable] = {
     "DDCM on a continuum with data size": continuum_rungs.rung_continuum_ddcm,
     "DDCM search quality on noisy data": rung_search_quality,
     "von Mises truss snap-through (finite kinematics)": rung_von_mises,
+    **finite_strain_rungs.RUNGS,
 }
 
 
