@@ -131,7 +131,7 @@ class _BuiltMPCC(BuiltFormulation):
             z, own = ca.vertcat(x, p), P[:problem.parameters.size]
             residual, gap = problem.residual_map.render(z, own), problem.gap_map.render(z, own)
             objective = (problem.distance.render(z, own) if problem.kind == "mpcc" else
-                         0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else kind(1, 1))
+                         0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else kind.zeros(1, 1))
             return {"x": z, "p": P, "f": objective, "g": ca.vertcat(residual, gap, rows(p, gap, P))}
 
         self._solver = ca.nlpsol("mpcc", "ipopt", nlp(self.parameters, lambda p, gap, P: gap * p - P[self.parameters.slice("tau")]),
