@@ -135,10 +135,13 @@ class _BuiltMPCC(BuiltFormulation):
             return {"x": z, "p": P, "f": objective, "g": ca.vertcat(residual, gap, rows(p, gap, P))}
 
         self._solver = ca.nlpsol("mpcc", "ipopt", nlp(self.parameters, lambda p, gap, P: gap * p - P[self.parameters.slice("tau")]),
-                                 {"ipopt": ipopt, "print_time": False, "error_on_fail": False})
+                                 {"ipopt": ipopt, "print_time": False, "error_on_fail": False,
+                                  "show_eval_warnings": False})
         # Branch NLP: [residual; g; p] with equality bounds chosen per solve.
+        # (an inverted element's terms are NaN at finite strain: IPOPT backs off, quietly)
         self._bnlp = ca.nlpsol("bnlp", "ipopt", nlp(base, lambda p, gap, P: p),
-                               {"ipopt": ipopt, "print_time": False, "error_on_fail": False})
+                               {"ipopt": ipopt, "print_time": False, "error_on_fail": False,
+                                "show_eval_warnings": False})
         w = ca.vertcat(problem.x, problem.p)
         self._ne = ne = problem.n_residual
         self._lbg = np.concatenate([np.zeros(ne), np.zeros(nc), np.full(nc, -np.inf)])
