@@ -229,12 +229,12 @@ def draw_deformed_body(cmp: Comparison, *, variant: str, formulation: str) -> Fi
         vm, label = state["von_mises_cauchy"], "von Mises stress (Cauchy)"
         if "von_mises_cauchy_in_plane" in state:  # DDCM in 2-D: sigma_zz unknown
             vm = state["von_mises_cauchy_in_plane"]
-            label = "von Mises stress (Cauchy) of the in-plane components (sigma_zz unknown)"
+            label = "in-plane von Mises stress (Cauchy)"  # sigma_zz unknown
     else:
         zz = sigma_zz(model, variant, stress)
         label = "von Mises stress"
         if zz is not None and np.isnan(zz).any():  # DDCM in 2-D: sigma_zz unknown
-            zz, label = None, "von Mises stress of the in-plane components (sigma_zz unknown)"
+            zz, label = None, "in-plane von Mises stress"  # sigma_zz unknown
         vm = von_mises(stress, d, zz)
     vm = _per_element(model, vm)
     disc = model.discretisation
