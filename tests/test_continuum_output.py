@@ -180,11 +180,11 @@ def test_figure_deformed_body_2d(tmp_path):
                                obstacles=[{"kind": "circle", "center": (0.5, 2.0), "radius": 1.0},
                                           {"kind": "plane", "point": (0, -0.1), "normal": (0, 1)}],
                                title="block")
-    assert fig.axes[0].get_title() == "block (displacements x 220)"  # 0.05 / |u|max = 223.6
+    assert fig._suptitle.get_text() == "block\n(displacements x 220)"  # 0.05 / |u|max = 223.6
     _saved(fig, tmp_path / "body2d.png")
     fig = figure_deformed_body(points, tri, displacement=u, values=np.arange(4) * 1e7,
                                value_label="p", scale=10.0, contact_points=points[2:] + u[2:])
-    assert "displacements x 10" in fig.axes[0].get_title()
+    assert "displacements x 10" in fig._suptitle.get_text()
     _saved(fig, tmp_path / "body2d_nodes.png")
     with pytest.raises(InputError, match="values"):
         figure_deformed_body(points, tri, displacement=u, values=np.zeros(3), value_label="p")

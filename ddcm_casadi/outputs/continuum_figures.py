@@ -286,7 +286,8 @@ def figure_deformed_body(points: Any, cells: Any, *, displacement: Any, values: 
         ax, mappable = _draw_body_3d(fig, b)
     fig.colorbar(mappable, ax=ax, label=f"{value_label} (MPa)", shrink=0.8)
     note = f"displacements x {b.scale:g}"
-    ax.set_title(f"{title} ({note})" if title else note)
+    # on the figure, not the axes: a long title would run into the colour bar
+    fig.suptitle(f"{title}\n({note})" if title else note, fontsize="medium")
     return fig
 
 
