@@ -60,6 +60,15 @@ FIGURES = (
            "deformed_classical.png", False),
     Figure("sweep_noise.png", ("ddcm-sweep", str(ROOT / "examples/sweeps/noise.toml"), "--out", "{out}"),
            "error_vs_noise.png", False),
+    Figure("seal2d_force_indentation.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/seal2d_finite.toml"),
+                                            "--out", "{out}", "-q"), "force_indentation.png", False),
+    Figure("seal2d_deformed.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/seal2d_finite.toml"),
+                                   "--formulations", "fischer_burmeister", "--variants", "classical",
+                                   "--out", "{out}", "-q"), "deformed_classical.png", False),
+    Figure("indentation3d_force_indentation.png", ("ddcm-compare", "--config",
+                                                   str(ROOT / "examples/cases/indentation3d_finite.toml"),
+                                                   "--formulations", "fischer_burmeister", "--out", "{out}", "-q"),
+           "force_indentation.png", False),
 )
 
 

@@ -235,8 +235,8 @@ class MaterialDataset:
                  keep=None) -> "MaterialDataset":
         """Any law ``stress = law(strain)`` (``(n, k) -> (n, k)``, Mandel components) sampled on a
         grid of ``points_per_axis^k`` strain states in ``[strain_min, strain_max]^k``, regular or
-        graded towards zero strain (``grading``, :func:`graded_axis`), or at ``samples`` states
-        drawn uniformly from that box (``seed``). ``keep(strain) -> bool mask`` (optional) selects
+        graded towards zero strain (``grading``, :func:`graded_axis`), or at ``samples`` states:
+        the zero strain and ``samples - 1`` drawn uniformly from that box (``seed``). ``keep(strain) -> bool mask`` (optional) selects
         the states to keep (e.g. principal strains within the range,
         :func:`~ddcm_casadi.data.hyperelastic.principal_strains_within`). States where the law is
         undefined (non-finite stress: a finite-strain law beyond ``det C > 0``) are left out too:
@@ -251,7 +251,9 @@ class MaterialDataset:
             count = int(samples)
             if count < 1 or count > limits.MAX_DATA_POINTS:
                 raise InputError(f"samples must be between 1 and {limits.MAX_DATA_POINTS}, got {samples!r}")
-            strain = np.random.default_rng(seed).uniform(strain_min, strain_max, (count, k))
+            # the reference state first: a material at rest is a datum, whatever the draw
+            strain = np.vstack([np.zeros((1, k)), np.random.default_rng(seed).uniform(strain_min, strain_max,
+                                                                                    (count - 1, k))])
         else:
             axis = graded_axis(strain_min, strain_max, n, grading)
             strain = np.stack(np.meshgrid(*([axis] * k), indexing="ij"), axis=-1).reshape(-1, k)
