@@ -362,7 +362,8 @@ def test_p2_ddcm_data_are_E_S_pairs(p2):
     assert {"data_set", "data_index", "data_strain", "data_stress", "ddcm_distance"} <= set(pd)
     E, S = pd["data_strain_mandel"], pd["data_stress_mandel"]
     assert _max_mismatch(S, neo_hookean_stress(E, YOUNG, NU, 2)) <= 1e-10
-    assert np.ptp(E[:, 1]) > 0  # not one datum for all
+    # the data moved off the zero state (the compression is homogeneous: one datum may serve all)
+    assert np.max(np.abs(E[:, 1])) > 0.1
 
 
 def test_p2_mesh_fields_and_json(p2):
