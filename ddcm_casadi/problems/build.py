@@ -129,25 +129,26 @@ def _point_major(mk: int, k: int) -> np.ndarray:
 def _equilibrium(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, P: Parameters, Ps: ca.SX,
                  stress_of: Callable[[ca.SX], ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     """``(E, r, t, g)``: the strains ``E(u)`` (``u = s_d uh``), the scaled equilibrium residual
-    ``r = (B(u)^T W stress - N(u)^T a p - f) / s_f`` with ``stress = stress_of(E)``, ``p = s_s ph``,
-    ``B(u) = dE/du`` and ``N(u) = dg/du`` by automatic differentiation (the virtual work
-    ``sum_i w_i stress_i . dE_i`` of a nonlinear strain measure, and of the contact forces on
-    the gaps ``g(u)`` of :meth:`~ddcm_casadi.models.base.ContactModel.gap_expression`), ``t``
-    the size of its terms (for relative residuals) and ``g`` the scaled gaps ``g / s_d``."""
-    u = s["displacement"] * uh
-    values = lambda name: Ps[P.slice(name)]  # noqa: E731 - the step's parameters by name
-    E = model.strain_expression(u)
+    ``r = (B(u)^T W stress - N(u)^T a p - f) / s_f`` with ``stress = stress_of(E)``, ``p = s_s ph``
+    and ``B(u) = dE/du`` by automatic differentiation (the virtual work ``sum_i w_i stress_i .
+    dE_i`` of a nonlinear strain measure; the contact forces and loads by
+    :func:`_contact_expression`), ``t`` the size of its terms (for relative residuals) and ``g``
+    the scaled gaps."""
+    E = model.strain_expression(s["displacement"] * uh)
     stress = stress_of(E)
     B = ca.jacobian(E, uh) / s["displacement"]
-    gap = model.gap_expression(u, values)
-    N = ca.jacobian(gap, uh) / s["displacement"]
-    ap = ca.DM(model.contact_area) * ph
-    f = values("f")
     w = ca.DM(np.repeat(np.asarray(model.volumes, float), model.strain_components))
-    r = (ca.mtimes(B.T, w * stress) - s["stress"] * ca.mtimes(N.T, ap) - f) / s["force"]
-    t = (ca.mtimes(ca.fabs(B).T, w * ca.fabs(stress)) + s["stress"] * ca.mtimes(ca.fabs(N).T, ca.fabs(ap))
-         + ca.fabs(f)) / s["force"]
-    return E, r, t, gap / s["displacement"]
+    r, t, gap = _contact_expression(model, s, uh, ph, P, Ps)
+    return (E, ca.mtimes(B.T, w * stress) / s["force"] + r,
+            ca.mtimes(ca.fabs(B).T, w * ca.fabs(stress)) / s["force"] + t, gap)
+
+
+def _with_gap_map(z: ca.SX, Ps: ca.SX, gap: ca.SX, common: dict) -> dict:
+    """``common`` (:func:`_common`) with the gaps as a :class:`NonlinearMap` where they are not
+    affine (a curved obstacle at the current configuration)."""
+    if gap.numel() and ca.depends_on(ca.jacobian(gap, z), z):
+        common["gap_map"] = NonlinearMap.of(gap, z, Ps, name="gap")
+    return common
 
 
 def _build_nonlinear(model: ContactModel) -> ProblemPair:
@@ -165,11 +166,6 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
     classical = projection = None
 
-    def gap_map(z: ca.SX, Ps: ca.SX, gap: ca.SX, common: dict) -> dict:
-        if nc and ca.depends_on(ca.jacobian(gap, z), z):
-            common["gap_map"] = NonlinearMap.of(gap, z, Ps, name="gap")
-        return common
-
     if model.youngs_modulus is not None:
         s = model.scales_for("classical")
         P = Parameters(**model.step_sizes())
@@ -177,7 +173,7 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
         _, F, terms, gap = _equilibrium(model, s, z[:n], z[n:], P, Ps, model.stress_expression)
         classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),),
                                            residual_map=NonlinearMap.of(F, z, Ps, terms, "residual"), distance=None,
-                                           **gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], n + nc, P)))
+                                           **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], n + nc, P)))
     if model.dataset is not None:
         s = model.scales_for("ddcm")
         mk = m * k
@@ -191,7 +187,7 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
         objective = NonlinearObjective(ca.Function("distance", [z, Ps], [0.5 * ca.dot(d, ca.mtimes(W, d))]))
         projection = ComplementarityProblem(
             kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=NonlinearMap.of(h, z, Ps, terms, "h"),
-            distance=objective, **gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], n + mk + nc, P)))
+            distance=objective, **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], n + mk + nc, P)))
     return ProblemPair(model=model, classical=classical, projection=projection)
 
 
@@ -239,11 +235,6 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
             return value
         return ca.if_else(ca.mmin(lk.volume_ratio(u_e, geometry)) > 0, 1.0, np.nan) * value
 
-    def gap_map(z, Ps, gap, common):
-        if nc and ca.depends_on(ca.jacobian(gap, z), z):
-            common["gap_map"] = NonlinearMap.of(gap, z, Ps, name="gap")
-        return common
-
     if model.youngs_modulus is not None:
         s = model.scales_for("classical")
         P = Parameters(**model.step_sizes())
@@ -266,7 +257,7 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
         r, t, gap = _contact_expression(model, s, z[:n], z[n:], P, Ps)
         classical = ComplementarityProblem(
             kind="mcp", unknowns=(("u", n),), residual_map=NonlinearMap.of(r, z, Ps, t, "residual", tuple(local)),
-            distance=None, **gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], nz, P)))
+            distance=None, **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], nz, P)))
     if model.dataset is not None:
         s = model.scales_for("ddcm")
         mk = m * k
@@ -320,7 +311,7 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
             kind="mpcc", unknowns=(("u", n), ("stress", mk)),
             residual_map=NonlinearMap.of(r, z, Ps, t, "h", (residual_local,)),
             distance=NonlinearObjective(ca.Function("distance", [z, Ps], [ca.SX(1, 1)]), (objective_local,)),
-            **gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], nz, P)))
+            **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], nz, P)))
     return ProblemPair(model=model, classical=classical, projection=projection)
 
 
