@@ -124,14 +124,12 @@ class _BuiltMPCC(BuiltFormulation):
         # SX throughout, local terms (finite strain) written out element by element: IPOPT's
         # Hessians of MX maps cost more than the expansion (measured on the 822-dof indentation:
         # 12 s to build and 302 s to solve in MX, 52 s and 17 s in SX).
-        kind = ca.SX
-
         def nlp(parameters, rows):
-            x, p, P = kind.sym("x", nx), kind.sym("p", nc), kind.sym("P", parameters.size)
+            x, p, P = ca.SX.sym("x", nx), ca.SX.sym("p", nc), ca.SX.sym("P", parameters.size)
             z, own = ca.vertcat(x, p), P[:problem.parameters.size]
             residual, gap = problem.residual_map.render(z, own), problem.gap_map.render(z, own)
             objective = (problem.distance.render(z, own) if problem.kind == "mpcc" else
-                         0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else kind.zeros(1, 1))
+                         0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else ca.SX.zeros(1, 1))
             return {"x": z, "p": P, "f": objective, "g": ca.vertcat(residual, gap, rows(p, gap, P))}
 
         self._solver = ca.nlpsol("mpcc", "ipopt", nlp(self.parameters, lambda p, gap, P: gap * p - P[self.parameters.slice("tau")]),

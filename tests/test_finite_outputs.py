@@ -21,7 +21,8 @@ import pytest
 
 from ddcm_casadi.casefiles.config import load_case_with_overrides
 from ddcm_casadi.commands.compare import written_summary
-from ddcm_casadi.data.hyperelastic import lame, mandel_vector, neo_hookean_stress
+from ddcm_casadi.data.hyperelastic import lame, neo_hookean_stress
+from ddcm_casadi.data.metric import tensor_to_mandel as mandel_vector
 from ddcm_casadi.outputs.drawings import drawing
 from ddcm_casadi.run import run_case
 

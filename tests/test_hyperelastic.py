@@ -9,7 +9,7 @@ import pytest
 from ddcm_casadi.casefiles.config import case_from_dict
 from ddcm_casadi.data import hyperelastic
 from ddcm_casadi.data.dataset import MaterialDataset
-from ddcm_casadi.data.metric import Metric, isotropic_elasticity
+from ddcm_casadi.data.metric import Metric, isotropic_elasticity, mandel_to_tensor
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.models.continuum.finite import green_lagrange
 from ddcm_casadi.models.continuum.inputs import Contact, Material, Support
@@ -50,7 +50,7 @@ def test_law_data_leave_out_undefined_states():
     law = hyperelastic.law_of("neo_hookean", 1.0, 0.3, 2)
     ds = MaterialDataset.from_law(law, 3, -0.45, 0.45, 7, c=Metric(np.eye(3)))
     assert 0 < len(ds) < 7**3
-    C = np.eye(3)[None] + 2 * hyperelastic._tensors(ds.strain, 2)
+    C = np.eye(3)[None] + 2 * mandel_to_tensor(ds.strain, 2)
     assert np.all(np.linalg.det(C[:, :2, :2]) > 0)
 
 
@@ -116,3 +116,50 @@ def test_case_file_law_keys_and_errors():
     small = {k: v for k, v in doc.items() if k != "kinematics"}
     with pytest.raises(InputError, match="does not fit kinematics = 'small'"):
         case_from_dict(small)
+
+
+def _whole_expression(model):
+    """The same model built as one expression of every point (no element-by-element assembly)."""
+    import dataclasses
+
+    from ddcm_casadi.models.continuum.model import ContinuumModel
+
+    whole = type("WholeExpression", (ContinuumModel,), {"local_kinematics": lambda self: None})
+    return whole(**{f.name: getattr(model, f.name) for f in dataclasses.fields(model) if f.init})
+
+
+# Both builds sum the same terms in another order: roundoff of the terms that cancel in a row,
+# the Newton loop's own allowance (64 ulps, ddcm_casadi.loops.newton.ROUNDOFF_ULPS).
+ASSEMBLY_ULPS = 64 * np.finfo(float).eps
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_element_assembly_equals_the_whole_expression(degree):
+    """LocalTerms against the one-expression builder, on a curved obstacle with data: residuals,
+    gaps, objective and the Fischer-Burmeister Newton matrix at a random state."""
+    from ddcm_casadi import formulations
+    from ddcm_casadi.problems.build import build_problems
+
+    ds = MaterialDataset.from_law(hyperelastic.law_of("neo_hookean", 1.0, 0.3, 2), 3, -0.2, 0.2, 5,
+                                  c=Metric(isotropic_elasticity(1.0, 0.3, 2)[0]))
+    ball = Ball(center=(0.5, 3.0), radius=2.0, direction=(0.0, -1.0), travel=[0.0, 0.05])
+    model = continuum_model(rectangle(1.0, 1.0, nx=2, ny=2), degree=degree, datasets=[ds],
+                            materials=[Material(youngs_modulus=1.0, poisson_ratio=0.3, law="neo_hookean", data=0)],
+                            supports=[Support("ymin", "y"), Support("xmin", "x")],
+                            contacts=[Contact(ball, "ymax")], kinematics="finite")
+    rng = np.random.default_rng(degree)
+    pairs = [build_problems(model), build_problems(_whole_expression(model))]
+    for kind in ("classical", "projection"):
+        a, b = (getattr(p, kind) for p in pairs)
+        x, p = 0.02 * rng.standard_normal(a.n_x), np.abs(rng.standard_normal(a.n_pairs))
+        P = rng.standard_normal(a.parameters.size) * 0.05
+        (ra, ta, ga, fa), (rb, tb, gb, fb) = a.evaluate(x, p, P), b.evaluate(x, p, P)
+        assert np.all(np.abs(ra - rb) <= ASSEMBLY_ULPS * np.maximum(ta, 1.0))
+        assert np.allclose(ta, tb, rtol=ASSEMBLY_ULPS, atol=0)
+        assert np.max(np.abs(ga - gb)) <= ASSEMBLY_ULPS * max(1.0, np.max(np.abs(ga)))
+        assert abs(fa - fb) <= ASSEMBLY_ULPS * max(1.0, abs(fa))
+        built = [formulations.get("fischer_burmeister").build(q) for q in (a, b)]
+        z, Pz = built[0].newton_point(P, x, p)
+        Ja, Jb = (f.newton_system().matrix(z, Pz) for f in built)
+        scale = max(float(abs(Ja).max()), 1.0)
+        assert abs(Ja - Jb).max() <= ASSEMBLY_ULPS * scale

@@ -34,7 +34,7 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from ddcm_casadi.data.metric import COMPONENTS
+from ddcm_casadi.data.metric import COMPONENTS, MANDEL_INDEX, mandel_to_tensor, tensor_to_mandel
 from ddcm_casadi.errors import InputError
 
 _SQRT2 = math.sqrt(2.0)
@@ -48,13 +48,12 @@ def lame(youngs_modulus, poisson_ratio) -> tuple[np.ndarray, np.ndarray]:
 
 def mandel_tensor(v, dimension: int):
     """The symmetric ``3 x 3`` tensor (a list of lists of entries) of a Mandel vector ``v``
-    (``k`` entries; ``SX`` or numbers). Plane strain: the third row and column are zero."""
-    r = 1.0 / _SQRT2
-    if dimension == 2:
-        e11, e22, e12 = v[0], v[1], r * v[2]
-        return [[e11, e12, 0], [e12, e22, 0], [0, 0, 0]]
-    e11, e22, e33, e23, e13, e12 = v[0], v[1], v[2], r * v[3], r * v[4], r * v[5]
-    return [[e11, e12, e13], [e12, e22, e23], [e13, e23, e33]]
+    (``k`` entries; ``SX`` or numbers; :data:`~ddcm_casadi.data.metric.MANDEL_INDEX`). Plane
+    strain: the third row and column are zero."""
+    T = [[0, 0, 0], [0, 0, 0], [0, 0, 0]]
+    for c, (a, b) in enumerate(MANDEL_INDEX[dimension]):
+        T[a][b] = T[b][a] = v[c] if a == b else v[c] / _SQRT2
+    return T
 
 
 def _det3(A) -> object:
@@ -154,34 +153,12 @@ def law_of(name: str, youngs_modulus: float, poisson_ratio: float, dimension: in
 
 
 # ------------------------------------------------------------- independent closed forms
-def _tensors(strain: np.ndarray, dimension: int) -> np.ndarray:
-    """``(n, 3, 3)`` tensors of Mandel rows."""
-    E = np.atleast_2d(np.asarray(strain, float))
-    T = np.zeros((E.shape[0], 3, 3))
-    r = 1.0 / _SQRT2
-    if dimension == 2:
-        T[:, 0, 0], T[:, 1, 1] = E[:, 0], E[:, 1]
-        T[:, 0, 1] = T[:, 1, 0] = r * E[:, 2]
-    else:
-        for c, (a, b) in enumerate([(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]):
-            T[:, a, b] = T[:, b, a] = E[:, c] * (1.0 if a == b else r)
-    return T
-
-
-def mandel_vector(T: np.ndarray, dimension: int) -> np.ndarray:
-    """Mandel rows ``(n, k)`` of symmetric tensors ``(n, 3, 3)`` (plane strain: the in-plane part)."""
-    if dimension == 2:
-        return np.stack([T[:, 0, 0], T[:, 1, 1], _SQRT2 * T[:, 0, 1]], axis=1)
-    return np.stack([T[:, 0, 0], T[:, 1, 1], T[:, 2, 2], _SQRT2 * T[:, 1, 2], _SQRT2 * T[:, 0, 2],
-                     _SQRT2 * T[:, 0, 1]], axis=1)
-
-
 def principal_strains_within(strain: np.ndarray, dimension: int, low: float, high: float) -> np.ndarray:
     """Which Mandel strain rows have every principal strain (eigenvalue of the tensor) in
     ``[low, high]``: the states a strain range means for a finite-strain law. With ``low > -1/2``
     it keeps ``det C = prod (1 + 2 E_i) >= (1 + 2 low)^d > 0``, so the stresses stay bounded (a
     Mandel box holds states near ``det C = 0``, whose Neo-Hookean stresses grow without bound)."""
-    T = _tensors(strain, dimension)[:, :dimension, :dimension]
+    T = mandel_to_tensor(strain, dimension)[:, :dimension, :dimension]
     e = np.linalg.eigvalsh(T)
     return np.all((e >= low) & (e <= high), axis=1)
 
@@ -189,20 +166,20 @@ def principal_strains_within(strain: np.ndarray, dimension: int, low: float, hig
 def neo_hookean_stress(strain: np.ndarray, youngs_modulus: float, poisson_ratio: float, dimension: int) -> np.ndarray:
     """``S = mu (I - C^-1) + lambda ln J C^-1`` (Mandel rows), the textbook form, for checks."""
     lam, mu = lame(youngs_modulus, poisson_ratio)
-    C = np.eye(3) + 2 * _tensors(strain, dimension)
+    C = np.eye(3) + 2 * mandel_to_tensor(strain, dimension)
     if dimension == 2:
         C[:, 2, 2] = 1.0
     Ci = np.linalg.inv(C)
     log_J = 0.5 * np.log(np.linalg.det(C))
     S = mu * (np.eye(3) - Ci) + lam * log_J[:, None, None] * Ci
-    return mandel_vector(S, dimension)
+    return tensor_to_mandel(S, dimension)
 
 
 def cauchy_stress(second_piola_stress: np.ndarray, deformation_gradient: np.ndarray, dimension: int) -> np.ndarray:
     """Cauchy stress ``sigma = F S F^T / J`` as ``(n, 3, 3)`` tensors, from Mandel ``S`` ``(n, k)``
     and ``F`` ``(n, d, d)`` (plane strain: ``F_33 = 1``; ``sigma_33`` is left out, the in-plane
     law does not give ``S_33``)."""
-    S = _tensors(second_piola_stress, dimension)
+    S = mandel_to_tensor(second_piola_stress, dimension)
     n = S.shape[0]
     F = np.tile(np.eye(3), (n, 1, 1))
     F[:, :dimension, :dimension] = deformation_gradient

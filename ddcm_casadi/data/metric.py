@@ -163,6 +163,42 @@ class Metric:
             raise InputError("the metric estimated from the data is not positive definite; give [data] c") from None
 
 
+#: The tensor index ``(a, b)`` of each Mandel component (shear ones scaled by ``sqrt 2``):
+#: 2-D ``[a11, a22, sqrt2 a12]``, 3-D ``[a11, a22, a33, sqrt2 a23, sqrt2 a13, sqrt2 a12]``.
+MANDEL_INDEX = {2: [(0, 0), (1, 1), (0, 1)], 3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
+
+
+def mandel_to_tensor(values, dim: int, out_of_plane=None) -> np.ndarray:
+    """Symmetric ``3 x 3`` tensors ``(N, 3, 3)`` from Mandel vectors ``(N, k)`` (:data:`MANDEL_INDEX`).
+
+    ``out_of_plane`` (2-D only, ``(N,)`` or a scalar): the ``a33`` component the 2-D Mandel vector
+    does not carry (plane strain: ``e33 = 0``, but not ``sigma_33``); NaN marks it unknown. Default 0.
+    """
+    if dim not in MANDEL_INDEX:
+        raise InputError(f"dim must be 2 or 3, got {dim!r}")
+    try:
+        v = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError("Mandel values must be numbers") from None
+    k = len(MANDEL_INDEX[dim])
+    if v.ndim != 2 or v.shape[1] != k:
+        raise InputError(f"Mandel values for dim={dim} must have shape (N, {k}), got {v.shape}")
+    t = np.zeros((v.shape[0], 3, 3))
+    for c, (i, j) in enumerate(MANDEL_INDEX[dim]):
+        t[:, i, j] = t[:, j, i] = v[:, c] if i == j else v[:, c] / np.sqrt(2.0)
+    if out_of_plane is not None:
+        if dim != 2:
+            raise InputError("out_of_plane is the 2-D a33 component; a 3-D Mandel vector carries it")
+        t[:, 2, 2] = np.broadcast_to(np.asarray(out_of_plane, dtype=float), (v.shape[0],))
+    return t
+
+
+def tensor_to_mandel(tensors: np.ndarray, dim: int) -> np.ndarray:
+    """Mandel vectors ``(N, k)`` of symmetric tensors ``(N, 3, 3)`` (2-D: the in-plane part)."""
+    T = np.asarray(tensors, dtype=float)
+    return np.stack([T[:, i, j] if i == j else np.sqrt(2.0) * T[:, i, j] for i, j in MANDEL_INDEX[dim]], axis=1)
+
+
 def isotropic_elasticity(youngs_modulus, poisson_ratio, dimension: int) -> np.ndarray:
     r"""Isotropic elasticity matrices in Mandel notation, one per value: ``(m, k, k)``.
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic
+from ddcm_casadi.data.metric import MANDEL_INDEX, mandel_to_tensor  # noqa: F401 - re-exported
 from ddcm_casadi.outputs.array_checks import as_float, connectivity, coordinates
 from ddcm_casadi.outputs.continuum_figures import (
     figure_convergence, figure_deformed_body, figure_pressure_profile, fit_rate,
@@ -37,55 +38,17 @@ __all__ = ["figure_convergence", "figure_deformed_body", "figure_pressure_profil
            "plane_strain_sigma_zz", "von_mises", "write_vtu_series"]
 
 # Tensor index of each Mandel component; off-diagonal components carry a factor sqrt(2).
-_MANDEL_INDEX = {2: [(0, 0), (1, 1), (0, 1)],
-                 3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
 _NODES_PER_CELL = {"vertex": 1, "line": 2, "triangle": 3, "quad": 4, "tetra": 4, "hexahedron": 8,
                    "triangle6": 6, "tetra10": 10}
 
 
 def _mandel(values: Any, dim: int) -> np.ndarray:
-    if dim not in _MANDEL_INDEX:
-        raise InputError(f"dim must be 2 or 3, got {dim!r}")
-    v = as_float("Mandel values", values)
-    k = len(_MANDEL_INDEX[dim])
-    if v.ndim != 2 or v.shape[1] != k:
-        raise InputError(f"Mandel values for dim={dim} must have shape (N, {k}), got {v.shape}")
-    return v
+    """Mandel vectors ``(N, k)``, checked (:func:`~ddcm_casadi.data.metric.mandel_to_tensor`'s checks)."""
+    mandel_to_tensor(values, dim)
+    return as_float("Mandel values", values)
 
 
 # --------------------------------------------------------------------------- Mandel notation
-def mandel_to_tensor(values: Any, dim: int, out_of_plane: Any = None) -> np.ndarray:
-    """Symmetric 3 x 3 tensors from Mandel vectors.
-
-    Parameters
-    ----------
-    values : array_like, shape (N, k)
-        Mandel vectors, k = 3 for ``dim=2`` (``[a11, a22, sqrt(2) a12]``) and k = 6 for ``dim=3``
-        (``[a11, a22, a33, sqrt(2) a23, sqrt(2) a13, sqrt(2) a12]``).
-    dim : {2, 3}
-        Spatial dimension.
-    out_of_plane : array_like, shape (N,) or scalar, optional
-        2-D only: the ``a33`` component, which the 2-D Mandel vector does not carry (plane strain:
-        ``e33 = 0`` but ``sigma_33 = nu (sigma_11 + sigma_22)`` for an isotropic law,
-        :func:`plane_strain_sigma_zz`); NaN marks it unknown. Default: 0.
-
-    Returns
-    -------
-    ndarray, shape (N, 3, 3)
-        The tensors. In 2-D the third row and column are zero but for ``a33 = out_of_plane``.
-    """
-    v = _mandel(values, dim)
-    t = np.zeros((v.shape[0], 3, 3))
-    for c, (i, j) in enumerate(_MANDEL_INDEX[dim]):
-        t[:, i, j] = t[:, j, i] = v[:, c] if i == j else v[:, c] / np.sqrt(2.0)
-    if out_of_plane is not None:
-        if dim != 2:
-            raise InputError("out_of_plane is the 2-D a33 component; a 3-D Mandel vector carries it")
-        zz = np.broadcast_to(np.asarray(out_of_plane, dtype=float), (v.shape[0],))
-        t[:, 2, 2] = zz
-    return t
-
-
 def plane_strain_sigma_zz(stress: Any, poisson_ratio: Any) -> np.ndarray:
     """The out-of-plane stress of plane strain for an isotropic law: ``nu (sigma_11 + sigma_22)``.
 

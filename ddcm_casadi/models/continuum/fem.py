@@ -36,7 +36,7 @@ import skfem
 from skfem.quadrature import get_quadrature
 
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.data.metric import COMPONENTS
+from ddcm_casadi.data.metric import COMPONENTS, MANDEL_INDEX
 
 _ELEMENTS = {
     (2, 1): skfem.ElementTriP1, (2, 2): skfem.ElementTriP2,
@@ -159,10 +159,7 @@ def strain_operator(disc: Discretisation) -> tuple[sp.csr_matrix, np.ndarray]:
     """
     basis, d, k = disc.basis, disc.dimension, disc.components
     ne, nq = basis.nelems, disc.points_per_element
-    if d == 2:
-        pairs = [(0, 0), (1, 1), (0, 1)]
-    else:
-        pairs = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
+    pairs = MANDEL_INDEX[d]
     rows_base = (np.arange(ne * nq).reshape(ne, nq) * k)  # first row of each point
     rows, cols, vals = [], [], []
     for i, phi in enumerate(basis.basis):
@@ -185,24 +182,14 @@ def strain_operator(disc: Discretisation) -> tuple[sp.csr_matrix, np.ndarray]:
 def gradient_operator(disc: Discretisation) -> sp.csr_matrix:
     """``H = G u``: the displacement gradient ``H_ab = du_a / dX_b`` at every quadrature point,
     sparse ``(m d^2, N)``, rows point-major (``i d^2 + a d + b``), points as in
-    :func:`strain_operator` (finite kinematics: ``F = I + H``)."""
-    basis, d = disc.basis, disc.dimension
-    ne, nq = basis.nelems, disc.points_per_element
-    rows_base = np.arange(ne * nq).reshape(ne, nq) * d * d
-    rows, cols, vals = [], [], []
-    for i, phi in enumerate(basis.basis):
-        G = phi[0].grad  # (d, d, ne, nq)
-        col = np.broadcast_to(basis.element_dofs[i][:, None], (ne, nq))
-        for a in range(d):
-            for b in range(d):
-                v = G[a, b]
-                keep = v != 0.0
-                if np.any(keep):
-                    rows.append((rows_base + a * d + b)[keep])
-                    cols.append(col[keep])
-                    vals.append(v[keep])
-    H = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(ne * nq * d * d, disc.n_dofs))
+    :func:`strain_operator` (finite kinematics: ``F = I + H``): the blocks of
+    :func:`element_gradients` placed at their elements' dofs."""
+    blocks = element_gradients(disc)  # (ne, nq, d^2, n_loc)
+    ne, nq, dd, n_loc = blocks.shape
+    rows = np.broadcast_to(np.arange(ne * nq * dd).reshape(ne, nq, dd, 1), blocks.shape)
+    cols = np.broadcast_to(disc.basis.element_dofs.T[:, None, None, :], blocks.shape)
+    keep = blocks != 0.0
+    H = sp.csr_matrix((blocks[keep], (rows[keep], cols[keep])), shape=(ne * nq * dd, disc.n_dofs))
     H.sum_duplicates()
     return H
 

@@ -19,16 +19,16 @@ import math
 import casadi as ca
 import numpy as np
 
+from ddcm_casadi.data.metric import MANDEL_INDEX
+
 _SQRT2 = math.sqrt(2.0)
-#: Mandel components ``(a, b)`` per dimension (shear ones scaled by ``sqrt 2``).
-MANDEL_PAIRS = {2: [(0, 0), (1, 1), (0, 1)], 3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
 
 
 def _components(H, d: int) -> list:
     """Mandel components of ``E = (H + H^T + H^T H) / 2`` from ``H[a][b]`` (arrays or symbols of
     equal shape, one entry per point)."""
     out = []
-    for a, b in MANDEL_PAIRS[d]:
+    for a, b in MANDEL_INDEX[d]:
         e = 0.5 * (H[a][b] + H[b][a] + sum(H[c][a] * H[c][b] for c in range(d)))
         out.append(e if a == b else _SQRT2 * e)
     return out
@@ -56,28 +56,24 @@ def green_lagrange_expression(gradient_operator, u, d: int) -> ca.SX:
     return ca.reshape(E, E.numel(), 1)
 
 
+def _element_gradients(u_e, geometry_e, d: int, n_loc: int, nq: int) -> list:
+    """``H`` (as ``H[a][b]`` entries) of each of one element's ``nq`` points from its local
+    displacements ``u_e`` and its flattened gradient blocks
+    (:func:`~ddcm_casadi.models.continuum.fem.element_gradients`, one element: ``(nq, d^2, n_loc)``
+    row-major), for CasADi symbols."""
+    h = ca.mtimes(ca.reshape(geometry_e, n_loc, nq * d * d).T, u_e)  # row q d^2 + a d + b
+    return [[[h[q * d * d + a * d + b] for b in range(d)] for a in range(d)] for q in range(nq)]
+
+
 def element_strain(u_e, geometry_e, d: int, n_loc: int, nq: int):
-    """Mandel ``E`` of one element's ``nq`` points (point-major) from its local displacements
-    ``u_e`` and its flattened gradient blocks (:func:`~ddcm_casadi.models.continuum.fem.element_gradients`,
-    one element: ``(nq, d^2, n_loc)`` row-major), for CasADi symbols."""
-    G = ca.reshape(geometry_e, n_loc, nq * d * d).T  # row q d^2 + a d + b
-    h = ca.mtimes(G, u_e)
-    out = []
-    for q in range(nq):
-        H = [[h[q * d * d + a * d + b] for b in range(d)] for a in range(d)]
-        out.extend(_components(H, d))
-    return ca.vertcat(*out)
+    """Mandel ``E`` of one element's ``nq`` points (point-major), for CasADi symbols."""
+    return ca.vertcat(*[e for H in _element_gradients(u_e, geometry_e, d, n_loc, nq) for e in _components(H, d)])
 
 
 def element_volume_ratio(u_e, geometry_e, d: int, n_loc: int, nq: int):
     """``J = det(I + H)`` of one element's ``nq`` points, for CasADi symbols."""
-    G = ca.reshape(geometry_e, n_loc, nq * d * d).T
-    h = ca.mtimes(G, u_e)
-    out = []
-    for q in range(nq):
-        F = ca.reshape(h[q * d * d:(q + 1) * d * d], d, d).T + ca.DM.eye(d)
-        out.append(ca.det(F))
-    return ca.vertcat(*out)
+    return ca.vertcat(*[ca.det(ca.SX.eye(d) + ca.vertcat(*[ca.horzcat(*row) for row in H]))
+                        for H in _element_gradients(u_e, geometry_e, d, n_loc, nq)])
 
 
 def deformation_gradient(H: np.ndarray) -> np.ndarray:

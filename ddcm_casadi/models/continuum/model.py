@@ -190,8 +190,7 @@ class ContinuumModel(ContactModel):
 
     def _directions(self) -> np.ndarray:
         """``(nc, d)`` the direction of travel of each pair's obstacle."""
-        return np.stack([self.obstacles[o].offset(1.0) for o in self.contact_obstacle]) if self.n_contacts \
-            else np.zeros((0, self.dimension))
+        return np.stack([ob.offset(1.0) for ob in self.obstacles] or [np.zeros(self.dimension)])[self.contact_obstacle]
 
     def gap_expression(self, u, values):
         """Small kinematics: ``G u + gap0``. Finite: ``phi(X + u - s_t d)`` per pair, exact at the
@@ -224,7 +223,12 @@ class ContinuumModel(ContactModel):
 
     def pair_travels(self, step: int) -> np.ndarray:
         """``s_t`` of each pair's obstacle at ``step``."""
-        return np.array([self.obstacles[o].travels(self.n_steps)[step] for o in self.contact_obstacle], float)
+        return np.array([ob.travels(self.n_steps)[step] for ob in self.obstacles], float)[self.contact_obstacle]
+
+    def _current_points(self, u: np.ndarray, step: int) -> np.ndarray:
+        """``X + u - s_t d`` per pair: the contact points in the obstacles' reference frame."""
+        x = self.contact_points + (self._contact_selection() @ np.asarray(u, float)).reshape(-1, self.dimension)
+        return x - self.pair_travels(step)[:, None] * self._directions()
 
     def step_values(self, step: int, previous: dict | None = None) -> dict[str, np.ndarray]:
         out = super().step_values(step, previous)
@@ -236,8 +240,7 @@ class ContinuumModel(ContactModel):
         """The gaps at ``step`` for free displacements ``u``: linearised (small) or exact (finite)."""
         if not self.finite or not self.n_contacts:
             return super().gap(u, step)
-        x = self.contact_points + (self._contact_selection() @ np.asarray(u, float)).reshape(-1, self.dimension)
-        x = x - self.pair_travels(step)[:, None] * self._directions()
+        x = self._current_points(u, step)
         out = np.empty(self.n_contacts)
         for o, ob in enumerate(self.obstacles):
             rows = self.contact_obstacle == o
@@ -250,8 +253,7 @@ class ContinuumModel(ContactModel):
         configuration (small), at the current contact points (finite)."""
         if not self.finite:
             return self.contact_normals
-        x = self.contact_points + (self._contact_selection() @ np.asarray(u, float)).reshape(-1, self.dimension)
-        x = x - self.pair_travels(step)[:, None] * self._directions()
+        x = self._current_points(u, step)
         out = np.empty((self.n_contacts, self.dimension))
         for o, ob in enumerate(self.obstacles):
             rows = self.contact_obstacle == o
