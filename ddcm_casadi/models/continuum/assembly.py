@@ -12,6 +12,7 @@ Each checks its own input with a one-line :class:`~ddcm_casadi.errors.InputError
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -21,9 +22,10 @@ import skfem
 from ddcm_casadi.data.dataset import MaterialDataset, PointData
 from ddcm_casadi.data.metric import isotropic_elasticity
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.models.continuum import fem
+from ddcm_casadi.models.continuum import fem, mortar
 from ddcm_casadi.models.continuum.mesh import select_facets
-from ddcm_casadi.models.continuum.inputs import BodyForce, Contact, Material, Support, Traction
+from ddcm_casadi.models.continuum.inputs import (DEFAULT_SEARCH_SHARE, BodyContact, BodyForce, Contact, Material,
+                                                 Support, Traction)
 from ddcm_casadi.models.continuum.obstacles import Obstacle
 
 #: Axis letters of support components.
@@ -152,7 +154,7 @@ def step_count(load_factors: Sequence[float] | None, contacts: Sequence[Contact]
     if load_factors is not None:
         n_steps = len(load_factors)
     for c in contacts:
-        trav = np.asarray(c.obstacle.travel)
+        trav = np.asarray(c.travel)
         if trav.ndim == 1 and n_steps is None:
             n_steps = trav.size
     return n_steps or 1
@@ -196,11 +198,11 @@ def _check_not_through(ob: Obstacle, gaps: np.ndarray, nodes: np.ndarray, n_step
 PENETRATION_TOL = 1e-12
 
 
-def _check_movable(keep: np.ndarray, gap0: np.ndarray, points: np.ndarray, owner: np.ndarray,
+def _check_movable(movable: np.ndarray, gap0: np.ndarray, points: np.ndarray, owner: np.ndarray,
                    obstacles: list, size: float) -> None:
-    """Refuse an obstacle that presses on nodes whose every displacement component is fixed: its
-    gap there cannot open, so no pressure satisfies contact (the solvers end not converged)."""
-    stuck = ~keep.any(axis=1) & np.any(gap0 < -PENETRATION_TOL * size, axis=0)
+    """Refuse an obstacle that presses on pairs whose every displacement component is fixed
+    (``movable`` false): the gap there cannot open, so no pressure satisfies contact (the solvers end not converged)."""
+    stuck = ~movable & np.any(gap0 < -PENETRATION_TOL * size, axis=0)
     if np.any(stuck):
         first = int(np.flatnonzero(stuck)[0])
         step = int(np.argmin(gap0[:, first]))
@@ -211,24 +213,126 @@ def _check_movable(keep: np.ndarray, gap0: np.ndarray, points: np.ndarray, owner
                          f"free them or keep the obstacle off them")
 
 
-def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: np.ndarray, n_steps: int,
-                   size: float) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, list[Obstacle], dict]:
-    """One pair per boundary dof of each contact surface.
+@dataclass(frozen=True)
+class PairSet:
+    """The pairs of one contact record, before the supports drop their fixed columns.
+
+    Attributes
+    ----------
+    dofs : (nc,) int
+        The scalar dof (node) of each pair.
+    points, normals : (nc, d)
+        Its reference coordinates and the normal its gap is measured along.
+    area : (nc,)
+        The area its pressure acts on.
+    gap0 : (n_steps, nc)
+        Gaps of the reference configuration per step.
+    rows : sparse (nc, n_dofs)
+        ``dg/du`` over every vector dof of the mesh.
+    facets : (nf,) int
+        The boundary facets the pairs stand on.
+    counterpart
+        What the pairs touch: the rigid :class:`~.obstacles.Obstacle`, or the master surface
+        (:class:`~.mortar.MasterSurface`).
+    """
+
+    dofs: np.ndarray
+    points: np.ndarray
+    normals: np.ndarray
+    area: np.ndarray
+    gap0: np.ndarray
+    rows: sp.csr_matrix
+    facets: np.ndarray
+    counterpart: object
+
+
+def _normal_rows(disc: fem.Discretisation, dofs: np.ndarray, normals: np.ndarray) -> sp.csr_matrix:
+    """``(nc, n_dofs)``: each pair's normal on the vector dofs of its own node."""
+    nc, d = normals.shape
+    cols = disc.vector_dofs()[:, dofs].T  # (nc, d)
+    return sp.csr_matrix((normals.ravel(), (np.repeat(np.arange(nc), d), cols.ravel())), shape=(nc, disc.n_dofs))
+
+
+def _obstacle_pairs(disc: fem.Discretisation, c: Contact, index: int, n_steps: int, size: float) -> PairSet:
+    """One pair per boundary dof of the contact surface against its rigid obstacle."""
+    d, ob = disc.dimension, c.obstacle
+    if ob.dimension != d:
+        raise InputError(f"obstacle {ob.name!r} is {ob.dimension}-D, the mesh {d}-D")
+    facets = _facets_of(disc, c.where, f"contact {index} (obstacle {ob.name!r})")
+    dofs, area = fem.tributary_areas(disc, facets)
+    X = disc.dof_locations()[dofs]
+    gaps = ob.gap_offsets(X, n_steps)
+    if float(np.min(gaps)) > size:
+        raise InputError(f"obstacle {ob.name!r} cannot touch the body: it comes no closer than "
+                         f"{float(np.min(gaps)):.3g} m along the path, more than the body's size {size:.3g} m")
+    _check_not_through(ob, gaps, disc.mesh.p.T, n_steps)
+    N = ob.normals(X, n_steps)
+    return PairSet(dofs, X, N, area, gaps, _normal_rows(disc, dofs, N), facets, ob)
+
+
+def _body_pairs(disc: fem.Discretisation, c: BodyContact, index: int, n_steps: int, size: float) -> PairSet:
+    """The mortar pairs of a slave boundary against a master surface
+    (:func:`~.mortar.mortar_coupling`, at the reference configuration)."""
+    mortar.check_linear(disc.degree, c.name)
+    mesh, d = disc.mesh, disc.dimension
+    slave = _facets_of(disc, c.slave, f"contact {index} ({c.name!r}) slave")
+    master = _facets_of(disc, c.master, f"contact {index} ({c.name!r}) master")
+    if np.intersect1d(mesh.facets[:, slave], mesh.facets[:, master]).size:
+        raise InputError(f"contact {index} ({c.name!r}): the slave and master boundaries share nodes; "
+                         "contact is between two separate surfaces")
+    reach = DEFAULT_SEARCH_SHARE * size if c.search_distance is None else float(c.search_distance)
+    if not (np.isfinite(reach) and reach > 0):
+        raise InputError(f"contact {index} ({c.name!r}): search_distance must be a positive length, got {reach!r}")
+    X = mesh.p.T
+    coupling = mortar.mortar_coupling(X, mortar.Surface.of(mesh, slave), mortar.element_centroids(mesh, slave),
+                                      mortar.Surface.of(mesh, master), mortar.element_centroids(mesh, master), reach)
+    if not coupling.nodes.size:
+        raise InputError(f"contact {index} ({c.name!r}): no slave node faces the master surface within "
+                         f"{reach:.3g} m (search_distance); check the boundaries, or increase the search distance")
+    nc = coupling.nodes.size
+    W = coupling.master_weights - coupling.slave_weights  # (nc, n_nodes); P1: node = scalar dof
+    vd = disc.vector_dofs()
+    rows = sp.hstack([sp.diags(coupling.normals[:, i]) @ W for i in range(d)]).tocsr()
+    perm = np.concatenate([vd[i, :mesh.p.shape[1]] for i in range(d)])
+    rows = sp.csr_matrix((rows.data, perm[rows.indices], rows.indptr), shape=(nc, disc.n_dofs))
+    gap0 = np.repeat(coupling.gaps(X)[None, :], n_steps, axis=0)
+    surface = mortar.MasterSurface(name=c.name, dimension=d, facet_pairs=coupling.facet_pairs,
+                                   dropped=coupling.dropped, search_distance=reach)
+    return PairSet(coupling.nodes, X[coupling.nodes], coupling.normals, coupling.area, gap0, rows, slave, surface)
+
+
+#: How each kind of contact record (``Contact.kind``) becomes pairs.
+PAIR_BUILDERS = {"obstacle": _obstacle_pairs, "bodies": _body_pairs}
+
+
+def _facets_of(disc: fem.Discretisation, where, label: str) -> np.ndarray:
+    facets = select_facets(disc.mesh, where)
+    if not facets.size:
+        # a name or a FacetBox / FacetPlane (dataclasses) shows itself; a bare function does not
+        shown = repr(where) if isinstance(where, str) or hasattr(where, "__dataclass_fields__") else "its facet test"
+        raise InputError(f"{label}: boundary {shown} matches no boundary facet of the mesh")
+    return facets
+
+
+def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact | BodyContact], free: np.ndarray,
+                   n_steps: int, size: float) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, list, dict]:
+    """The complementarity pairs of every contact record: one per boundary dof against a rigid
+    obstacle, one per covered slave node between two bodies (:data:`PAIR_BUILDERS`).
 
     Returns
     -------
     G : sparse (nc, n_free)
-        Gap operator: the obstacle normal on each pair's displacement (fixed components dropped).
+        Gap operator ``dg/du`` on the free dofs (fixed components dropped).
     area : (nc,) ndarray
-        Tributary boundary areas.
+        The areas the pressures act on.
     gap0 : (n_steps, nc) ndarray
         Gaps of the reference configuration per step.
-    obstacles : list of Obstacle
-        The obstacles, in the order of ``contacts``.
+    counterparts : list
+        What each record's pairs touch (an obstacle or a master surface), in the order of ``contacts``.
     contact : dict
         The :class:`ContinuumModel` fields ``contact_dofs``, ``contact_points``,
-        ``contact_normals``, ``contact_obstacle`` and ``contact_facets`` (the boundary facets of
-        each contact surface).
+        ``contact_normals``, ``contact_obstacle`` (the record of each pair) and
+        ``contact_facets`` (the boundary facets of each record's pairs).
     """
     d = disc.dimension
     if contacts and d == 3 and disc.degree == 2:
@@ -236,46 +340,21 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact], free: n
         # vertices, so nodal contact would leave them biactive and their pressures meaningless.
         raise InputError("contact on quadratic tetrahedra is not supported (a quadratic triangle's vertices "
                          "carry no share of a pressure); use degree = 1 in 3-D")
-    obstacles, rows_dofs, points, normals, areas, owner, g0, facet_sets = [], [], [], [], [], [], [], []
-    for i, c in enumerate(contacts):
-        ob = c.obstacle
-        if ob.dimension != d:
-            raise InputError(f"obstacle {ob.name!r} is {ob.dimension}-D, the mesh {d}-D")
-        facets = select_facets(disc.mesh, c.where)
-        if not facets.size:
-            # a name or a FacetBox / FacetPlane (dataclasses) shows itself; a bare function does not
-            where = repr(c.where) if isinstance(c.where, str) or hasattr(c.where, "__dataclass_fields__") else "its facet test"
-            raise InputError(f"contact {i} (obstacle {ob.name!r}): boundary {where} matches no boundary facet "
-                             f"of the mesh")
-        dofs, area = fem.tributary_areas(disc, facets)
-        X = disc.dof_locations()[dofs]
-        gaps = ob.gap_offsets(X, n_steps)
-        if float(np.min(gaps)) > size:
-            raise InputError(f"obstacle {ob.name!r} cannot touch the body: it comes no closer than "
-                             f"{float(np.min(gaps)):.3g} m along the path, more than the body's size {size:.3g} m")
-        _check_not_through(ob, gaps, disc.mesh.p.T, n_steps)
-        obstacles.append(ob)
-        rows_dofs.append(dofs)
-        points.append(X)
-        normals.append(ob.normals(X, n_steps))
-        areas.append(area)
-        owner.append(np.full(dofs.size, i))
-        g0.append(gaps)
-        facet_sets.append(facets)
-    nc = int(sum(r.size for r in rows_dofs))
+    sets = [PAIR_BUILDERS[c.kind](disc, c, i, n_steps, size) for i, c in enumerate(contacts)]
+    counterparts = [s.counterpart for s in sets]
+    facet_sets = tuple(s.facets for s in sets)
+    nc = int(sum(s.dofs.size for s in sets))
     if not nc:
         contact = dict(contact_dofs=np.zeros(0, np.int64), contact_points=np.zeros((0, d)),
                        contact_normals=np.zeros((0, d)), contact_obstacle=np.zeros(0, np.int64),
-                       contact_facets=tuple(facet_sets))
-        return sp.csr_matrix((0, free.size)), np.zeros(0), np.zeros((n_steps, 0)), obstacles, contact
-    index_of = np.full(disc.n_dofs, -1, dtype=np.int64)
-    index_of[free] = np.arange(free.size)
-    cdofs = np.concatenate(rows_dofs)
-    N = np.concatenate(normals)
-    cols = index_of[disc.vector_dofs()[:, cdofs]].T  # (nc, d)
-    keep = cols >= 0  # a fixed component moves no gap
-    _check_movable(keep, np.concatenate(g0, axis=1), np.concatenate(points), np.concatenate(owner), obstacles, size)
-    G = sp.csr_matrix((N[keep], (np.nonzero(keep)[0], cols[keep])), shape=(nc, free.size))
-    contact = dict(contact_dofs=cdofs, contact_points=np.concatenate(points), contact_normals=N,
-                   contact_obstacle=np.concatenate(owner), contact_facets=tuple(facet_sets))
-    return G, np.concatenate(areas), np.concatenate(g0, axis=1), obstacles, contact
+                       contact_facets=facet_sets)
+        return sp.csr_matrix((0, free.size)), np.zeros(0), np.zeros((n_steps, 0)), counterparts, contact
+    G = sp.vstack([s.rows for s in sets]).tocsr()[:, free]
+    gap0 = np.concatenate([s.gap0 for s in sets], axis=1)
+    owner = np.concatenate([np.full(s.dofs.size, i) for i, s in enumerate(sets)])
+    points = np.concatenate([s.points for s in sets])
+    _check_movable(np.asarray(abs(G).sum(axis=1)).ravel() > 0, gap0, points, owner, counterparts, size)
+    contact = dict(contact_dofs=np.concatenate([s.dofs for s in sets]), contact_points=points,
+                   contact_normals=np.concatenate([s.normals for s in sets]), contact_obstacle=owner,
+                   contact_facets=facet_sets)
+    return G, np.concatenate([s.area for s in sets]), gap0, counterparts, contact

@@ -70,3 +70,46 @@ class Contact:
 
     obstacle: Obstacle
     where: Where
+
+    kind = "obstacle"
+
+    @property
+    def name(self) -> str:
+        return self.obstacle.name
+
+    @property
+    def travel(self):
+        """The obstacle's travel (one number, or one per step)."""
+        return self.obstacle.travel
+
+
+@dataclass(frozen=True)
+class BodyContact:
+    """Contact between two deformable surfaces (:mod:`~ddcm_casadi.models.continuum.mortar`):
+    the nodes of the ``slave`` boundary against the facets of the ``master`` boundary.
+
+    Parameters
+    ----------
+    slave, master : Where
+        Boundaries of the mesh (usually of two bodies, :mod:`~ddcm_casadi.models.continuum.bodies`).
+        Choose as slave the surface that stays within the other.
+    name : str
+        A label for tables and figures.
+    search_distance : float, optional
+        How far (m) from a slave facet, along its normal, master facets are searched. Default:
+        :data:`DEFAULT_SEARCH_SHARE` of the body's size.
+    """
+
+    slave: Where
+    master: Where
+    name: str = "contact"
+    search_distance: float | None = None
+
+    kind = "bodies"
+    travel = 0.0  # the bodies move by their loads and supports
+
+
+#: The default search distance of a :class:`BodyContact`, as a share of the model's size: pairs
+#: are found once, at the reference configuration (small kinematics), so every slave point that
+#: may close its gap along the load path must be within reach.
+DEFAULT_SEARCH_SHARE = 0.05

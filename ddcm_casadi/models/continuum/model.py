@@ -11,6 +11,9 @@ components per material point, so that every formulation and both variants apply
 - every boundary dof a contact surface holds is one contact pair with its obstacle: gap along the
   obstacle normal at the reference configuration (:mod:`ddcm_casadi.models.continuum.obstacles`), and a
   pressure acting on its tributary boundary area (lumped), so that ``a p`` is the nodal force;
+- two bodies (disconnected pieces of the mesh, :mod:`ddcm_casadi.models.continuum.bodies`) touch
+  through mortar pairs, one per covered slave node, whose weighted gaps couple the slave node to
+  the master facets (:mod:`ddcm_casadi.models.continuum.mortar`): the same ``g = G u + gap0``;
 - supports fix displacement components on boundaries; body forces and surface tractions are scaled
   by one load factor per step, obstacles move by their own travel per step.
 
@@ -40,7 +43,7 @@ from ddcm_casadi.models.base import ContactModel, FigureSpec, LocalKinematics, d
 from ddcm_casadi.models.continuum import fem, finite
 from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, isotropic_law,
                                                    point_data, reference_loads, step_count)
-from ddcm_casadi.models.continuum.inputs import BodyForce, Contact, Material, Support, Traction
+from ddcm_casadi.models.continuum.inputs import BodyContact, BodyForce, Contact, Material, Support, Traction
 from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
 
 #: Above this Poisson's ratio, linear (P1) elements lock (:meth:`ContinuumModel.path_warnings`):
@@ -465,8 +468,10 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
     materials : sequence of Material
         One per region; at most one with ``region=None`` (the rest of the mesh).
     supports : sequence of Support
-    contacts : sequence of Contact
-        Rigid obstacles and the boundaries that may touch them.
+    contacts : sequence of Contact or BodyContact
+        Rigid obstacles and the boundaries that may touch them; pairs of boundaries of two bodies
+        (:mod:`~ddcm_casadi.models.continuum.mortar`; the bodies are disconnected pieces of the
+        mesh, :func:`~ddcm_casadi.models.continuum.bodies.join`).
     degree : {1, 2}
         Lagrange elements (P1 or P2).
     tractions, body_forces : sequences
@@ -499,10 +504,16 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
     n_steps = step_count(load_factors, contacts)
     factors = np.ones(n_steps) if load_factors is None else np.asarray(load_factors, dtype=float)
     size = float(np.max(np.ptp(mesh.p, axis=1)))
+    bodies = [c.name for c in contacts if c.kind == "bodies"]
+    if kinematics == "finite" and bodies:
+        raise InputError(f"contact pair {bodies[0]!r}: contact between bodies is linearised at the reference "
+                         "configuration; finite kinematics needs rigid obstacles for now")
     G, area_all, gap0, obstacles, contact = contact_pairs(disc, contacts, free, n_steps, size)
     loads = factors[:, None] * f_ref[free][None, :]
-    load_parameter = (contacts[0].obstacle.travels(n_steps) if contacts and load_factors is None else factors)
-    lp_name = "obstacle travel (m)" if contacts and load_factors is None else "load factor"
+    travelling = [ob for ob in obstacles if ob.direction is not None]
+    by_travel = bool(travelling) and load_factors is None
+    load_parameter = travelling[0].travels(n_steps) if by_travel else factors
+    lp_name = "obstacle travel (m)" if by_travel else "load factor"
 
     model = ContinuumModel(
         strain_operator=B_all[:, free].tocsr(), volumes=w, gap_operator=G, contact_area=area_all,
@@ -535,16 +546,26 @@ def _check_held(model: ContinuumModel) -> None:
     rigid-body motion of that piece (translations, rotations) vanishes on every fixed dof. The
     classical problem would be singular wherever the obstacles do not touch. Each connected piece
     (elements linked through shared nodes) is checked on its own: a second body no support holds
-    is refused even when the first is held."""
+    is refused even when the first is held.
+
+    A body pressed onto another (or onto an obstacle) and held only by that contact, as in a
+    force-controlled cylinder on a block, is held when the pairs closed at the first step
+    (``gap0 <= 0``) take the rigid-body motions the supports leave: their gap rows join the
+    fixed dofs in the rank test."""
     disc = model.discretisation
     modes = disc.rigid_body_modes()
     fixed = np.zeros(disc.n_dofs, dtype=bool)
     fixed[np.setdiff1d(np.arange(disc.n_dofs), model.free_dofs)] = True
+    closed = model.gap_offsets[0] <= 0 if model.n_contacts else np.zeros(0, dtype=bool)
     pieces, piece_of_element = mesh_pieces(disc.mesh)
     element_dofs = disc.basis.element_dofs  # (vector dofs per element, elements)
     for piece in range(pieces):
         dofs = np.unique(element_dofs[:, piece_of_element == piece])
-        R = modes[dofs[fixed[dofs]]]
+        inside = np.zeros(disc.n_dofs, dtype=bool)
+        inside[dofs] = True
+        # closed pairs' gap rows on this piece's free dofs, as constraints on its modes
+        rows = model.gap_operator[closed][:, inside[model.free_dofs]]
+        R = np.vstack([modes[dofs[fixed[dofs]]], rows @ modes[model.free_dofs[inside[model.free_dofs]]]])
         # modes are O(1) (translations) and O(body size) (rotations about the centroid): 1e-9 of
         # the largest entry separates independent columns from roundoff (~1e-16 relative)
         if R.shape[0] == 0 or np.linalg.matrix_rank(R, tol=1e-9 * max(1.0, float(np.abs(R).max()))) < modes.shape[1]:
