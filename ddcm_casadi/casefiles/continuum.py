@@ -56,6 +56,12 @@ Continua
     boundary = "ymax"            # a traction (Pa) on a boundary, or
     traction = [0.0, -1e6]       # body_force = [0, -8e4] (N/m^3) with optional region = "..."
 
+    # several bodies instead of one shape: [mesh] keeps degree, each [[mesh.body]] table takes
+    # the keys above plus name; its boundaries are then "<name>/<boundary>", its region "<name>"
+    # [[mesh.body]]
+    # name = "cylinder"
+    # shape = "quarter_disc"     # also: ball_octant (signs = [1, 1, -1]: the octant)
+
     [[contact]]                  # a rigid obstacle and the boundary that may touch it
     boundary = "ymax"
     obstacle = "circle"          # plane, circle (2-D), sphere (3-D), cylinder (3-D), punch
@@ -64,6 +70,11 @@ Continua
                                  # punch: center (of its face), normal, half_width, edge_radius
     direction = [0.0, -1.0]      # direction of travel
     travel = [0.0, 1e-5, 2e-5]   # m, one value per step (or one number: standing still)
+
+    # [[contact]]                # or two bodies: mortar pairs of the slave's nodes against the
+    # slave = "cylinder/arc"     # master's facets (P1; choose as slave the surface that stays
+    # master = "block/ymax"      # within the other), found within search_distance (m; default
+    # search_distance = 0.01     # 5 % of the size) at the reference configuration
 
     [loading]
     load_factors = [0.0, 1.0]    # optional: one per step (default: loads in full)
@@ -97,11 +108,12 @@ ANNOUNCE_DATA_POINTS = 200_000
 #: not fit beside other programs); above all of it, it is refused.
 MEMORY_WARNING_SHARE = 0.5
 
-_MESH = {"shape", "size", "divisions", "origin", "radius", "center", "refine", "path", "degree", "refine_near"}
+_MESH = {"shape", "size", "divisions", "origin", "radius", "center", "refine", "path", "degree", "refine_near",
+         "signs", "body"}
 _HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus", "poisson_ratio", "grading"}
 _GRID = _HOOKEAN
 _SAMPLES = {"strain_min", "strain_max", "count", "seed", "youngs_modulus", "poisson_ratio"}
-_SHAPES = ("rectangle", "box", "disc", "half_disc", "ball")
+_SHAPES = ("rectangle", "box", "disc", "half_disc", "quarter_disc", "ball", "ball_octant")
 _OBSTACLES = ("plane", "circle", "sphere", "cylinder", "punch")
 
 
@@ -112,65 +124,95 @@ def _keys(label: str, table: dict, known: set) -> None:
 
 
 def _shape_mesh(doc: dict, base_dir: Path):
+    """The mesh of ``[mesh]`` and its element degree: one shape or file, or the bodies of
+    ``[[mesh.body]]`` tables joined (:func:`~ddcm_casadi.models.continuum.bodies.join`)."""
+    m = doc["mesh"]
+    if "body" in m:
+        from ddcm_casadi.models.continuum.bodies import join
+
+        extra = sorted(set(m) & (_MESH - {"degree", "body"}))
+        if extra:
+            raise InputError(f"[mesh] with [[mesh.body]] tables takes only 'degree'; {extra[0]!r} goes in a body")
+        bodies = {}
+        for i, table in enumerate(_tables(m, "body")):
+            label = f"mesh.body {i}"
+            if not isinstance(table, dict):
+                raise InputError(f"[{label}] must be a table")
+            _keys(label, table, (_MESH - {"degree", "body"}) | {"name"})
+            name = table.get("name")
+            if not isinstance(name, str) or not name or name in bodies:
+                raise InputError(f"[{label}] needs a unique 'name' (a string), got {show(name)}")
+            bodies[name] = _one_mesh(label, table, base_dir)
+        mesh = join(bodies)
+    else:
+        mesh = _one_mesh("mesh", m, base_dir)
+    degree = m.get("degree", 1)
+    if isinstance(degree, bool) or not isinstance(degree, int) or degree not in (1, 2):
+        raise InputError(f"[mesh] degree must be 1 (P1) or 2 (P2), got {show(degree)}")
+    return mesh, degree
+
+
+def _one_mesh(label: str, m: dict, base_dir: Path):
+    """One generated shape or mesh file, graded by ``refine_near`` if asked."""
     from ddcm_casadi.models.continuum import mesh as meshes
 
-    m = doc["mesh"]
     if ("path" in m) == ("shape" in m):
-        raise InputError("[mesh] needs exactly one of 'shape' or 'path'")
+        raise InputError(f"[{label}] needs exactly one of 'shape' or 'path'")
     if "path" in m:
         if not isinstance(m["path"], str):
-            raise InputError(f"[mesh] path must be a string, got {show(m['path'])}")
+            raise InputError(f"[{label}] path must be a string, got {show(m['path'])}")
         mesh = meshes.read_mesh(base_dir / m["path"])
     else:
         shape = m["shape"]
         if shape not in _SHAPES:
-            raise InputError(f"[mesh] shape must be one of {', '.join(_SHAPES)}, got {show(shape)}")
+            raise InputError(f"[{label}] shape must be one of {', '.join(_SHAPES)}, got {show(shape)}")
         if shape in ("rectangle", "box"):
             d = 2 if shape == "rectangle" else 3
             for key in ("size", "divisions"):
                 if key not in m:
-                    raise InputError(f"[mesh] a {shape} needs {key!r}")
-            size = [positive("mesh", "size", v) for v in vector("mesh", "size", m["size"], d)]
-            div = nonempty_list("mesh", "divisions", m["divisions"])
+                    raise InputError(f"[{label}] a {shape} needs {key!r}")
+            size = [positive(label, "size", v) for v in vector(label, "size", m["size"], d)]
+            div = nonempty_list(label, "divisions", m["divisions"])
             if len(div) != d:
-                raise InputError(f"[mesh] divisions must be a list of {d} integers, got {show(div)}")
-            div = [integer("mesh", "divisions", v, low=1, high=10**4, what="a positive integer") for v in div]
-            origin = vector("mesh", "origin", m.get("origin", [0.0] * d), d)
+                raise InputError(f"[{label}] divisions must be a list of {d} integers, got {show(div)}")
+            div = [integer(label, "divisions", v, low=1, high=10**4, what="a positive integer") for v in div]
+            origin = vector(label, "origin", m.get("origin", [0.0] * d), d)
             if d == 2:
                 mesh = meshes.rectangle(*size, nx=div[0], ny=div[1], origin=tuple(origin))
             else:
                 mesh = meshes.box(*size, nx=div[0], ny=div[1], nz=div[2], origin=tuple(origin))
         else:
-            d = 3 if shape == "ball" else 2
+            d = 3 if shape.startswith("ball") else 2
             if "radius" not in m:
-                raise InputError(f"[mesh] a {shape} needs 'radius'")
-            radius = positive("mesh", "radius", m["radius"])
-            center = vector("mesh", "center", m.get("center", [0.0] * d), d)
-            refine = integer("mesh", "refine", m.get("refine", 3 if d == 2 else 2), low=0, high=8,
+                raise InputError(f"[{label}] a {shape} needs 'radius'")
+            if "signs" in m and shape != "ball_octant":
+                raise InputError(f"[{label}] signs is for shape = \"ball_octant\" only")
+            radius = positive(label, "radius", m["radius"])
+            center = vector(label, "center", m.get("center", [0.0] * d), d)
+            refine = integer(label, "refine", m.get("refine", 3 if d == 2 else 2), low=0, high=8,
                              what="an integer")
-            build = dict(disc=meshes.disc, half_disc=meshes.half_disc, ball=meshes.ball)[shape]
-            mesh = build(radius, center=tuple(center), refine=refine)
+            build = dict(disc=meshes.disc, half_disc=meshes.half_disc, quarter_disc=meshes.quarter_disc,
+                         ball=meshes.ball, ball_octant=meshes.ball_octant)[shape]
+            extra = {"signs": tuple(vector(label, "signs", m.get("signs", [1, 1, -1]), 3))} if shape == "ball_octant" else {}
+            mesh = build(radius, center=tuple(center), refine=refine, **extra)
     if "refine_near" in m:
         r = m["refine_near"]
         if not isinstance(r, dict):
-            raise InputError("[mesh] refine_near must be a table {point, radius, levels}")
-        _keys("mesh.refine_near", r, {"point", "radius", "levels", "shrink", "buffer"})
+            raise InputError(f"[{label}] refine_near must be a table {{point, radius, levels}}")
+        _keys(f"{label}.refine_near", r, {"point", "radius", "levels", "shrink", "buffer"})
         d = mesh.p.shape[0]
         if "point" not in r or "radius" not in r:
-            raise InputError("[mesh] refine_near needs 'point' and 'radius'")
-        point = vector("mesh", "refine_near.point", r["point"], d)
-        radius = positive("mesh", "refine_near.radius", r["radius"])
-        levels = integer("mesh", "refine_near.levels", r.get("levels", 1), low=1, high=12, what="an integer")
-        shrink = number("mesh", "refine_near.shrink", r.get("shrink", 0.5))
-        buffer = number("mesh", "refine_near.buffer", r.get("buffer", 0.0))
+            raise InputError(f"[{label}] refine_near needs 'point' and 'radius'")
+        point = vector(label, "refine_near.point", r["point"], d)
+        radius = positive(label, "refine_near.radius", r["radius"])
+        levels = integer(label, "refine_near.levels", r.get("levels", 1), low=1, high=12, what="an integer")
+        shrink = number(label, "refine_near.shrink", r.get("shrink", 0.5))
+        buffer = number(label, "refine_near.buffer", r.get("buffer", 0.0))
         try:
             mesh = meshes.refine_near(mesh, point, radius, levels=levels, shrink=shrink, buffer=buffer)
         except InputError as err:  # name the table: the function's own message names its argument
-            raise InputError(f"[mesh] refine_near: {err}") from None
-    degree = m.get("degree", 1)
-    if isinstance(degree, bool) or not isinstance(degree, int) or degree not in (1, 2):
-        raise InputError(f"[mesh] degree must be 1 (P1) or 2 (P2), got {show(degree)}")
-    return mesh, degree
+            raise InputError(f"[{label}] refine_near: {err}") from None
+    return mesh
 
 
 def _tables(doc: dict, name: str) -> list[dict]:
@@ -245,6 +287,22 @@ def _obstacle(label: str, t: dict, d: int):
                         radius=positive(label, "radius", t["radius"]), **common)
     return Ball(center=vector(label, "center", t["center"], d), radius=positive(label, "radius", t["radius"]),
                 **common)
+
+
+def _body_contact(label: str, t: dict, d: int):
+    """A ``[[contact]]`` between two bodies: ``slave`` and ``master`` boundaries (names, tags,
+    boxes or planes, as ``boundary`` elsewhere), ``name``, ``search_distance``."""
+    from ddcm_casadi.models.continuum.inputs import BodyContact
+
+    extra = sorted(set(t) - {"slave", "master", "name", "search_distance"})
+    if extra:
+        raise InputError(f"[{label}] a contact between bodies (slave, master) takes no {extra[0]!r}")
+    for key in ("slave", "master"):
+        if key not in t:
+            raise InputError(f"[{label}] a contact between bodies needs {key!r} (a boundary of the mesh)")
+    reach = positive(label, "search_distance", t["search_distance"]) if "search_distance" in t else None
+    return BodyContact(_boundary(label, {"boundary": t["slave"]}, d), _boundary(label, {"boundary": t["master"]}, d),
+                       name=str(t.get("name", f"contact {label.split()[-1]}")), search_distance=reach)
 
 
 def _metric(label: str, value: Any, k: int, material) -> Metric | str:
@@ -467,7 +525,8 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     contacts = []
     for i, t in enumerate(_tables(doc, "contact")):
         label = f"contact {i}"
-        contacts.append(Contact(_obstacle(label, t, d), _boundary(label, t, d)))
+        contacts.append(_body_contact(label, t, d) if "slave" in t or "master" in t
+                        else Contact(_obstacle(label, t, d), _boundary(label, t, d)))
 
     reference = None
     if "hertz" in doc:
@@ -476,7 +535,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
             raise InputError("[hertz] needs one material with youngs_modulus and poisson_ratio")
         ob = integer("hertz", "obstacle", h.get("obstacle", 0), low=0, high=max(len(contacts) - 1, 0),
                      what="a [[contact]] index")
-        if not contacts or contacts[ob].obstacle.kind != "ball":
+        if not contacts or getattr(getattr(contacts[ob], "obstacle", None), "kind", None) != "ball":
             raise InputError("[hertz] needs a circle (2-D) or sphere (3-D) obstacle")
         reference = HertzReference(materials[0].youngs_modulus, materials[0].poisson_ratio, obstacle=ob,
                                    force_factor=number("hertz", "force_factor", h.get("force_factor", 1.0)))
@@ -498,7 +557,7 @@ register_case_kind(
     sections={"mesh": _MESH, "material": {"region", "youngs_modulus", "poisson_ratio", "data", "law"},
               "supports": {"boundary", "fix"}, "loads": {"boundary", "traction", "body_force", "region"},
               "contact": {"boundary", "obstacle", "radius", "center", "point", "normal", "axis", "half_width",
-                          "edge_radius", "direction", "travel", "name"},
+                          "edge_radius", "direction", "travel", "name", "slave", "master", "search_distance"},
               "loading": {"load_factors"}, "hertz": {"obstacle", "force_factor"}},
     arrays={"supports", "loads", "contact"}, tables={"material"}, parse=parse_case,
     uses="[material], [[supports]] and [[contact]]", default_name="continuum", kinematics=("small", "finite"))

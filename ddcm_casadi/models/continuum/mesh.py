@@ -6,7 +6,8 @@ indices) and, where known, named element sets in ``mesh.subdomains`` (name -> el
 
 This module is the one to import; it holds the generated shapes and re-exports the rest:
 
-- generated shapes: :func:`rectangle`, :func:`box`, :func:`disc`, :func:`half_disc`, :func:`ball`;
+- generated shapes: :func:`rectangle`, :func:`box`, :func:`disc`, :func:`half_disc`,
+  :func:`quarter_disc`, :func:`ball`, :func:`ball_octant`;
 - :func:`refine_near` grades a mesh towards a (contact) point and keeps the named sets and the
   curved boundaries (:class:`Curved`) (:mod:`~ddcm_casadi.models.continuum.mesh_refinement`);
 - :func:`read_mesh` reads Gmsh ``.msh`` (2.2 and 4.1), ``.vtu`` and ``.xdmf`` files with meshio
@@ -25,13 +26,14 @@ import numpy as np
 from skfem import MeshTet1, MeshTri1
 
 from ddcm_casadi.data.dataset import check_positive
+from ddcm_casadi.errors import InputError
 from ddcm_casadi.models.continuum.mesh_checks import (DEGENERATE, FacetBox, FacetPlane, Mesh, check_count,
                                                       check_mesh, check_point, describe, mesh_size, select_facets)
 from ddcm_casadi.models.continuum.mesh_files import READERS, read_mesh
 from ddcm_casadi.models.continuum.mesh_refinement import Curved, refine_near, refined_shape
 
-__all__ = ["DEGENERATE", "READERS", "Curved", "FacetBox", "FacetPlane", "Mesh", "ball", "box", "check_mesh", "describe", "disc",
-           "half_disc", "mesh_size", "read_mesh", "rectangle", "refine_near", "select_facets"]
+__all__ = ["DEGENERATE", "READERS", "Curved", "FacetBox", "FacetPlane", "Mesh", "ball", "ball_octant", "box", "check_mesh", "describe", "disc",
+           "half_disc", "mesh_size", "quarter_disc", "read_mesh", "rectangle", "refine_near", "select_facets"]
 
 
 # --- generated shapes ------------------------------------------------------------------------
@@ -107,6 +109,25 @@ def half_disc(radius: float, *, center: Sequence[float] = (0.0, 0.0),
                   check_count("refine", refine, 0))
 
 
+def quarter_disc(radius: float, *, center: Sequence[float] = (0.0, 0.0), refine: int = 3) -> MeshTri1:
+    """The quarter ``x >= center_x``, ``y <= center_y`` of a disc: a half model (symmetry plane
+    ``x = center_x``) of a cylinder's contact zone, flat side on top.
+
+    Returns
+    -------
+    MeshTri1
+        With boundaries ``arc``, ``flat`` (``y = center_y``) and ``axis`` (``x = center_x``) and
+        ``mesh.curved`` (:class:`Curved`).
+    """
+    r, c = check_positive("radius", radius), check_point("center", center, 2)
+    corners = c[:, None] + r * np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])
+    tol = 1e-9 * r
+    tests = {"flat": lambda x: np.abs(x[1] - c[1]) <= tol, "axis": lambda x: np.abs(x[0] - c[0]) <= tol,
+             "arc": lambda x: (np.abs(x[1] - c[1]) > tol) & (np.abs(x[0] - c[0]) > tol)}
+    return refined_shape(MeshTri1(corners, np.array([[0], [1], [2]])), tests, Curved("arc", c, r),
+                         check_count("refine", refine, 0))
+
+
 def ball(radius: float, *, center: Sequence[float] = (0.0, 0.0, 0.0), refine: int = 2) -> MeshTet1:
     """A ball: an octahedron of eight tetrahedra refined ``refine`` times, projected each time.
 
@@ -121,6 +142,30 @@ def ball(radius: float, *, center: Sequence[float] = (0.0, 0.0, 0.0), refine: in
                   [0, 2, 3, 4], [0, 4, 5, 3], [0, 4, 6, 2], [0, 5, 6, 1]]).T
     return refined_shape(MeshTet1(c[:, None] + r * unit, t), {"surface": _everywhere},
                   Curved("surface", c, r), check_count("refine", refine, 0))
+
+
+def ball_octant(radius: float, *, center: Sequence[float] = (0.0, 0.0, 0.0),
+                signs: Sequence[int] = (1, 1, -1), refine: int = 2) -> MeshTet1:
+    """One eighth of a ball, the octant ``signs`` (e.g. ``(1, 1, -1)``: ``x, y >= c`` and
+    ``z <= c``): a quarter model of a sphere's contact zone with symmetry planes ``x = c_x`` and
+    ``y = c_y``. One tetrahedron refined ``refine`` times, its curved face projected each time.
+
+    Returns
+    -------
+    MeshTet1
+        With boundaries ``surface`` (the curved face), ``x0``, ``y0``, ``z0`` (the flat faces
+        through the centre) and ``mesh.curved``.
+    """
+    r, c = check_positive("radius", radius), check_point("center", center, 3)
+    sg = np.asarray(signs, dtype=float).ravel()
+    if sg.size != 3 or not np.all(np.abs(sg) == 1):
+        raise InputError(f"signs must be three numbers +1 or -1, got {signs!r}")
+    corners = np.hstack((np.zeros((3, 1)), np.diag(sg))) * r + c[:, None]
+    tol = 1e-9 * r
+    tests = {f"{a}0": (lambda x, i=i: np.abs(x[i] - c[i]) <= tol) for i, a in enumerate("xyz")}
+    tests["surface"] = lambda x: np.all(np.abs(x - c[:, None]) > tol, axis=0)
+    return refined_shape(MeshTet1(corners, np.array([[0], [1], [2], [3]])), tests, Curved("surface", c, r),
+                         check_count("refine", refine, 0))
 
 
 # --- helpers ---------------------------------------------------------------------------------

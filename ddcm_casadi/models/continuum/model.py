@@ -574,7 +574,14 @@ def _check_held(model: ContinuumModel) -> None:
                 centre = disc.mesh.p[:, disc.mesh.t[:, piece_of_element == piece].ravel()].mean(axis=1)
                 where = (f" of body {piece + 1} of {pieces} (disconnected pieces of the mesh; its centre at "
                          f"({', '.join(f'{c:.3g}' for c in centre)}))")
-            raise InputError(f"the supports leave a rigid-body motion{where} free; fix more displacement components")
+            hint = ""
+            if rows.nnz == 0 and model.gap_operator[:, inside[model.free_dofs]].nnz:
+                gaps = model.gap_offsets[0][np.asarray(abs(model.gap_operator[:, inside[model.free_dofs]]).sum(axis=1)).ravel() > 0]
+                hint = (f", or let it touch or overlap what holds it at the first step (its smallest gap is "
+                        f"{float(np.min(gaps)):.3g} m; a body held only by contact is free to move, so an "
+                        f"overlap along that motion changes no stress)")
+            raise InputError(f"the supports leave a rigid-body motion{where} free; fix more displacement "
+                             f"components{hint}")
 
 
 def mesh_pieces(mesh: skfem.Mesh) -> tuple[int, np.ndarray]:
