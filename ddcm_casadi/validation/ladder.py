@@ -46,7 +46,7 @@ from ddcm_casadi.validation import continuum as continuum_rungs
 from ddcm_casadi.validation.quality_rungs import rung_search_quality
 from ddcm_casadi.validation.fixed_points import check_fixed_points
 from ddcm_casadi.validation.finite_rungs import rung_von_mises
-from ddcm_casadi.validation import finite_strain_rungs
+from ddcm_casadi.validation import finite_strain_rungs, two_body_rungs
 from ddcm_casadi.validation.verification import (  # noqa: F401 - as_records, markdown: ddcm-validate's API
     Check, as_records, fitted_rate, markdown,
 )
@@ -320,6 +320,7 @@ RUNGS: dict[str, Callable] = {
     "DDCM search quality on noisy data": rung_search_quality,
     "von Mises truss snap-through (finite kinematics)": rung_von_mises,
     **finite_strain_rungs.RUNGS,
+    **two_body_rungs.RUNGS,
 }
 
 

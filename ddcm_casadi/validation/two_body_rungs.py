@@ -30,6 +30,7 @@ from ddcm_casadi.models.continuum.hertz import hertz_2d, hertz_3d
 from ddcm_casadi.models.continuum.inputs import BodyContact, Material, Support, Traction
 from ddcm_casadi.models.continuum.model import ContinuumModel, continuum_model
 from ddcm_casadi.models.continuum.mortar import Surface, element_centroids, mortar_coupling
+from ddcm_casadi.validation.verification import Check, fitted_rate
 
 #: NAFEMS benchmark 1, SI units: radius (m), moduli (Pa), Poisson's ratio, load (N per m of thickness).
 NAFEMS = dict(radius=0.05, cylinder_modulus=210e9, block_modulus=70e9, poisson_ratio=0.3, load=3.5e7)
@@ -171,3 +172,175 @@ def two_spheres_model(levels: int, *, radius: float = 0.01, youngs_modulus: floa
         load_factors=[1.0])
     e_star = combined_modulus(youngs_modulus, poisson_ratio, youngs_modulus, poisson_ratio)
     return model, TwoBodyHertz(R / 2, e_star, force_factor=4.0)
+
+
+#: The patch test's load steps (equal increments of the traction): one, so that DDCM starts at the
+#: exact state (:func:`rung_patch_test`; a later step would start from the previous one's data,
+#: and on a coarse grid alternating projections may then stop at a local fixed point).
+PATCH_STEPS = 1
+
+
+def patch_model(dimension: int, *, data: bool = False, traction: float = 1e7) -> ContinuumModel:
+    """The contact patch test: a punch (``E = 2 GPa``, ``nu = 0.25``) pressed by a uniform
+    ``traction`` onto a block (``E = 1 GPa``, ``nu = 0.3``) with non-matching meshes (7 x 4 vs
+    5 x 3 elements in 2-D, 4 x 3 x 2 vs 3 x 2 x 2 in 3-D), rollers on the symmetry sides and the
+    base, the interface frictionless. The exact state is uniform in each body: ``sigma_nn = -t``,
+    every other stress component zero, and the contact pressure ``t`` at every pair. ``data``:
+    the data-driven variant too (Hookean grids of each material, with the uniform states)."""
+    from ddcm_casadi.data.dataset import MaterialDataset
+    from ddcm_casadi.data.metric import isotropic_elasticity
+
+    laws = dict(block=(1e9, 0.3), punch=(2e9, 0.25))
+    if dimension == 2:
+        bodies = dict(block=meshes.rectangle(1.0, 0.5, nx=7, ny=4, origin=(0.0, -0.5)),
+                      punch=meshes.rectangle(1.0, 0.5, nx=5, ny=3, origin=(0.0, 0.0)))
+        sym = ["x"]
+    else:
+        bodies = dict(block=meshes.box(1.0, 1.0, 0.5, nx=4, ny=3, nz=2, origin=(0.0, 0.0, -0.5)),
+                      punch=meshes.box(1.0, 1.0, 0.5, nx=3, ny=2, nz=2, origin=(0.0, 0.0, 0.0)))
+        sym = ["x", "y"]
+    up = "xyz"[dimension - 1]
+    supports = [Support(f"block/{up}min", up)] + [Support(f"{b}/{a}min", a) for b in bodies for a in sym]
+    factors = np.arange(1, PATCH_STEPS + 1) / PATCH_STEPS
+    datasets = ()
+    if data:
+        # Hookean grids (11 points per axis in 2-D, 5 in 3-D) plus the exact uniform states of
+        # each step: the uniform state is then at distance 0, the global minimum
+        datasets = []
+        for E, nu in laws.values():
+            C = isotropic_elasticity(E, nu, dimension)[0]
+            grid = MaterialDataset.hookean_grid(C, -0.02, 0.02, 11 if dimension == 2 else 5, c=C)
+            stress = np.zeros((len(factors), C.shape[0]))
+            stress[:, dimension - 1] = -traction * np.asarray(factors)
+            strain = np.linalg.solve(C, stress.T).T
+            datasets.append(MaterialDataset(np.vstack([grid.strain, strain]), np.vstack([grid.stress, stress]), c=C))
+    materials = [Material(b, E, nu, **(dict(data=i) if data else {})) for i, (b, (E, nu)) in enumerate(laws.items())]
+    load = np.zeros(dimension)
+    load[-1] = -traction
+    return continuum_model(join(bodies), materials=materials, supports=supports, datasets=datasets,
+                           tractions=[Traction(f"punch/{up}max", tuple(load))],
+                           contacts=[BodyContact(f"punch/{up}min", f"block/{up}max", name="interface")],
+                           load_factors=list(factors), name=f"patch test {dimension}-D")
+
+
+#: The patch test's tolerance on the relative deviation from the uniform state: the solvers stop
+#: at scaled residuals of 1e-9 and below (penalty's Newton at 1e-11 of the force unit gives 3e-12
+#: in the pressure); round-off of the assembly is ~1e-15.
+PATCH_TOL = 1e-9
+
+
+def patch_deviation(model: ContinuumModel, step, traction: float) -> float:
+    """The largest relative deviation of one step from the uniform state (see :func:`patch_model`):
+    over the pairs' pressures and every stress component of every material point."""
+    d, k = model.dimension, model.strain_components
+    t = traction * float(model.load_parameter[step.step])  # the load factor
+    stress = np.asarray(step.stress).reshape(-1, k)
+    expected = np.zeros(k)
+    expected[d - 1] = -t
+    return max(float(np.max(np.abs(np.asarray(step.p) - t))), float(np.max(np.abs(stress - expected)))) / t
+
+
+def rung_patch_test() -> list[Check]:
+    """The contact patch test across non-matching meshes, 2-D and 3-D, every formulation,
+    classical and DDCM: the uniform state to :data:`PATCH_TOL`."""
+    from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+    from ddcm_casadi.drivers.harness import compare
+
+    out = []
+    for d in (2, 3):
+        model = patch_model(d, data=True)
+        # DDCM starts at the uniform state (the exact datum of each material, see patch_model),
+        # so that the check is of the coupling, not of the data search: the uniform state must
+        # be a fixed point
+        ds = model.dataset
+        start = ds.offsets[ds.material] + np.array([len(s) - PATCH_STEPS for s in ds.datasets])[ds.material]
+        cmp = compare(model, ddcm=DDCMOptions(initial=tuple(int(i) for i in start)))
+        for (variant, name), r in cmp.results.items():
+            dev = max(patch_deviation(model, s, 1e7) for s in r.steps)
+            ok = all(s.converged for s in r.steps)
+            out.append(Check.make(f"patch test {d}-D, non-matching meshes / {variant} / {name}",
+                                  "max rel. deviation from the uniform state (pressures, stresses)",
+                                  dev if ok else float("nan"), 0.0, PATCH_TOL,
+                                  note=f"{model.n_contacts} pairs, {model.n_dofs} unknowns"))
+    return out
+
+
+def hertz_sequence(build, levels, axis, formulation: str = "fischer_burmeister") -> list[dict]:
+    """Classical runs of ``build(level)`` for each level: the Hertz measures of the last step, the
+    size and the solver's figures."""
+    from ddcm_casadi.drivers.harness import compare
+
+    rows = []
+    for level in levels:
+        model, ref = build(level)
+        r = compare(model, [formulation], variants=("classical",))["classical", formulation]
+        last = r.steps[-1]
+        rows.append(dict(level=level, unknowns=model.n_dofs, pairs=model.n_contacts,
+                         converged=all(s.converged for s in r.steps), iterations=last.iterations,
+                         **hertz_measure(model, last.p, ref, axis)))
+    return rows
+
+
+def rung_nafems(levels=(3, 4, 5, 6)) -> list[Check]:
+    """NAFEMS benchmark 1 on a sequence of gradings (the element size at the contact halves per
+    level): the peak pressure's error falls at the fitted rate ~1 (the largest nodal pressure
+    carries an O(h) bias), and on the finest mesh ``p0`` is within 3 % and ``a`` within 1 % of
+    Hertz (``a`` levels off near 0.3 %: the block is finite, Hertz's half-space is not)."""
+    rows = hertz_sequence(nafems_model, levels, (0.0, 1.0))
+    name = "NAFEMS 1 cylinder on block (mortar, P1) / classical / fischer_burmeister"
+    h = 2.0 ** -np.asarray(levels, float)
+    rate, se = fitted_rate(h, [r["error_p0"] for r in rows])
+    table = "; ".join(f"L{r['level']}: {r['unknowns']} dofs, p0 {r['p0_fe'] / 1e6:.0f} MPa ({r['error_p0']:.2%}), "
+                      f"a {r['a_fe'] * 1e3:.3f} mm ({r['error_a']:.2%})" for r in rows)
+    last = rows[-1]
+    ref = f"Hertz: p0 = {last['p0_hertz'] / 1e6:.0f} MPa, a = {last['a_hertz'] * 1e3:.3f} mm (NAFEMS: 3585 MPa, 6.21 mm)"
+    return [Check.make(name, "converged meshes", sum(r["converged"] for r in rows), len(rows), 0, note=table),
+            Check.make(name, "fitted rate d log(error p0) / d log(h)", rate, 1.0, 0.5, note=f"standard error {se:.2f}"),
+            Check.make(name, "rel. error of p0, finest mesh", last["error_p0"], 0.0, 0.03, note=ref),
+            Check.make(name, "rel. error of a, finest mesh", last["error_a"], 0.0, 0.01)]
+
+
+def rung_two_spheres(levels=(4,)) -> list[Check]:
+    """Two equal spheres (quarter model, mortar, P1) against Hertz on the finest of ``levels``:
+    ``a`` within 2 % and ``p0`` within 5 % (the sequence to 3e4 unknowns, :func:`main`, gives
+    0.5 % and 3.2 %)."""
+    rows = hertz_sequence(two_spheres_model, levels, (0.0, 0.0, 1.0))
+    name = "two spheres (mortar, P1, quarter model) / classical / fischer_burmeister"
+    last = rows[-1]
+    note = (f"{last['unknowns']} dofs; F = {last['force']:.4g} N, Hertz a = {last['a_hertz'] * 1e3:.4f} mm, "
+            f"p0 = {last['p0_hertz'] / 1e6:.0f} MPa; FE a = {last['a_fe'] * 1e3:.4f} mm, p0 = {last['p0_fe'] / 1e6:.0f} MPa")
+    return [Check.make(name, "converged", float(last["converged"]), 1.0, 0),
+            Check.make(name, "rel. error of a", last["error_a"], 0.0, 0.02, note=note),
+            Check.make(name, "rel. error of p0", last["error_p0"], 0.0, 0.05)]
+
+
+#: The rungs ``ddcm-validate`` runs (registered in :mod:`ddcm_casadi.validation.ladder`).
+RUNGS = {
+    "contact patch test between two bodies (non-matching meshes)": rung_patch_test,
+    "NAFEMS benchmark 1, cylinder on block (mesh convergence)": rung_nafems,
+    "two spheres against Hertz": rung_two_spheres,
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m ddcm_casadi.validation.two_body_rungs [--levels ...] [--sphere-levels ...]``:
+    the NAFEMS and two-sphere mesh sequences as tables (minutes for the finest meshes)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m ddcm_casadi.validation.two_body_rungs", description=main.__doc__)
+    parser.add_argument("--levels", default="2,3,4,5,6,7", help="NAFEMS gradings (default 2..7)")
+    parser.add_argument("--sphere-levels", default="2,3,4,5", help="two-sphere gradings (default 2..5)")
+    args = parser.parse_args(argv)
+    for title, build, levels, axis in (("NAFEMS benchmark 1", nafems_model, args.levels, (0.0, 1.0)),
+                                       ("two spheres", two_spheres_model, args.sphere_levels, (0.0, 0.0, 1.0))):
+        print(f"\n{title}\n| level | unknowns | pairs | in contact | p0 (MPa) | p0 Hertz | error p0 | a (mm) | a Hertz | error a |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        for r in hertz_sequence(build, [int(v) for v in levels.split(",") if v], axis):
+            print(f"| {r['level']} | {r['unknowns']} | {r['pairs']} | {r['nodes_in_contact']} | {r['p0_fe'] / 1e6:.1f} | "
+                  f"{r['p0_hertz'] / 1e6:.1f} | {r['error_p0']:.2%} | {r['a_fe'] * 1e3:.4f} | {r['a_hertz'] * 1e3:.4f} | "
+                  f"{r['error_a']:.2%} |" + ("" if r["converged"] else " not converged"), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,172 @@
+"""Contact between two deformable bodies (mortar, dual multipliers): the coupling operators, the
+patch test across non-matching meshes, NAFEMS benchmark 1, the case files and their errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ddcm_casadi import compare, formulations
+from ddcm_casadi.casefiles.config import load_case
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.models.continuum import fem
+from ddcm_casadi.models.continuum import mesh as meshes
+from ddcm_casadi.models.continuum.bodies import join
+from ddcm_casadi.models.continuum.inputs import BodyContact, Material, Support, Traction
+from ddcm_casadi.models.continuum.model import continuum_model
+from ddcm_casadi.models.continuum.mortar import Surface, candidate_facets, element_centroids, mortar_coupling
+from ddcm_casadi.validation import two_body_rungs
+
+from .test_bad_input import assert_input_error, run_cli
+
+CASES = Path(__file__).resolve().parent.parent / "examples" / "cases"
+#: Round-off of sums over a few dozen O(1) terms.
+ROUNDOFF = 1e-13
+
+
+def _blocks(d: int):
+    """Two blocks on top of each other with non-matching meshes (punch above, block below)."""
+    if d == 2:
+        bodies = dict(block=meshes.rectangle(1.0, 0.5, nx=7, ny=3, origin=(0.0, -0.5)),
+                      punch=meshes.rectangle(1.0, 0.5, nx=5, ny=3, origin=(0.0, 0.0)))
+        return join(bodies), "punch/ymin", "block/ymax"
+    bodies = dict(block=meshes.box(1.0, 1.0, 0.5, nx=5, ny=4, nz=2, origin=(0.0, 0.0, -0.5)),
+                  punch=meshes.box(1.0, 1.0, 0.5, nx=3, ny=3, nz=2, origin=(0.0, 0.0, 0.0)))
+    return join(bodies), "punch/zmin", "block/zmax"
+
+
+def _coupling(mesh, slave, master, reach=0.1):
+    s, m = mesh.boundaries[slave], mesh.boundaries[master]
+    return mortar_coupling(mesh.p.T, Surface.of(mesh, s), element_centroids(mesh, s), Surface.of(mesh, m),
+                           element_centroids(mesh, m), reach)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_mortar_weights_are_means_and_transmit_a_uniform_pressure(d):
+    """Rows of D/m and M/m sum to one (the weighted gap is a difference of means); a uniform
+    pressure puts exactly the consistent loads int N on both sides of non-matching meshes."""
+    mesh, slave, master = _blocks(d)
+    c = _coupling(mesh, slave, master)
+    assert c.dropped == 0
+    assert np.allclose(c.slave_weights.sum(axis=1), 1.0, atol=ROUNDOFF)
+    assert np.allclose(c.master_weights.sum(axis=1), 1.0, atol=ROUNDOFF)
+    disc = fem.Discretisation.create(mesh, 1)
+    for weights, boundary in ((c.master_weights, master), (c.slave_weights, slave)):
+        loads = np.asarray(weights.T @ c.area).ravel()  # uniform p = 1
+        dofs, area = fem.tributary_areas(disc, mesh.boundaries[boundary])  # P1: int N per node
+        assert np.max(np.abs(loads[dofs] - area)) < ROUNDOFF
+    assert np.max(np.abs(c.gaps(mesh.p.T))) < ROUNDOFF  # the blocks touch
+    lifted = mesh.p.T.copy()
+    lifted[np.unique(mesh.t[:, mesh.subdomains["punch"]]), -1] += 0.01
+    assert np.allclose(c.gaps(lifted), 0.01, atol=ROUNDOFF)
+
+
+def test_contact_search_finds_overlapping_facets_only():
+    centres = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]])
+    s, m = candidate_facets(np.array([[0.0, 0.1]]), np.array([0.5]), centres, np.full(3, 0.5), 0.2)
+    assert s.tolist() == [0, 0] and sorted(m.tolist()) == [0, 1]
+
+
+def test_join_names_bodies_and_their_boundaries():
+    mesh, _, _ = _blocks(2)
+    assert set(mesh.subdomains) == {"block", "punch"}
+    assert {"block/ymax", "punch/ymin", "block", "punch"} <= set(mesh.boundaries)
+    top = mesh.p[:, mesh.facets[:, mesh.boundaries["block/ymax"]]]
+    assert np.allclose(top[1], 0.0)
+
+
+def test_patch_test_every_formulation_and_variant():
+    checks = two_body_rungs.rung_patch_test()
+    assert len(checks) == 2 * 2 * len(formulations.available())
+    failed = [(c.name, c.value) for c in checks if not c.passed]
+    assert not failed, failed
+
+
+def test_nafems_exact_formulations_agree_and_penalty_within_its_bound():
+    """On one coarse grading every formulation solves NAFEMS 1; the exact ones agree to their
+    stopping tests (1e-8 relative) and penalty's pressures differ by its O(1/gamma) share."""
+    model, ref = two_body_rungs.nafems_model(2, steps=2)
+    cmp = compare(model, variants=("classical",))
+    p = {name: np.asarray(r.steps[-1].p) for (_, name), r in cmp.results.items()}
+    assert all(s.converged for r in cmp.results.values() for s in r.steps)
+    scale = float(np.max(p["fischer_burmeister"]))
+    for name in ("augmented_lagrangian", "mpcc"):
+        assert np.max(np.abs(p[name] - p["fischer_burmeister"])) < 1e-8 * scale, name
+    assert np.max(np.abs(p["penalty"] - p["fischer_burmeister"])) < 0.05 * scale
+    m = two_body_rungs.hertz_measure(model, p["fischer_burmeister"], ref, (0.0, 1.0))
+    assert m["force"] == pytest.approx(two_body_rungs.NAFEMS["load"], rel=1e-9)  # the load, all of it
+    assert m["p0_hertz"] == pytest.approx(two_body_rungs.NAFEMS_REFERENCE["p0"], rel=1e-3)
+    assert m["a_hertz"] == pytest.approx(two_body_rungs.NAFEMS_REFERENCE["a"], rel=1e-2)
+
+
+def test_nafems_example_case_runs(tmp_path, capsys):
+    code, out, err = run_cli(["--config", str(CASES / "nafems1.toml"), "--formulations", "fischer_burmeister",
+                              "--variants", "classical", "--out", str(tmp_path / "out"), "--no-plots"], capsys)
+    assert code == 0, err
+    model = load_case(CASES / "nafems1.toml").model
+    assert model.n_contacts > 10 and {ob.kind for ob in model.obstacles} == {"surface"}
+
+
+def _case(tmp_path, contact: str, degree: int = 1, extra: str = "") -> Path:
+    path = tmp_path / "two.toml"
+    path.write_text(f"""{extra}
+[mesh]
+degree = {degree}
+[[mesh.body]]
+name = "punch"
+shape = "rectangle"
+size = [1.0, 0.5]
+divisions = [3, 2]
+[[mesh.body]]
+name = "block"
+shape = "rectangle"
+size = [1.0, 0.5]
+divisions = [4, 2]
+origin = [0.0, -0.5]
+[material]
+youngs_modulus = 1e9
+poisson_ratio = 0.3
+[[supports]]
+boundary = "block/ymin"
+fix = "xy"
+[[supports]]
+boundary = "punch/ymax"
+fix = "x"
+[[loads]]
+boundary = "punch/ymax"
+traction = [0.0, -1e6]
+[[contact]]
+{contact}
+""")
+    return path
+
+
+@pytest.mark.parametrize("contact, degree, extra, expected", [
+    ('slave = "punch/ymin"', 1, "", "needs 'master'"),
+    ('slave = "punch/ymin"\nmaster = "block/nowhere"', 1, "", "nowhere"),
+    ('slave = "punch/ymin"\nmaster = "block/ymax"\nobstacle = "plane"', 1, "", "takes no 'obstacle'"),
+    ('slave = "punch/ymin"\nmaster = "block/ymax"\nsearch_distance = -1', 1, "", "search_distance"),
+    ('slave = "punch/ymin"\nmaster = "block/ymax"', 2, "", "degree = 1"),
+    ('slave = "punch/ymin"\nmaster = "punch/ymin"', 1, "", "share nodes"),
+    ('slave = "punch/ymin"\nmaster = "block/ymax"', 1, 'kinematics = "finite"\n', "finite kinematics"),
+])
+def test_bad_two_body_cases_are_one_line_errors(tmp_path, capsys, contact, degree, extra, expected):
+    if "finite" in extra:
+        path = _case(tmp_path, contact, degree, extra)
+        path.write_text(path.read_text().replace('poisson_ratio = 0.3', 'poisson_ratio = 0.3\nlaw = "neo_hookean"'))
+    else:
+        path = _case(tmp_path, contact, degree, extra)
+    code, _, err = run_cli(["--config", str(path), "--out", str(tmp_path / "out")], capsys)
+    assert_input_error(code, err, expected)
+
+
+def test_a_body_held_only_by_a_contact_it_does_not_touch_is_refused_with_a_hint():
+    mesh = join(dict(block=meshes.rectangle(1.0, 0.5, nx=3, ny=2, origin=(0.0, -0.5)),
+                     punch=meshes.rectangle(1.0, 0.5, nx=2, ny=2, origin=(0.0, 0.001))))
+    with pytest.raises(InputError, match=r"smallest gap is 0\.001 m"):
+        continuum_model(mesh, materials=[Material(None, 1e9, 0.3)],
+                        supports=[Support("block/ymin", "xy"), Support("punch/ymax", "x")],
+                        tractions=[Traction("punch/ymax", (0.0, -1e6))],
+                        contacts=[BodyContact("punch/ymin", "block/ymax")])
