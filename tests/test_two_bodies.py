@@ -170,3 +170,36 @@ def test_a_body_held_only_by_a_contact_it_does_not_touch_is_refused_with_a_hint(
                         supports=[Support("block/ymin", "xy"), Support("punch/ymax", "x")],
                         tractions=[Traction("punch/ymax", (0.0, -1e6))],
                         contacts=[BodyContact("punch/ymin", "block/ymax")])
+
+
+@pytest.mark.parametrize("case, radius, force_factor", [("gmsh_cylinder_on_block.toml", 0.05, 2.0),
+                                                        ("two_spheres.toml", 0.005, 4.0)])
+def test_two_body_examples_against_hertz(case, radius, force_factor):
+    """The Gmsh-made NAFEMS case and the two spheres run and agree with Hertz for the measured force
+    within what their meshes resolve (the rung's sequences: 0.1 % and 2 % in a, a few % in p0)."""
+    model = load_case(CASES / case).model
+    r = compare(model, ["fischer_burmeister"], variants=("classical",))["classical", "fischer_burmeister"]
+    assert all(s.converged for s in r.steps)
+    d = model.dimension
+    e = model.youngs_modulus[[0, -1]]  # the two bodies' moduli
+    ref = two_body_rungs.TwoBodyHertz(radius, two_body_rungs.combined_modulus(e[0], 0.3, e[1], 0.3),
+                                      force_factor=force_factor)
+    m = two_body_rungs.hertz_measure(model, r.steps[-1].p, ref, np.eye(d)[-1])
+    assert m["error_a"] < 0.03 and m["error_p0"] < 0.06, m
+
+
+def test_ddcm_on_two_bodies_every_formulation():
+    """NAFEMS 1 on a coarse mesh with Hookean data of each material: every formulation reaches a
+    DDCM fixed point that carries the whole load through the contact."""
+    from ddcm_casadi.data.dataset import MaterialDataset
+    from ddcm_casadi.data.metric import isotropic_elasticity
+
+    data = [MaterialDataset.hookean_grid(isotropic_elasticity(E, 0.3, 2)[0], -0.03, 0.03, 15, c="estimated")
+            for E in (210e9, 70e9)]
+    model, ref = two_body_rungs.nafems_model(1, datasets=data)
+    cmp = compare(model, variants=("ddcm",))
+    for (_, name), r in cmp.results.items():
+        last = r.steps[-1]
+        assert last.converged, (name, last.message)
+        m = two_body_rungs.hertz_measure(model, last.p, ref, (0.0, 1.0))
+        assert m["force"] == pytest.approx(two_body_rungs.NAFEMS["load"], rel=1e-6), name

@@ -116,7 +116,6 @@ def touching(bodies: dict, slave: str, master: str, reach: float):
 
 def nafems_model(levels: int, *, steps: int = 1, refine: int = 3, block_divisions: int = 8,
                  datasets=(), name: str = "nafems1") -> tuple[ContinuumModel, TwoBodyHertz]:
-
     """NAFEMS benchmark 1 (see the module), graded ``levels`` times towards the contact point.
 
     A half model (symmetry plane ``x = 0``, ``u_x = 0`` there on both bodies): the quarter
@@ -132,9 +131,9 @@ def nafems_model(levels: int, *, steps: int = 1, refine: int = 3, block_division
         cyl = meshes.refine_near(cyl, (0.0, 0.0), 0.3 * R, levels=levels, shrink=1.0)
         block = meshes.refine_near(block, (0.0, 0.0), 0.3 * R, levels=levels, shrink=1.0)
     mesh = touching({"cylinder": cyl, "block": block}, "cylinder/arc", "block/ymax", 0.2 * R)
-    data = {} if not datasets else dict(data=0)
-    materials = [Material("cylinder", NAFEMS["cylinder_modulus"], nu, **data),
-                 Material("block", NAFEMS["block_modulus"], nu, **data)]
+    data = [{} if not datasets else dict(data=min(i, len(datasets) - 1)) for i in range(2)]  # one set each, or shared
+    materials = [Material("cylinder", NAFEMS["cylinder_modulus"], nu, **data[0]),
+                 Material("block", NAFEMS["block_modulus"], nu, **data[1])]
     model = continuum_model(
         mesh, materials=materials, degree=1, datasets=datasets, name=name,
         supports=[Support("block/ymin", "y"), Support("block/xmin", "x"), Support("cylinder/axis", "x")],

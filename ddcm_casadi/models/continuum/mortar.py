@@ -177,8 +177,9 @@ def _triangle_points(xs: np.ndarray, ns: np.ndarray, xm: np.ndarray) -> tuple[np
     ``(P, Q)`` (area) and the slave and master barycentric coordinates, ``(P, Q, 3)`` each."""
     a = xs[:, 0]
     T = np.stack([xs[:, 1] - a, xs[:, 2] - a], axis=2)  # (P, 3, 2)
-    gram_inv = np.linalg.inv(np.einsum("pdi,pdj->pij", T, T))
-    lam12 = np.einsum("pij,pdj,pkd->pki", gram_inv, T, xm - a[:, None])  # master corners, slave coords
+    Tt = T.transpose(0, 2, 1)  # (P, 2, 3)
+    # master corners in slave coordinates: the least-squares (orthogonal) projection on the plane
+    lam12 = ((xm - a[:, None]) @ T) @ np.linalg.inv(Tt @ T).transpose(0, 2, 1)
     poly = np.concatenate([1.0 - lam12.sum(axis=2, keepdims=True), lam12], axis=2)  # (P, 3, 3)
     count = np.full(len(xs), 3, dtype=np.int64)
     for f in range(3):
@@ -197,9 +198,9 @@ def _triangle_points(xs: np.ndarray, ns: np.ndarray, xm: np.ndarray) -> tuple[np
         tri = np.stack([poly[:, 0], poly[:, k], poly[:, k + 1]], axis=1)  # (P, 3 corners, 3 bary)
         d1, d2 = tri[:, 1, 1:] - tri[:, 0, 1:], tri[:, 2, 1:] - tri[:, 0, 1:]
         sub = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) * area2 * valid
-        pts = np.einsum("qc,pcb->pqb", rule, tri)  # (P, 3, 3) slave barycentrics
+        pts = rule @ tri  # (P, 3, 3) slave barycentrics
         rel = pts[:, :, 1:] - mu[:, None, 0]
-        beta12 = np.einsum("pij,pqj->pqi", J_inv, rel)
+        beta12 = rel @ J_inv.transpose(0, 2, 1)
         weights.append(sub[:, None] * rule_w[None, :])
         slave_bary.append(pts)
         master_bary.append(np.concatenate([1.0 - beta12.sum(axis=2, keepdims=True), beta12], axis=2))
@@ -261,9 +262,13 @@ def mortar_coupling(x: np.ndarray, slave: Surface, slave_inside: np.ndarray, mas
     n_s, meas_s, c_s = slave.geometry(x, slave_inside)
     n_m, _, c_m = master.geometry(x, master_inside)
     radius = lambda surf, c: np.max(np.linalg.norm(x[surf.nodes] - c[:, None], axis=2), axis=1)  # noqa: E731
-    s, m = candidate_facets(c_s, radius(slave, c_s), c_m, radius(master, c_m), reach)
+    r_s, r_m = radius(slave, c_s), radius(master, c_m)
+    s, m = candidate_facets(c_s, r_s, c_m, r_m, reach)
     facing = np.einsum("pd,pd->p", n_s[s], n_m[m]) < -FACING_COSINE
-    near = np.abs(np.einsum("pd,pd->p", c_m[m] - c_s[s], n_s[s])) <= reach
+    offset = c_m[m] - c_s[s]
+    along = np.einsum("pd,pd->p", offset, n_s[s])
+    # within reach along the slave normal, and overlapping across it (bounding circles)
+    near = (np.abs(along) <= reach) & (np.linalg.norm(offset - along[:, None] * n_s[s], axis=1) <= r_s[s] + r_m[m])
     s, m = s[facing & near], m[facing & near]
     xs, xm = x[slave.nodes[s]], x[master.nodes[m]]
     if d == 2:
@@ -275,9 +280,10 @@ def mortar_coupling(x: np.ndarray, slave: Surface, slave_inside: np.ndarray, mas
     psi = (d + 1) * lam - 1.0  # the dual basis of a simplex facet with d vertices
     n_nodes = x.shape[0]
     rows = np.repeat(slave.nodes[s], d, axis=1).ravel()  # (P, j, k) flattened, j major
-    M = sp.csr_matrix((np.einsum("pq,pqj,pqk->pjk", w, psi, beta).ravel(),
+    wpsi_t = (w[:, :, None] * psi).transpose(0, 2, 1)  # (P, j, q)
+    M = sp.csr_matrix(((wpsi_t @ beta).ravel(),
                        (rows, np.tile(master.nodes[m], (1, d)).ravel())), shape=(n_nodes, n_nodes))
-    D = sp.csr_matrix((np.einsum("pq,pqj,pql->pjl", w, psi, lam).ravel(),
+    D = sp.csr_matrix(((wpsi_t @ lam).ravel(),
                        (rows, np.tile(slave.nodes[s], (1, d)).ravel())), shape=(n_nodes, n_nodes))
     covered = np.asarray(M.sum(axis=1)).ravel()
     full = np.bincount(slave.nodes.ravel(), weights=np.repeat(meas_s / d, d), minlength=n_nodes)  # int N_j
