@@ -49,9 +49,11 @@ case file, TOML or JSON, of one of these kinds:
   [structure]   a 1-D, 2-D or 3-D truss against rigid obstacles; the top-level key
                 kinematics = "finite" for large displacements (a von Mises truss that snaps)
   [mesh]        a 2-D (plane strain) or 3-D continuum, generated (rectangle, box, disc,
-                half_disc, ball) or read from a mesh file (.msh, .vtu, .xdmf), pressed
-                against rigid obstacles (plane, circle, sphere, cylinder, punch), with
-                optional Hertz validation and material data for DDCM
+                half_disc, quarter_disc, ball, ball_octant) or read from a mesh file (.msh,
+                .vtu, .xdmf), pressed against rigid obstacles (plane, circle, sphere,
+                cylinder, punch) or against another body ([[mesh.body]] tables, [[contact]]
+                slave/master: mortar pairs), with optional Hertz validation and material
+                data for DDCM
 
 The case format: the README's "Case files" section, and in full the documentation of
 ddcm_casadi.casefiles.config (python -m pydoc ddcm_casadi.casefiles.config); mesh files and
