@@ -208,13 +208,22 @@ def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
     ``contact_pressure``, ``contact_force``, ``strain``, ``stress``, for trusses
     ``nodal_displacement`` and ``member_force``, for DDCM the assigned data) to arrays, steps
     first (written as nested lists, non-finite values as null), as much of them as the model keeps
-    (:meth:`~ddcm_casadi.models.base.ContactModel.results_fields`). The one-unknown bar has none: its CSV
+    (:meth:`~ddcm_casadi.models.base.ContactModel.results_fields`), and with a hard device always
+    ``hard_device_force`` (steps, supports, dim: the force the device exerts on the body, N; the
+    supports are named in ``parameters.hard_device``). The one-unknown bar has none: its CSV
     rows already hold ``u`` and ``p``.
     """
     model = cmp.model
     if model.scalar:
         return None
-    return {f"{variant}/{name}": model.results_fields(cmp.fields(variant, name)) for (variant, name) in cmp.results}
+    out = {}
+    for variant, name in cmp.results:
+        full = cmp.fields(variant, name)
+        kept = model.results_fields(full)
+        if "hard_device_force" in full:  # kept by every model kind (a continuum keeps a summary only)
+            kept = {**kept, "hard_device_force": full["hard_device_force"]}
+        out[f"{variant}/{name}"] = kept
+    return out
 
 
 def results_document(case: Case, cmp: Comparison, *, files: Sequence[str],

@@ -51,6 +51,9 @@ Continua
                                  # or by position: boundary = { min = [x0, y0], max = [x1, y1] } (a box)
                                  # or { point = [..], normal = [..], tolerance = 1e-9 } (a plane);
                                  # docs/meshes.md
+    # displacement = [1e-4, 0.0] # optional: a hard device: the fixed components move by this (m),
+                                 # scaled by the load factors, or one vector per step
+                                 # ([[0, 0], [1e-4, 0], ...]); 0 along components not fixed
 
     [[loads]]                    # optional, scaled by [loading] load_factors
     boundary = "ymax"            # a traction (Pa) on a boundary, or
@@ -501,7 +504,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
         label = f"supports {i}"
         if "fix" not in t:
             raise InputError(f"[{label}] needs 'fix' (components, e.g. \"xy\")")
-        supports.append(Support(_boundary(label, t, d), t["fix"]))
+        supports.append(Support(_boundary(label, t, d), t["fix"], t.get("displacement")))  # a hard device
     if not supports:
         raise InputError("missing [[supports]]: a continuum must be held")
 
@@ -555,7 +558,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
 register_case_kind(
     "mesh",
     sections={"mesh": _MESH, "material": {"region", "youngs_modulus", "poisson_ratio", "data", "law"},
-              "supports": {"boundary", "fix"}, "loads": {"boundary", "traction", "body_force", "region"},
+              "supports": {"boundary", "fix", "displacement"}, "loads": {"boundary", "traction", "body_force", "region"},
               "contact": {"boundary", "obstacle", "radius", "center", "point", "normal", "axis", "half_width",
                           "edge_radius", "direction", "travel", "name", "slave", "master", "search_distance"},
               "loading": {"load_factors"}, "hertz": {"obstacle", "force_factor"}},

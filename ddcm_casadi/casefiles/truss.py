@@ -32,6 +32,9 @@ Trusses
     youngs_modulus = 200e9      # Pa, one number or one per member; optional if DDCM only
     material = [0, 0, 1]        # optional: data set of each member (index into [[data]])
     supports = [[0, "xy"], [1, "y"]]               # (node, fixed axes from "xyz")
+    # supports = [[0, "xy"], [1, "y", [0.0, -1e-3]]]  # a third entry prescribes the displacement (m)
+                                 # of the fixed axes (a hard device): scaled by the load factors, or
+                                 # one vector per step, [[0, -1e-3], [0, -2e-3]]; 0 along free axes
     loads = [[2, [0.0, -1e5]]]                     # (node, reference force vector N), optional
     distributed_loads = [["all", [0.0, -1e3]]]     # (member index or "all", N/m), optional
 
@@ -89,19 +92,26 @@ def _case_members(value: Any, X: np.ndarray) -> np.ndarray:
     return M
 
 
-def _case_supports(value: Any, nn: int, d: int) -> list[tuple[int, str]]:
+def _case_supports(value: Any, nn: int, d: int) -> list[tuple]:
     out = []
     for k, entry in enumerate(casefile.nonempty_list("structure", "supports", value)):
-        if not isinstance(entry, list) or len(entry) != 2 or not isinstance(entry[1], str):
-            raise InputError(f"[structure] supports[{k}] must be [node, axes] such as [0, \"xy\"], "
-                             f"got {casefile.show(entry)}")
+        if not isinstance(entry, list) or len(entry) not in (2, 3) or not isinstance(entry[1], str):
+            raise InputError(f"[structure] supports[{k}] must be [node, axes] such as [0, \"xy\"], or "
+                             f"[node, axes, displacement], got {casefile.show(entry)}")
         node = casefile.integer("structure", f"supports[{k}]", entry[0], low=0, high=nn - 1, what="a node index")
         axes = entry[1].lower()
         bad = [a for a in axes if a not in AXES[:d]]
         if bad or not axes:
             raise InputError(f"[structure] supports[{k}] axes must be letters from {AXES[:d]!r} in {d}-D, "
                              f"got {casefile.show(entry[1])}")
-        out.append((node, axes))
+        if len(entry) == 3:  # a hard device: checked against the load path by truss_model
+            displacement = entry[2]
+            if not isinstance(displacement, (list, int, float)) or isinstance(displacement, bool):
+                raise InputError(f"[structure] supports[{k}] displacement must be {d} numbers or one list of "
+                                 f"{d} numbers per step, got {casefile.show(displacement)}")
+            out.append((node, axes, displacement))
+        else:
+            out.append((node, axes))
     return out
 
 

@@ -196,14 +196,14 @@ class DDCMSolver:
                 break
             x, p, state = sol.x, sol.p, sol.state
             t1 = time.perf_counter()
-            f = problems.fields("mpcc", sol.x, sol.p)
+            f = problems.fields("mpcc", sol.x, sol.p, self.projection.last_params)
             update = scheme.update(f["strain"], f["stress"])
             t_search += time.perf_counter() - t1
             star = update.star
             if update.done:
                 converged, message = update.converged, update.message
                 break
-        f = problems.fields("mpcc", sol.x, sol.p)
+        f = problems.fields("mpcc", sol.x, sol.p, self.projection.last_params)
         star = scheme.finish(star)
         distance = (float(0.5 * np.dot(problems.model.volumes, scheme.distance2(f["strain"], f["stress"], star)))
                     if sol.converged else float("inf"))

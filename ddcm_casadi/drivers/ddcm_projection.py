@@ -42,6 +42,9 @@ class Projection:
         #: Applied to the parameters of every projection when set: the driver's sub-step of a load
         #: step interpolates their load entries (:func:`~ddcm_casadi.drivers.substeps.interpolate`).
         self.substep: Callable[[np.ndarray], np.ndarray] | None = None
+        #: The parameters of the last projection (:meth:`project`): the fields of its solution
+        #: are those of these parameters (a hard device's prescribed displacements).
+        self.last_params: np.ndarray | None = None
 
     def solve(self, params: np.ndarray, x0, p0, state):
         """Projection onto Z_E, restarted on the exact global branch if it may have stopped elsewhere.
@@ -110,6 +113,7 @@ class Projection:
         params = self.problems.projection_params(k, strain_star, stress_star, self.previous)
         if self.substep is not None:
             params = self.substep(params)
+        self.last_params = params
         sol, is_global, err = self.solve(params, *warm)
         cost["inner"] += sol.iterations
         cost["t_project"] += time.perf_counter() - t0

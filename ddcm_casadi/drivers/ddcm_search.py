@@ -81,9 +81,17 @@ def elastic_state(model, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     (see the module's docstring), at load step ``step``."""
     C, lu, KG, S = _elastic_operator(model)
     k = model.strain_components
-    u = lu.solve(model.loads[step])
+    f, offset, g0 = model.loads[step], None, model.gap_offsets[step]
+    if model.prescribed is not None:  # a hard device: strains B u + B_D u_D, gaps + G_D u_D
+        u_D = model.prescribed.values[step]
+        offset = model.prescribed.strain_operator @ u_D
+        sigma0 = np.einsum("ijk,ik->ij", C * model.volumes[:, None, None], offset.reshape(-1, k)).reshape(-1)
+        f = f - model.strain_operator.T @ sigma0
+        if model.n_contacts:
+            g0 = g0 + model.prescribed.gap_operator @ u_D
+    u = lu.solve(f)
     if model.n_contacts:
-        q = model.gap_operator @ u + model.gap_offsets[step]
+        q = model.gap_operator @ u + g0
         if np.any(q < 0):  # some pair would penetrate: solve the dual
             from scipy.optimize import nnls  # scipy.optimize costs a first run 0.08 s to import
 
@@ -93,6 +101,8 @@ def elastic_state(model, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]
             lam, _ = nnls(L.T, -np.linalg.solve(L, q / scale), maxiter=50 * S.shape[0] + 100)
             u = u + KG @ lam
     strain = model.strain_operator @ u
+    if offset is not None:
+        strain = strain + offset
     stress = np.einsum("ijk,ik->ij", C, strain.reshape(-1, k)).reshape(-1)
     return u, strain, stress
 

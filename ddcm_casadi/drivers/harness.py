@@ -89,8 +89,8 @@ def _note(what: str, values: list, name: str | None = None) -> str:
 
 def _relative_error(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """Per-step error relative to the largest reference magnitude along the path."""
-    scale = float(np.max(np.abs(reference))) or 1.0
-    return np.max(np.abs(values - reference), axis=1) / scale
+    scale = float(np.max(np.abs(reference), initial=0.0)) or 1.0
+    return np.max(np.abs(values - reference), axis=1, initial=0.0) / scale
 
 
 @dataclass
@@ -160,8 +160,10 @@ class Comparison:
         ``u`` (n_steps, n_dofs) free displacements, ``contact_pressure`` and ``contact_force``
         (n_steps, n_contacts), ``strain`` and ``stress`` (n_steps, n_points); the model kind's own
         fields (:meth:`ContactModel.extra_fields`, for trusses ``nodal_displacement`` (n_steps,
-        n_nodes, dim) and ``member_force``); for DDCM the assigned ``strain_star``, ``stress_star``
-        and ``data_index``.
+        n_nodes, dim) and ``member_force``); with a hard device ``hard_device_force`` (n_steps,
+        n_supports, dim: per prescribed support, the resultant force the device exerts on the body,
+        :meth:`ContactModel.hard_device_forces`); for DDCM the assigned ``strain_star``,
+        ``stress_star`` and ``data_index``.
         """
         r, m = self.results[(variant, formulation)], self.model
         p = r.array("p")
@@ -169,6 +171,8 @@ class Comparison:
                    contact_force=m.contact_area * p, strain=r.array("strain"), stress=r.array("stress"),
                    converged=r.array("converged"))
         out.update(m.extra_fields(out["u"], out["stress"]))
+        if m.prescribed is not None:  # (n_steps, n_supports, d): the force of the hard device on the body
+            out["hard_device_force"] = np.array([m.hard_device_forces(s.step, s.u, s.stress, s.p) for s in r.steps])
         if variant == "ddcm":
             for k in ("strain_star", "stress_star", "data_index"):
                 out[k] = r.array(k)
@@ -204,6 +208,7 @@ class Comparison:
                 row = dict(variant=variant, formulation=name, step=s.step)
                 row[m.load_parameter_name if m.load_parameter_name not in row else "load_parameter"] = s.load_parameter
                 row.update(m.step_summary(s.u, s.p))
+                row.update(m.hard_device_summary(s.step, s.u, s.stress, s.p))  # none without one
                 row.update(converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
                            residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,
                            seconds=s.seconds)

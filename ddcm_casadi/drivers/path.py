@@ -82,7 +82,7 @@ def _classical_step(problems: ProblemPair, built, k: int, params: np.ndarray, wa
     checks with the load of ``params``, the stability of a nonlinear problem)."""
     model, problem = problems.model, problems.classical
     sol = built.solve(params, *warm)
-    f = problems.fields("mcp", sol.x, sol.p)
+    f = problems.fields("mcp", sol.x, sol.p, params)
     step = StepResult(step=k, load_parameter=float(model.load_parameter[k]), u=f["u"], p=f["p"],
                       converged=sol.converged, iterations=sol.iterations,
                       outer_iterations=sol.outer_iterations, residual=sol.residual,

@@ -6,9 +6,12 @@ A :class:`ContactModel` describes a small-strain, linear structure with ``n`` di
 - kinematics ``strain = B u`` with a sparse ``B`` (m x n) and material-point volumes ``w`` (m);
 - equilibrium ``B^T W stress - G^T (a * p) = f`` with loads ``f``;
 - contact pairs ``gap = G u + gap0 >= 0``, ``p >= 0``, ``gap * p = 0`` with contact areas ``a``;
-- a material law ``stress = E strain`` (classical) and/or a material data set (DDCM).
+- a material law ``stress = E strain`` (classical) and/or a material data set (DDCM);
+- optionally prescribed displacements ``u_D`` (a hard device, :mod:`ddcm_casadi.models.prescribed`):
+  strains ``B u + B_D u_D`` and gaps ``G u + G_D u_D + gap0``, ``u_D`` a step parameter.
 
-The load path is a sequence of steps, each with its own ``gap0`` (obstacle positions) and ``f``.
+The load path is a sequence of steps, each with its own ``gap0`` (obstacle positions), ``f`` and,
+with a hard device, ``u_D``.
 Both the classical and the data-driven problem are built from this one object
 (see :mod:`ddcm_casadi.problems.contract`).
 """
@@ -26,6 +29,7 @@ from ddcm_casadi.models.contact_laws import get_contact_law
 from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import to_casadi
+from ddcm_casadi.models.prescribed import PARAMETER as PRESCRIBED, Prescribed
 from ddcm_casadi.models.scales import LARGE_STRAIN, load_path_warnings, reference_scales
 
 
@@ -111,6 +115,30 @@ def drawn_formulation(runs: Iterable[tuple[str, str]], variant: str) -> str | No
     return "fischer_burmeister" if "fischer_burmeister" in names else names[0]
 
 
+def _check_prescribed(prescribed: Prescribed, rows: int, G: sp.csr_matrix, gap0: np.ndarray, length: float) -> None:
+    """Refuse prescribed displacements that do not fit the model, or that push a contact pair no
+    free dof moves into its obstacle (its gap is prescribed: nothing could open it) (one line)."""
+    nc, n_steps = G.shape[0], gap0.shape[0]
+    if not isinstance(prescribed, Prescribed):
+        raise InputError(f"prescribed must be a Prescribed record, got {type(prescribed).__name__}")
+    if prescribed.strain_operator.shape[0] != rows or prescribed.gap_operator.shape[0] != nc:
+        raise InputError(f"prescribed displacements: operators of {prescribed.strain_operator.shape[0]} strain rows "
+                         f"and {prescribed.gap_operator.shape[0]} gap rows, the model has {rows} and {nc}")
+    if prescribed.n_steps != n_steps:
+        raise InputError(f"prescribed displacements are given for {prescribed.n_steps} steps, the load path has "
+                         f"{n_steps}")
+    if nc and prescribed.gap_operator.nnz:
+        held = (np.diff(G.indptr) == 0) & (np.diff(prescribed.gap_operator.tocsr().indptr) > 0)
+        gaps = gap0 + np.asarray(prescribed.gap_operator @ prescribed.values.T).T
+        stuck = held & np.any(gaps < -1e-12 * length, axis=0)
+        if np.any(stuck):
+            j = int(np.flatnonzero(stuck)[0])
+            step = int(np.argmin(gaps[:, j]))
+            raise InputError(f"the prescribed displacements push contact pair {j} into its obstacle (gap "
+                             f"{gaps[step, j]:.3g} m at step {step}) and no free displacement can open it: "
+                             f"keep the obstacle off the prescribed dofs or prescribe less")
+
+
 def _finite(name: str, a: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=float)
     if not np.all(np.isfinite(a)):
@@ -147,6 +175,10 @@ class ContactModel:
         Characteristic length, used only to nondimensionalise.
     name : str
         Human-readable name.
+    prescribed : Prescribed, optional
+        Prescribed displacements (a hard device): dofs that are not unknowns but move by given
+        values per step (:mod:`ddcm_casadi.models.prescribed`). ``None``: every dof that is not
+        an unknown is fixed at zero.
     """
 
     strain_operator: sp.csr_matrix
@@ -164,6 +196,7 @@ class ContactModel:
     strain_components: int = 1
     kinematics: str = "small"
     contact_law: str = "signorini"
+    prescribed: Prescribed | None = None
     _cache: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -210,6 +243,8 @@ class ContactModel:
             if self.dataset.k != k:
                 raise InputError(f"the data set has {self.dataset.k} strain components per point, "
                                  f"the model's material points have {k}")
+        if self.prescribed is not None:
+            _check_prescribed(self.prescribed, m * k, G, g0, float(self.length_scale))
         for k, v in dict(strain_operator=B, gap_operator=G, volumes=w, contact_area=a,
                          gap_offsets=g0, loads=f, load_parameter=lp, youngs_modulus=E,
                          length_scale=L).items():
@@ -343,22 +378,32 @@ class ContactModel:
         return {}
 
     def step_sizes(self) -> dict[str, int]:
-        """Names and sizes of a load step's parameters, in order: ``gap0`` and ``f``, those a
+        """Names and sizes of a load step's parameters, in order: ``gap0`` and ``f``, with a hard
+        device ``u_prescribed`` (:data:`~ddcm_casadi.models.prescribed.PARAMETER`), those a
         model kind adds (:meth:`load_names`: e.g. an obstacle's travel per pair for gaps at the
         current configuration), then :meth:`history_sizes`."""
-        return dict(gap0=self.n_contacts, f=self.n_dofs, **self.history_sizes())
+        return dict(gap0=self.n_contacts, f=self.n_dofs, **self.prescribed_sizes(), **self.history_sizes())
+
+    def prescribed_sizes(self) -> dict[str, int]:
+        """``{u_prescribed: nD}`` with a hard device, else empty (the default problems are
+        unchanged)."""
+        return {} if self.prescribed is None else {PRESCRIBED: self.prescribed.size}
 
     def load_names(self) -> tuple[str, ...]:
         """The step parameters that grow with the load (linear in the load parameter between two
-        steps, so that a sub-step interpolates them): ``gap0`` and ``f``."""
-        return ("gap0", "f")
+        steps, so that a sub-step interpolates them): ``gap0`` and ``f``, and with a hard device
+        the prescribed displacements ``u_prescribed``."""
+        return ("gap0", "f") + tuple(self.prescribed_sizes())
 
     def gap_expression(self, u, values):
         """The gaps (physical, ``nc``) for a CasADi symbol ``u`` (free displacements) with the
-        step's parameters ``values(name)`` (symbols): ``G u + gap0``, affine. A model kind whose
-        gaps are nonlinear (finite kinematics against curved obstacles) overrides this; the
-        contact forces are then ``(dg/du)^T a p``."""
-        return ca.mtimes(to_casadi(self.gap_operator), u) + values("gap0")
+        step's parameters ``values(name)`` (symbols): ``G u + gap0`` (``+ G_D u_D`` with a hard
+        device), affine. A model kind whose gaps are nonlinear (finite kinematics against curved
+        obstacles) overrides this; the contact forces are then ``(dg/du)^T a p``."""
+        gap = ca.mtimes(to_casadi(self.gap_operator), u) + values("gap0")
+        if self.prescribed is not None and self.n_contacts:
+            gap = gap + ca.mtimes(to_casadi(self.prescribed.gap_operator), values(PRESCRIBED))
+        return gap
 
     def local_kinematics(self) -> LocalKinematics | None:
         """The item-by-item structure of a nonlinear model (:class:`LocalKinematics`), or
@@ -376,26 +421,91 @@ class ContactModel:
         :meth:`history_sizes`. ``previous``: the physical fields (``u``, ``p``; for DDCM also
         ``strain`` and ``stress``) of the last converged step, ``None`` before the first. The
         drivers pass it; a model kind whose steps depend on their history overrides this."""
-        return dict(gap0=self.gap_offsets[step], f=self.loads[step])
+        out = dict(gap0=self.gap_offsets[step], f=self.loads[step])
+        if self.prescribed is not None:
+            out[PRESCRIBED] = self.prescribed.values[step]
+        return out
 
     def gap(self, u: np.ndarray, step: int) -> np.ndarray:
-        return self.gap_operator @ np.asarray(u) + self.gap_offsets[step]
+        gap = self.gap_operator @ np.asarray(u) + self.gap_offsets[step]
+        if self.prescribed is not None and self.n_contacts:
+            gap = gap + self.prescribed.gap_operator @ self.prescribed.values[step]
+        return gap
 
     def active_contacts(self, pressure: np.ndarray) -> np.ndarray:
         """Which pairs carry a pressure above 1e-8 of the stress scale (one rule for tables and
         figures); ``pressure`` may be stacked over steps."""
         return np.asarray(pressure) > 1e-8 * self.scales["stress"]
 
-    def strain(self, u: np.ndarray) -> np.ndarray:
-        """Material-point strains (flat, point-major) of the free displacements ``u``."""
-        return self.strain_operator @ np.asarray(u)
+    def strain(self, u: np.ndarray, u_prescribed: np.ndarray | None = None) -> np.ndarray:
+        """Material-point strains (flat, point-major) of the free displacements ``u``; with a hard
+        device ``B u + B_D u_D`` with the step's prescribed values ``u_prescribed``
+        (:meth:`prescribed_values`), which it then needs."""
+        strain = self.strain_operator @ np.asarray(u)
+        if self.prescribed is not None:
+            strain = strain + self.prescribed.strain_operator @ self._given_prescribed(u_prescribed)
+        return strain
 
-    def strain_expression(self, u):
-        """:meth:`strain` for a CasADi symbol ``u``. Small kinematics: ``B u``. A model kind with
-        ``kinematics = "finite"`` overrides both with its nonlinear strain (Green-Lagrange); the
-        problems then take the nonlinear form (:mod:`ddcm_casadi.problems.contract`), and ``B`` is the
-        strain's derivative at the reference configuration (used only for reference scales)."""
-        return to_casadi(self.strain_operator) @ u
+    def _given_prescribed(self, u_prescribed) -> np.ndarray:
+        """The prescribed values a strain needs, checked (a programming error otherwise: the strain
+        of a model with a hard device depends on the step)."""
+        if u_prescribed is None:
+            raise ValueError("this model has prescribed displacements: its strains need the step's values "
+                             "(u_prescribed)")
+        return np.asarray(u_prescribed, dtype=float)
+
+    def strain_expression(self, u, values=None):
+        """:meth:`strain` for a CasADi symbol ``u`` (``values(name)``: the step's parameters, as
+        symbols; with a hard device ``u_prescribed`` is read from them). Small kinematics: ``B u``
+        (``+ B_D u_D``). A model kind with ``kinematics = "finite"`` overrides both with its
+        nonlinear strain (Green-Lagrange); the problems then take the nonlinear form
+        (:mod:`ddcm_casadi.problems.contract`), and ``B`` is the strain's derivative at the
+        reference configuration (used only for reference scales)."""
+        strain = to_casadi(self.strain_operator) @ u
+        if self.prescribed is not None:
+            if values is None:
+                raise ValueError("this model has prescribed displacements: its strains need the step's parameters")
+            strain = strain + ca.mtimes(to_casadi(self.prescribed.strain_operator), values(PRESCRIBED))
+        return strain
+
+    # ------------------------------------------------------------ prescribed displacements
+    def prescribed_values(self, step: int) -> np.ndarray | None:
+        """The prescribed displacements ``u_D`` of load step ``step`` (``None``: no hard device)."""
+        return None if self.prescribed is None else self.prescribed.values[step]
+
+    def prescribed_strain_jacobian(self, u: np.ndarray, u_prescribed: np.ndarray):
+        """``d strain / d u_D`` at ``(u, u_D)``: ``B_D`` under small kinematics (a model kind with
+        finite kinematics and a hard device overrides it)."""
+        return self.prescribed.strain_operator
+
+    def hard_device_forces(self, step: int, u: np.ndarray, stress: np.ndarray, p: np.ndarray,
+                           u_prescribed: np.ndarray | None = None) -> np.ndarray | None:
+        """``(n_supports, d)``: per prescribed support, the resultant force (N; per unit thickness
+        in 2-D continua) the hard device exerts on the body at step ``step``,
+        ``sum (B_D^T W sigma - f_D - G_D^T a p)`` over the support's prescribed dofs
+        (:meth:`~ddcm_casadi.models.prescribed.Prescribed.nodal_forces`); ``None`` without a hard
+        device. ``u_prescribed``: the values if not the step's (a sub-step's)."""
+        if self.prescribed is None:
+            return None
+        pr = self.prescribed
+        if stress is None:  # no state to take it from
+            return np.full((len(pr.support_names), pr.dimension), np.nan)
+        uD = pr.values[step] if u_prescribed is None else np.asarray(u_prescribed, float)
+        weighted = np.repeat(self.volumes, self.strain_components) * np.asarray(stress, float).reshape(-1)
+        jac = None if self.kinematics == "small" else self.prescribed_strain_jacobian(u, uD)
+        nodal = pr.nodal_forces(weighted, self.contact_area * np.asarray(p, float).reshape(-1), step, jac)
+        return pr.resultants(nodal)
+
+    def hard_device_summary(self, step: int, u: np.ndarray, stress, p: np.ndarray) -> dict:
+        """The per-step columns of ``results.csv`` of a hard device
+        (:meth:`~ddcm_casadi.models.prescribed.Prescribed.columns`:
+        ``hard_device_force_<axis>(<support>)``, N); empty without one or without a stress."""
+        if self.prescribed is None or stress is None:
+            return {}
+        forces = self.hard_device_forces(step, u, stress, p)
+        if not np.all(np.isfinite(forces)):
+            forces = np.full_like(forces, np.nan)
+        return self.prescribed.columns(forces)
 
     def closed_form(self, step: int):
         """Exact classical solution ``(u, p)`` if the model knows one in closed form, else ``None``."""
@@ -419,7 +529,8 @@ class ContactModel:
                     n_contacts=self.n_contacts, n_steps=self.n_steps,
                     load_parameter_name=self.load_parameter_name,
                     load_parameter=self.load_parameter.tolist(), youngs_modulus=E, kinematics=self.kinematics,
-                    contact_law=self.contact_law)
+                    contact_law=self.contact_law,
+                    **({} if self.prescribed is None else {"hard_device": self.prescribed.describe()}))
 
     @property
     def scalar(self) -> bool:

@@ -37,6 +37,7 @@ class ContactModel(Protocol):
     length_scale: float
     strain_components: int
     kinematics: str
+    prescribed: Any
     _cache: dict
 
     @property
@@ -115,10 +116,40 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
                 imposed = float(np.max(np.abs(B @ u_g), initial=0.0)) * pen / normal
                 model._cache[("imposed_strain", kind)] = imposed
                 strain = max(strain, imposed)
+        if model.prescribed is not None:  # the hard device's largest step, alone
+            U_D, strain_D = _prescribed_response(model, K, D, spring)
+            model._cache[("prescribed_strain", kind)] = strain_D
+            strain = max(strain, strain_D)
+            pen = max(pen, U_D)
     U = max(float(np.max(np.abs(u_f), initial=0.0)), pen)
     if not (U > 0 and strain > 0):
         U, strain = 1e-3 * model.length_scale, 1e-3  # nothing moves: any unit will do
     return _checked(kind, _magnitudes(model, kind, D, U, strain))
+
+
+def _prescribed_response(model: ContactModel, K, D: np.ndarray, spring) -> tuple[float, float]:
+    """``(displacement, strain)`` magnitudes of the step with the largest prescribed displacement:
+    ``K u = -B^T W D B_D u_D`` (no load, no obstacle), the displacement ``max(|u|, |u_D|)`` and
+    the strain ``max |B u + B_D u_D|``."""
+    pr = model.prescribed
+    if not pr.size or not np.any(pr.values):
+        return 0.0, 0.0
+    step = int(np.argmax(np.max(np.abs(pr.values), axis=1)))
+    u_D = pr.values[step]
+    offset = pr.strain_operator @ u_D
+    u = np.zeros(model.n_dofs)
+    if model.n_dofs:
+        rhs = -(model.strain_operator.T @ (np.repeat(model.volumes * D, model.strain_components) * offset))
+        try:
+            u = factorize(K).solve(rhs)
+        except SingularMatrix:
+            u = spring().solve(rhs)
+    strain = float(np.max(np.abs(model.strain_operator @ u + offset), initial=0.0))
+    if not np.isfinite(strain):
+        strain = np.inf
+    elif strain <= 64 * np.finfo(float).eps * float(np.max(np.abs(offset), initial=0.0)):
+        strain = 0.0  # roundoff: the device moves the body without straining it (a mechanism's motion)
+    return max(float(np.max(np.abs(u), initial=0.0)), float(np.max(np.abs(u_D)))), strain
 
 
 def _magnitudes(model: ContactModel, kind: str, D: np.ndarray, U: float, strain: float) -> dict:
@@ -166,15 +197,19 @@ def load_path_warnings(model: ContactModel) -> list[str]:
       pair held) only selects the paths to look at; the strain reported is that of the computed
       state of that step (:func:`computed_strain`: a linear elastic solve with the contacts found
       by an active set), so a stop that closes only part way is accounted for.
+    - Likewise the strain a hard device imposes at its largest prescribed displacement
+      (:func:`_prescribed_warnings`).
 
     The strain checks apply to small kinematics only.
 
     Raises
     ------
     InputError
-        A computed compressive strain of 1 or more (an obstacle pushed past a fixed end, through
-        the body: a member shortened to nothing); for continua, a strain of 1 or more of any sign.
-        A bar stretched to a strain of 1 is a warning, not a refusal.
+        A computed compression of 1 or more (an obstacle pushed past a fixed end, through the
+        body, or a hard device that shortens a member to nothing): a member's strain, a
+        continuum's smallest principal strain (:func:`_compression`). A stretch of any size is a
+        warning, not a refusal (a bar pulled to strain 1 by a hard device, E = 1 and a
+        displacement equal to its length, is well posed).
     """
     out = []
     starting = _starting_penetration(model)
@@ -189,22 +224,62 @@ def load_path_warnings(model: ContactModel) -> list[str]:
     model.scales_for(kind)
     imposed = max((v for k, v in model._cache.items() if isinstance(k, tuple) and k[0] == "imposed_strain"),
                   default=0.0)
-    if imposed <= LARGE_STRAIN:  # the quick estimate (every pair held) is the larger: nothing to look at
-        return out
-    worst = int(np.argmin(np.min(model.gap_offsets, axis=1))) if model.n_contacts else 0
-    where = f"{model.load_parameter_name}={model.load_parameter[worst]:.6g}"
-    low, high = computed_strain(model, kind, worst)
-    compression = -low
-    squashed = compression if model.strain_components == 1 else max(compression, high)
-    if squashed >= 1.0 - 1e-4:
-        raise InputError(f"the obstacles impose a strain of about {squashed:.2g} at {where} (penetration "
-                         f"{-np.min(model.gap_offsets):.3g} m): pushed past a fixed end or through the body; "
-                         f"a small-strain model is meaningless there")
-    strain = max(compression, high)
-    if strain > LARGE_STRAIN:
-        out.append(f"the obstacles impose a strain of about {strain:.2g} at {where} (a linear elastic solve of "
-                   f"that step): far beyond the small-strain model (> {LARGE_STRAIN:g})")
+    if imposed > LARGE_STRAIN:  # else the quick estimate (every pair held) is the larger: nothing to look at
+        worst = int(np.argmin(np.min(model.gap_offsets, axis=1))) if model.n_contacts else 0
+        where = f"{model.load_parameter_name}={model.load_parameter[worst]:.6g}"
+        state = _linear_state(model, kind, worst)
+        compression = _compression(model, state)
+        if compression >= 1.0 - 1e-4:
+            raise InputError(f"the obstacles impose a strain of about {compression:.2g} at {where} (penetration "
+                             f"{-np.min(model.gap_offsets):.3g} m): pushed past a fixed end or through the body; "
+                             f"a small-strain model is meaningless there")
+        strain = max(compression, float(np.max(state, initial=0.0)))
+        if strain > LARGE_STRAIN:
+            out.append(f"the obstacles impose a strain of about {strain:.2g} at {where} (a linear elastic solve of "
+                       f"that step): far beyond the small-strain model (> {LARGE_STRAIN:g})")
+    out += _prescribed_warnings(model, kind)
     return out
+
+
+def _compression(model: ContactModel, strain: np.ndarray) -> float:
+    """The largest compression of a state (a positive number): ``-min strain`` of one-component
+    points; of a continuum's points, ``-min`` of their principal strains (a fibre shortened by
+    that fraction of its length: 1 or more is the body inverted under small kinematics)."""
+    e = np.asarray(strain, dtype=float)
+    if not e.size:
+        return 0.0
+    k = model.strain_components
+    if k == 1:
+        return float(-np.min(e))
+    from ddcm_casadi.data.metric import mandel_to_tensor
+
+    dim = {3: 2, 6: 3}[k]
+    t = mandel_to_tensor(e.reshape(-1, k), dim)[:, :dim, :dim]
+    return float(-np.min(np.linalg.eigvalsh(t)))
+
+
+def _prescribed_warnings(model: ContactModel, kind: str) -> list[str]:
+    """The strain a hard device imposes at its largest step (a linear elastic solve, contacts
+    by an active set): refused where it compresses the body to nothing or beyond (a fibre's
+    length reversed: the body inverted), a warning beyond :data:`LARGE_STRAIN` (a well-posed
+    stretch, however large, is a warning only)."""
+    pr = model.prescribed
+    if pr is None or model._cache.get(("prescribed_strain", kind), 0.0) <= LARGE_STRAIN:
+        return []
+    step = int(np.argmax(np.max(np.abs(pr.values), axis=1)))
+    where = f"{model.load_parameter_name}={model.load_parameter[step]:.6g}"
+    state = _linear_state(model, kind, step)
+    compression = _compression(model, state)
+    if compression >= 1.0 - 1e-4:
+        raise InputError(f"the prescribed displacements compress the body to a strain of about {-compression:.2g} at "
+                         f"{where} (largest prescribed displacement {float(np.max(np.abs(pr.values[step]))):.3g} m): "
+                         f"shortened past zero length, the body inverted; a small-strain model is meaningless there")
+    strain = max(compression, float(np.max(np.abs(state), initial=0.0)))
+    if strain > LARGE_STRAIN:
+        return [f"the prescribed displacements impose a strain of about {strain:.2g} at {where} (a linear elastic "
+                f"solve of that step): far beyond the small-strain model (> {LARGE_STRAIN:g}); "
+                f"kinematics = \"finite\" models large strains"]
+    return []
 
 
 def _starting_penetration(model: ContactModel) -> tuple[int, float] | None:
@@ -230,18 +305,30 @@ def _starting_penetration(model: ContactModel) -> tuple[int, float] | None:
 
 
 def computed_strain(model: ContactModel, kind: str, step: int) -> tuple[float, float]:
-    """The smallest and largest strain component of a linear elastic solve of step ``step``.
-
-    The load and the obstacles of the step, with a representative modulus per point
-    (:meth:`~ddcm_casadi.models.base.ContactModel.point_stiffness`); contacts by a penalty active
-    set (a pair is active while it penetrates; a stiff spring, ``1e6`` times the stiffest
-    diagonal of ``K``, holds it), at most 30 passes. A singular system (a body held by nothing)
-    falls back on every pair held, as :func:`reference_scales` does.
+    """The smallest and largest strain component of a linear elastic solve of step ``step``
+    (:func:`_linear_state`).
 
     Returns
     -------
     tuple of float
         ``(min, max)`` over every strain component of every point (signed: compression < 0).
+    """
+    e = _linear_state(model, kind, step)
+    if not e.size:
+        return 0.0, 0.0
+    return float(np.min(e)), float(np.max(e))
+
+
+def _linear_state(model: ContactModel, kind: str, step: int) -> np.ndarray:
+    """The strains (flat, point-major) of a linear elastic solve of step ``step``.
+
+    The load, the obstacles and the prescribed displacements of the step (strains ``B u + B_D
+    u_D``, gaps ``G u + G_D u_D + gap0``), with a representative modulus per point
+    (:meth:`~ddcm_casadi.models.base.ContactModel.point_stiffness`); contacts by a penalty active
+    set (a pair is active while it penetrates; a stiff spring, ``1e6`` times the stiffest
+    diagonal of ``K``, holds it), at most 30 passes. A singular system (a body held by nothing)
+    falls back on every pair held, as :func:`reference_scales` does. Empty where no state is
+    found (a singular system even then, or non-finite strains).
     """
     D = model.point_stiffness(kind)
     B, G, w, a = model.strain_operator, model.gap_operator, model.volumes, model.contact_area
@@ -250,11 +337,20 @@ def computed_strain(model: ContactModel, kind: str, step: int) -> tuple[float, f
     k_max = float(np.max(K.diagonal())) if K.shape[0] else 1.0
     f = model.loads[step] if model.loads.size else np.zeros(model.n_dofs)
     g0 = model.gap_offsets[step] if model.n_contacts else np.zeros(0)
+    offset = np.zeros(B.shape[0])
+    if model.prescribed is not None:  # the hard device: a strain offset and a gap offset
+        u_D = model.prescribed.values[step]
+        offset = model.prescribed.strain_operator @ u_D
+        f = f - B.T @ (np.repeat(w * D, k) * offset)
+        if model.n_contacts:
+            g0 = g0 + model.prescribed.gap_operator @ u_D
     kappa = 1e6 * k_max / float(np.max(a)) if model.n_contacts else 0.0
     active = g0 < 0
     u = np.zeros(model.n_dofs)
     with np.errstate(over="ignore", invalid="ignore"):
         for _ in range(30):
+            if not model.n_dofs:
+                break
             held = sp.diags(kappa * a * active)
             try:
                 u = factorize((K + G.T @ held @ G).tocsc() if model.n_contacts else K).solve(
@@ -264,13 +360,13 @@ def computed_strain(model: ContactModel, kind: str, step: int) -> tuple[float, f
                 try:
                     u = factorize((K + G.T @ held @ G).tocsc()).solve(f - G.T @ (held @ np.minimum(g0, 0.0)))
                 except SingularMatrix:
-                    return 0.0, 0.0
+                    return np.zeros(0)
                 break
             now = (g0 + G @ u < 0) if model.n_contacts else active
             if np.array_equal(now, active):
                 break
             active = now
-    e = B @ u
+        e = B @ u + offset
     if not e.size or not np.all(np.isfinite(e)):
-        return 0.0, 0.0
-    return float(np.min(e)), float(np.max(e))
+        return np.zeros(0)
+    return e

@@ -3,7 +3,8 @@
 One function per piece, each checking its own input with a one-line :class:`InputError`:
 
 - geometry: :func:`node_coordinates`, :func:`member_geometry`, :func:`per_member` (sections, moduli);
-- kinematics and supports: :func:`fixed_directions`, :func:`strain_operator` (``B``, free columns);
+- kinematics and supports: :func:`fixed_directions`, :func:`strain_operator` (``B``, free columns),
+  :func:`prescribed_supports` (a hard device: supports with a displacement);
 - loads: :func:`reference_loads` (nodal and distributed, lumped to the nodes);
 - contact: :func:`contact_pairs` (one per obstacle and node), :func:`load_path` (load factors and
   the number of steps), :func:`gap_operator` (``G`` and ``gap0``), :func:`contact_areas`;
@@ -114,18 +115,18 @@ def fixed_directions(supports, nn: int, d: int) -> np.ndarray:
 
     Parameters
     ----------
-    supports : (nn, d) array_like of bool, or sequence of (node, axes)
-        The mask itself, or fixed directions by node such as ``[(0, "xy"), (4, "y")]``.
+    supports : (nn, d) array_like of bool, or sequence of (node, axes) or (node, axes, displacement)
+        The mask itself, or fixed directions by node such as ``[(0, "xy"), (4, "y")]``; a
+        support with a displacement (:func:`prescribed_supports`) holds its axes too.
     nn, d : int
         Number of nodes and dimension.
     """
-    arr = np.asarray(supports, dtype=object)
-    if arr.shape == (nn, d) and all(isinstance(v, (bool, np.bool_)) for v in arr.ravel()):
-        return arr.astype(bool)
+    if _is_mask(supports, nn, d):
+        return np.asarray(supports, dtype=bool)
     fixed = np.zeros((nn, d), dtype=bool)
     for entry in supports:
         try:
-            node, axes = entry
+            node, axes = entry[:2] if isinstance(entry, (list, tuple)) and len(entry) == 3 else entry
             node = int(node)
         except (TypeError, ValueError):
             raise InputError(f"support {entry!r} must be (node, axes) such as (0, 'xy')") from None
@@ -138,6 +139,37 @@ def fixed_directions(supports, nn: int, d: int) -> np.ndarray:
         for a in axes:
             fixed[node, AXES.index(a)] = True
     return fixed
+
+
+def _is_mask(supports, nn: int, d: int) -> bool:
+    """Whether ``supports`` is the ``(nn, d)`` boolean mask form."""
+    try:
+        arr = np.asarray(supports, dtype=object)
+    except ValueError:  # ragged: entries with displacements
+        return False
+    return arr.shape == (nn, d) and all(isinstance(v, (bool, np.bool_)) for v in arr.ravel())
+
+
+def prescribed_supports(supports, nn: int, d: int) -> list[tuple[int, list[int], object]]:
+    """The supports with a displacement (a hard device): ``(node, axes, displacement)`` for each
+    ``(node, axes, displacement)`` entry of ``supports``, ``axes`` as indices; the displacement as
+    given (one ``d``-vector scaled by the load factors, or one per step: checked by
+    :func:`~ddcm_casadi.models.prescribed.displacement_path`)."""
+    if _is_mask(supports, nn, d):
+        return []
+    out, seen = [], {}
+    for entry in supports:
+        if not (isinstance(entry, (list, tuple)) and len(entry) == 3):
+            continue
+        node, axes, value = entry
+        node = int(node)
+        idx = [AXES.index(a) for a in str(axes).lower()]
+        for c in idx:
+            if (node, c) in seen:
+                raise InputError(f"support at node {node}: two displacements prescribed along {AXES[c]}")
+            seen[node, c] = True
+        out.append((node, sorted(set(idx)), value))
+    return out
 
 
 def strain_operator(M: np.ndarray, unit: np.ndarray, length: np.ndarray, nn: int,
@@ -240,8 +272,8 @@ def contact_pairs(obstacles: Sequence[Obstacle], nn: int, d: int) -> ContactPair
 def load_path(load_factors, steps_from_obstacles: int | None) -> tuple[np.ndarray, int]:
     """The load factor of every step and the number of steps.
 
-    Default: ones, as many steps as the obstacle offsets have (or one). Given load factors must
-    agree with the obstacles' number of steps.
+    Default: ones, as many steps as the obstacle offsets (or the prescribed displacements given
+    per step) have, or one. Given load factors must agree with that number of steps.
     """
     lf = None if load_factors is None else np.asarray(load_factors, dtype=float).ravel()
     if lf is not None and (lf.size == 0 or not np.all(np.isfinite(lf))):

@@ -132,7 +132,7 @@ def _step_data(model: ContinuumModel, step, points: dict[str, np.ndarray]) -> di
         cell = {key: points[key] for key in fields if key in points}
     else:  # a mean of P2 data is no datum: means of the states only, named so
         cell = {key + ELEMENT_MEAN: _per_element(model, points[key]) for key in means if key in points}
-    point = dict(displacement=model.dof_displacement(step.u), **_contact_fields(model, step))
+    point = dict(displacement=model.dof_displacement(step.u, step.step), **_contact_fields(model, step))
     return dict(time=float(step.load_parameter), point_data=point, cell_data=cell)
 
 
@@ -200,7 +200,7 @@ def draw_pressure_profile(cmp: Comparison) -> Figure:
         p, xr = np.asarray(last.p, dtype=float), x
         if current:
             p = model.true_pressure(last.u, p)
-            xr = x + model.dof_displacement(last.u)[model.contact_dofs[pairs], 0]
+            xr = x + model.dof_displacement(last.u, last.step)[model.contact_dofs[pairs], 0]
         runs.append(dict(label=f"{variant}/{name}", x=xr, pressure=p[pairs],
                          converged=bool(last.converged), style=styles[variant]))
         if hertz is None and model.reference is not None and variant == "classical" and last.converged:
@@ -240,7 +240,7 @@ def draw_deformed_body(cmp: Comparison, *, variant: str, formulation: str) -> Fi
     disc = model.discretisation
     nn = model.mesh.p.shape[1]  # vertices come first among the scalar dofs
     points = disc.dof_locations()[:nn]
-    disp = model.dof_displacement(last.u)[:nn]
+    disp = model.dof_displacement(last.u, last.step)[:nn]
     active = model.active_contacts(last.p)
     cdofs = model.contact_dofs[active]
     cdofs = cdofs[cdofs < nn]

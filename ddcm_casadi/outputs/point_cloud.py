@@ -196,10 +196,11 @@ def finite_state(model: ContinuumModel, variant: str, u: np.ndarray, strain: np.
     return out
 
 
-def point_displacement(model: ContinuumModel, u: np.ndarray) -> np.ndarray:
-    """``(m, d)`` the displacement at every material point (element-major, as the points)."""
+def point_displacement(model: ContinuumModel, u: np.ndarray, step: int | None = None) -> np.ndarray:
+    """``(m, d)`` the displacement at every material point (element-major, as the points);
+    ``step``: the load step of ``u`` (a hard device's prescribed values)."""
     disc = model.discretisation
-    value = np.asarray(disc.basis.interpolate(model.full_displacement(u)))  # (d, elements, points per element)
+    value = np.asarray(disc.basis.interpolate(model.full_displacement(u, step)))  # (d, elements, points per element)
     return value.reshape(disc.dimension, -1).T.copy()
 
 
@@ -239,7 +240,7 @@ def point_fields(model: ContinuumModel, variant: str, step: StepResult,
                    stress_mandel=stress, von_mises=von_mises(stress, d, zz))
         if zz is not None and np.isnan(zz).any():
             out["von_mises_in_plane"] = von_mises(stress, d)
-    out.update(displacement=point_displacement(model, step.u),
+    out.update(displacement=point_displacement(model, step.u, step.step),
                region=np.asarray(model.point_region, dtype=np.int64),
                element=model.discretisation.element_of_point().astype(np.int64),
                volume=np.asarray(model.volumes, dtype=float))

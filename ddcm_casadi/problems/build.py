@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from ddcm_casadi.data.metric import block_diagonal, weighted_distance2
 from ddcm_casadi.linalg import to_casadi
 from ddcm_casadi.models.base import ContactModel
+from ddcm_casadi.models.prescribed import PARAMETER as PRESCRIBED
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, Distance, LocalTerms, NonlinearMap, NonlinearObjective
 from ddcm_casadi.problems.parameters import Parameters
@@ -52,14 +53,22 @@ class ProblemPair:
         """The reference scales of the ``"mcp"`` (classical) or ``"mpcc"`` (projection) problem."""
         return self.model.scales_for("classical" if kind == "mcp" else "ddcm")
 
-    def fields(self, kind: str, x: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
+    def fields(self, kind: str, x: np.ndarray, p: np.ndarray, params: np.ndarray | None = None
+               ) -> dict[str, np.ndarray]:
         """Physical displacement, contact pressure, strain and stress from scaled unknowns
-        (strain and stress flat and point-major: ``m k`` values)."""
+        (strain and stress flat and point-major: ``m k`` values). ``params``: the parameters the
+        unknowns solved (the problem's of ``kind``); a model with prescribed displacements needs
+        them (its strains are ``B u + B_D u_D``)."""
         s = self.scales(kind)
         n = self.model.n_dofs
         u = s["displacement"] * np.asarray(x[:n])
         pressure = s["stress"] * np.asarray(p)
-        strain = self.model.strain(u)
+        u_D = None
+        if self.model.prescribed is not None:
+            if params is None:
+                raise ValueError("the fields of a model with prescribed displacements need the step's parameters")
+            u_D = self._problem(kind).parameters.get(params, PRESCRIBED)
+        strain = self.model.strain(u) if u_D is None else self.model.strain(u, u_D)
         if kind == "mpcc":
             stress = s["stress"] * np.asarray(x[n:])
         else:
@@ -80,9 +89,20 @@ def _common(model: ContactModel, s: dict, fb_beta: float, n_z: int, P: Parameter
     nc = model.n_contacts
     gap = Affine(sp.hstack([model.gap_operator, sp.csr_matrix((nc, n_z - model.n_dofs))]),
                  sp.hstack([sp.identity(nc) / s["displacement"], sp.csr_matrix((nc, P.size - nc))]))
+    if model.prescribed is not None and nc:  # + G_D u_D / s_d
+        gap = gap + Affine(sp.csr_matrix((nc, n_z)),
+                           _placed(model.prescribed.gap_operator / s["displacement"], P, PRESCRIBED))
     return dict(parameters=P, gap_map=gap, gap_ref=s["displacement"], pressure_ref=s["stress"],
                 contact_stiffness=model.contact_stiffness, fb_alpha=1.0 / (0.01 * model.length_scale),
                 fb_beta=fb_beta, contact_law=model.contact_law, kinematics=model.kinematics)
+
+
+def _placed(A: sp.spmatrix, P: Parameters, name: str) -> sp.csr_matrix:
+    """``A`` placed at the columns of the parameter ``name`` of ``P`` (zero elsewhere)."""
+    sl = P.slice(name)
+    A = sp.csr_matrix(A)
+    return sp.hstack([sp.csr_matrix((A.shape[0], sl.start)), A,
+                      sp.csr_matrix((A.shape[0], P.size - sl.stop))]).tocsr()
 
 
 def _selection(rows: int, start: int, columns: int, scale: float = 1.0) -> sp.csr_matrix:
@@ -134,7 +154,9 @@ def _equilibrium(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, P: Paramete
     dE_i`` of a nonlinear strain measure; the contact forces and loads by
     :func:`_contact_expression`), ``t`` the size of its terms (for relative residuals) and ``g``
     the scaled gaps."""
-    E = model.strain_expression(s["displacement"] * uh)
+    values = lambda name: Ps[P.slice(name)]  # noqa: E731 - the step's parameters by name
+    E = (model.strain_expression(s["displacement"] * uh) if model.prescribed is None
+         else model.strain_expression(s["displacement"] * uh, values))
     stress = stress_of(E)
     B = ca.jacobian(E, uh) / s["displacement"]
     w = ca.DM(np.repeat(np.asarray(model.volumes, float), model.strain_components))
@@ -206,7 +228,8 @@ def _contact_expression(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, P: P
     values = lambda name: Ps[P.slice(name)]  # noqa: E731 - the step's parameters by name
     gap = model.gap_expression(s["displacement"] * uh, values)
     N = ca.jacobian(gap, uh) / s["displacement"]
-    ap = ca.DM(model.contact_area) * ph
+    ph = ca.reshape(ph, model.n_contacts, 1)  # an empty slice of a symbol is 1 x 0: make it nc x 1
+    ap = ca.DM(np.asarray(model.contact_area, float).reshape(-1, 1)) * ph
     f = values("f")
     r = (-s["stress"] * ca.mtimes(N.T, ap) - f) / s["force"]
     t = (s["stress"] * ca.mtimes(ca.fabs(N).T, ca.fabs(ap)) + ca.fabs(f)) / s["force"]
@@ -223,6 +246,11 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
     objective's items ``1/2 sum_q d_q^T W_q d_q / energy``, ``d_q = [E_q(u) - E*_q; stress_q - S*_q]``.
     The same problems as :func:`_build_nonlinear` builds, item by item.
     """
+    if model.prescribed is not None:  # the element-by-element assembly gathers free dofs only
+        from ddcm_casadi.errors import InputError
+
+        raise InputError("prescribed displacements are not supported by the element-by-element assembly of "
+                         "finite kinematics (a continuum with kinematics = \"finite\"); use kinematics = \"small\"")
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
     ne, q = lk.dofs.shape
     nq = lk.points_per_item
@@ -331,7 +359,11 @@ def build_problems(model: ContactModel) -> ProblemPair:
         # F = (K u - G^T a p - f) / s_f with u = s_d u_hat, p = s_s p_hat
         # (scaled in the order the arithmetic of F does it: each term times its scale, over s_f)
         F = Affine(sp.hstack([model.stiffness() * s["displacement"] / s["force"], GtA * -s["stress"] / s["force"]]),
-                   _selection(n, nc, P.size, -1.0 / s["force"]))
+                   _selection(n, P.slice("f").start, P.size, -1.0 / s["force"]))
+        if model.prescribed is not None:  # + B^T W D B_D u_D / s_f: the hard device's strain offset
+            W = sp.diags(np.repeat(model.volumes, k))
+            KD = model.strain_operator.T @ (W @ model.material_matrix()) @ model.prescribed.strain_operator
+            F = F + Affine(sp.csr_matrix((n, n + nc)), _placed(KD / s["force"], P, PRESCRIBED))
         classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),), residual_map=F, distance=None,
                                            **_common(model, s, 1.0 / s["modulus"], n + nc, P))
 
@@ -343,11 +375,15 @@ def build_problems(model: ContactModel) -> ProblemPair:
         BtW = model.strain_operator.T @ sp.diags(np.repeat(model.volumes, k))
         # h = (B^T W stress - G^T a p - f) / s_f with stress = s_s stress_hat
         h = Affine(sp.hstack([sp.csr_matrix((n, n)), BtW * s["stress"] / s["force"], GtA * -s["stress"] / s["force"]]),
-                   _selection(n, nc, P.size, -1.0 / s["force"]))
+                   _selection(n, P.slice("f").start, P.size, -1.0 / s["force"]))
         # d = [B u - strain_star; stress - stress_star] point-major, f = d^T W d / (2 energy)
         stacked = Affine(sp.vstack([sp.hstack([model.strain_operator * s["displacement"], sp.csr_matrix((mk, mk + nc))]),
                                     _selection(mk, n, nz, s["stress"])]),
-                         sp.vstack([_selection(mk, nc + n, P.size, -1.0), _selection(mk, nc + n + mk, P.size, -1.0)]))
+                         sp.vstack([_selection(mk, P.slice("strain_star").start, P.size, -1.0),
+                                    _selection(mk, P.slice("stress_star").start, P.size, -1.0)]))
+        if model.prescribed is not None:  # the strains B u + B_D u_D
+            stacked = stacked + Affine(sp.csr_matrix((2 * mk, nz)), sp.vstack([
+                _placed(model.prescribed.strain_operator, P, PRESCRIBED), sp.csr_matrix((mk, P.size))]))
         order = _point_major(mk, k)
         d = Affine(stacked.z[order], stacked.params[order])
         projection = ComplementarityProblem(

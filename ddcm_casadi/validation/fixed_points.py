@@ -61,7 +61,7 @@ def check_fixed_points(problems: ProblemPair, result: PathResult, *,
     ex = exact.solve(params)  # every step in one call
     err_u, err_p = [], []
     for i, step in enumerate(result.steps):
-        f = problems.fields("mpcc", ex.x[:, i], ex.p[:, i])
+        f = problems.fields("mpcc", ex.x[:, i], ex.p[:, i], params[:, i])
         err_u.append(float(np.max(np.abs(step.u - f["u"]), initial=0.0)) / s["displacement"])
         err_p.append(float(np.max(np.abs(step.p - f["p"]), initial=0.0)) / s["stress"])
     nearest = [nearest_by_brute_force(model.dataset, step) for step in result.steps]

@@ -23,6 +23,9 @@ Rungs
 11. Finite-strain continua: homogeneous compression against its closed form, the small-load limit
     of Hertz, a sphere to 0.3 R on a coarse mesh, DDCM's rate on Neo-Hookean data,
     :mod:`ddcm_casadi.validation.finite_strain_rungs` (its mesh sequence: ``python -m`` it).
+12. Prescribed displacements (a hard device), classical and DDCM, every formulation: the tutorial
+    bar (E = 1, u = 1) against ``sigma = E u / L``, a bar pulled onto a stop, a truss against the
+    stiffness method, a stretched continuum patch (:mod:`ddcm_casadi.validation.hard_device_rungs`).
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ from ddcm_casadi.validation import continuum as continuum_rungs
 from ddcm_casadi.validation.quality_rungs import rung_search_quality
 from ddcm_casadi.validation.fixed_points import check_fixed_points
 from ddcm_casadi.validation.finite_rungs import rung_von_mises
-from ddcm_casadi.validation import finite_strain_rungs, two_body_rungs
+from ddcm_casadi.validation import finite_strain_rungs, hard_device_rungs, two_body_rungs
 from ddcm_casadi.validation.verification import (  # noqa: F401 - as_records, markdown: ddcm-validate's API
     Check, as_records, fitted_rate, markdown,
 )
@@ -320,6 +323,7 @@ RUNGS: dict[str, Callable] = {
     "DDCM search quality on noisy data": rung_search_quality,
     "von Mises truss snap-through (finite kinematics)": rung_von_mises,
     **finite_strain_rungs.RUNGS,
+    **hard_device_rungs.RUNGS,
     **two_body_rungs.RUNGS,
 }
 

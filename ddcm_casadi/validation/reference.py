@@ -82,6 +82,9 @@ class ContactQP:
                  solver_options: dict | None = None) -> None:
         if model.youngs_modulus is None:
             raise InputError("the QP reference needs a Young's modulus")
+        if model.prescribed is not None:
+            raise InputError("the QP reference takes no prescribed displacements (see "
+                             "ddcm_casadi.validation.hard_device_rungs.stiffness_method)")
         if not ca.has_conic(solver):
             raise InputError(f"QP solver {solver!r} is not available in this CasADi build")
         self.model = model

@@ -321,8 +321,9 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact | BodyCon
 
     Returns
     -------
-    G : sparse (nc, n_free)
-        Gap operator ``dg/du`` on the free dofs (fixed components dropped).
+    G_all : sparse (nc, n_dofs)
+        Gap operator ``dg/du`` over every vector dof of the mesh (the model keeps the free
+        columns; a hard device's prescribed columns move the gaps too).
     area : (nc,) ndarray
         The areas the pressures act on.
     gap0 : (n_steps, nc) ndarray
@@ -348,13 +349,13 @@ def contact_pairs(disc: fem.Discretisation, contacts: Sequence[Contact | BodyCon
         contact = dict(contact_dofs=np.zeros(0, np.int64), contact_points=np.zeros((0, d)),
                        contact_normals=np.zeros((0, d)), contact_obstacle=np.zeros(0, np.int64),
                        contact_facets=facet_sets)
-        return sp.csr_matrix((0, free.size)), np.zeros(0), np.zeros((n_steps, 0)), counterparts, contact
-    G = sp.vstack([s.rows for s in sets]).tocsr()[:, free]
+        return sp.csr_matrix((0, disc.n_dofs)), np.zeros(0), np.zeros((n_steps, 0)), counterparts, contact
+    G_all = sp.vstack([s.rows for s in sets]).tocsr()
     gap0 = np.concatenate([s.gap0 for s in sets], axis=1)
     owner = np.concatenate([np.full(s.dofs.size, i) for i, s in enumerate(sets)])
     points = np.concatenate([s.points for s in sets])
-    _check_movable(np.asarray(abs(G).sum(axis=1)).ravel() > 0, gap0, points, owner, counterparts, size)
+    _check_movable(np.asarray(abs(G_all[:, free]).sum(axis=1)).ravel() > 0, gap0, points, owner, counterparts, size)
     contact = dict(contact_dofs=np.concatenate([s.dofs for s in sets]), contact_points=points,
                    contact_normals=np.concatenate([s.normals for s in sets]), contact_obstacle=owner,
                    contact_facets=facet_sets)
-    return G, np.concatenate([s.area for s in sets]), gap0, counterparts, contact
+    return G_all, np.concatenate([s.area for s in sets]), gap0, counterparts, contact

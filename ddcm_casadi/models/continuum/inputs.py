@@ -42,10 +42,14 @@ class Material:
 
 @dataclass(frozen=True)
 class Support:
-    """Fix the displacement components ``components`` (e.g. ``"xy"``, ``"z"``) on a boundary."""
+    """Fix the displacement components ``components`` (e.g. ``"xy"``, ``"z"``) on a boundary: at
+    zero, or with ``displacement`` at that value (a hard device,
+    :mod:`ddcm_casadi.models.continuum.prescribed`): ``d`` numbers (m) scaled by the load
+    factors, or one ``d``-vector per step; zero along the components the support leaves free."""
 
     where: Where
     components: str
+    displacement: object = None
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materi
                                                    point_data, reference_loads, step_count)
 from ddcm_casadi.models.continuum.inputs import BodyContact, BodyForce, Contact, Material, Support, Traction
 from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
+from ddcm_casadi.models.continuum.prescribed import check_kinematics, continuum_prescribed, device_step_count
 
 #: Above this Poisson's ratio, linear (P1) elements lock (:meth:`ContinuumModel.path_warnings`):
 #: the bulk modulus over the shear modulus, ``2 (1 + nu) / (3 (1 - 2 nu))``, passes 9.7 at 0.45
@@ -73,6 +74,7 @@ class ContinuumModel(ContactModel):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        check_kinematics(self)
         for law in set(self.laws):
             if hyperelastic.get_law(law).finite != (self.kinematics == "finite") and self.youngs_modulus is not None:
                 want = ("\"saint_venant_kirchhoff\" or \"neo_hookean\"" if self.kinematics == "finite"
@@ -97,15 +99,16 @@ class ContinuumModel(ContactModel):
         """``(m, d, d)`` ``H = du/dX`` at the material points."""
         return finite.displacement_gradient(self.gradient_operator(), u, self.dimension)
 
-    def strain(self, u: np.ndarray) -> np.ndarray:
-        """Mandel strains (flat, point-major): ``B u`` (small), Green-Lagrange ``E`` (finite)."""
+    def strain(self, u: np.ndarray, u_prescribed: np.ndarray | None = None) -> np.ndarray:
+        """Mandel strains (flat, point-major): ``B u`` (small; ``+ B_D u_D`` with a hard device),
+        Green-Lagrange ``E`` (finite)."""
         if not self.finite:
-            return super().strain(u)
+            return super().strain(u) if self.prescribed is None else super().strain(u, u_prescribed)
         return finite.green_lagrange(self.displacement_gradient(u)).reshape(-1)
 
-    def strain_expression(self, u):
+    def strain_expression(self, u, values=None):
         if not self.finite:
-            return super().strain_expression(u)
+            return super().strain_expression(u) if self.prescribed is None else super().strain_expression(u, values)
         return finite.green_lagrange_expression(self.gradient_operator(), u, self.dimension)
 
     def local_kinematics(self) -> LocalKinematics | None:
@@ -302,16 +305,23 @@ class ContinuumModel(ContactModel):
     def dimension(self) -> int:
         return self.discretisation.dimension
 
-    def full_displacement(self, u: np.ndarray) -> np.ndarray:
-        """All dofs (fixed ones zero) from the free unknowns; ``u`` may be stacked over steps."""
+    def full_displacement(self, u: np.ndarray, step: int | None = None) -> np.ndarray:
+        """All dofs (fixed ones zero) from the free unknowns; ``u`` may be stacked over steps.
+        With a hard device the prescribed dofs take the values of load step ``step`` (one
+        ``u``), which it then needs."""
         u = np.asarray(u)
         out = np.zeros(u.shape[:-1] + (self.discretisation.n_dofs,))
         out[..., self.free_dofs] = u
+        if self.prescribed is not None:
+            if step is None:
+                raise ValueError("the displacements of a continuum with prescribed displacements need the step")
+            out[..., self.prescribed.dofs] = self.prescribed.values[step]
         return out
 
-    def dof_displacement(self, u: np.ndarray) -> np.ndarray:
-        """``(N_scalar, d)`` displacement at every scalar dof location (nodes, P2 midpoints)."""
-        full = self.full_displacement(u)
+    def dof_displacement(self, u: np.ndarray, step: int | None = None) -> np.ndarray:
+        """``(N_scalar, d)`` displacement at every scalar dof location (nodes, P2 midpoints);
+        ``step``: the load step of ``u`` (needed with a hard device)."""
+        full = self.full_displacement(u, step)
         return full[self.discretisation.vector_dofs()].T
 
     # ------------------------------------------------------------- mechanics
@@ -501,19 +511,23 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
     B_all, w = fem.strain_operator(disc)
     free = free_dofs(disc, supports)
     f_ref = reference_loads(disc, tractions, body_forces)
-    n_steps = step_count(load_factors, contacts)
+    n_steps = device_step_count(load_factors, contacts, supports, d)
     factors = np.ones(n_steps) if load_factors is None else np.asarray(load_factors, dtype=float)
     size = float(np.max(np.ptp(mesh.p, axis=1)))
     bodies = [c.name for c in contacts if c.kind == "bodies"]
     if kinematics == "finite" and bodies:
         raise InputError(f"contact pair {bodies[0]!r}: contact between bodies is linearised at the reference "
                          "configuration; finite kinematics needs rigid obstacles for now")
-    G, area_all, gap0, obstacles, contact = contact_pairs(disc, contacts, free, n_steps, size)
+    G_all, area_all, gap0, obstacles, contact = contact_pairs(disc, contacts, free, n_steps, size)
+    G = G_all[:, free].tocsr()
     loads = factors[:, None] * f_ref[free][None, :]
     travelling = [ob for ob in obstacles if ob.direction is not None]
     by_travel = bool(travelling) and load_factors is None
     load_parameter = travelling[0].travels(n_steps) if by_travel else factors
     lp_name = "obstacle travel (m)" if by_travel else "load factor"
+    prescribed = continuum_prescribed(disc, supports, B_all, G_all, n_steps, load_factors, f_ref)
+    if prescribed is not None and load_factors is None and not (by_travel and np.ptp(load_parameter) > 0):
+        load_parameter, lp_name = np.arange(n_steps, dtype=float), "load step"  # a path set by the device
 
     model = ContinuumModel(
         strain_operator=B_all[:, free].tocsr(), volumes=w, gap_operator=G, contact_area=area_all,
@@ -521,7 +535,8 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
         length_scale=size, name=name, load_parameter_name=lp_name, strain_components=k, discretisation=disc,
         poisson_ratio=nu, free_dofs=free, point_region=point_region,
         region_names=tuple(m.region or "(rest)" for m in materials), obstacles=tuple(obstacles),
-        reference=reference, laws=tuple(m.law for m in materials), kinematics=kinematics, **contact)
+        reference=reference, laws=tuple(m.law for m in materials), kinematics=kinematics, prescribed=prescribed,
+        **contact)
     _check_held(model)
     return model
 
