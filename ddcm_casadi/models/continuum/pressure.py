@@ -117,7 +117,7 @@ def pressure_field(model: ContactModel, pressure: np.ndarray, stress: np.ndarray
             continue
         fb = _facet_basis(model, facets)
         normals = np.moveaxis(np.asarray(fb.normals), 0, -1)  # (nf, nq, d), outward
-        x = np.asarray(fb.global_coordinates().value)
+        x = np.asarray(fb.global_coordinates())
         t_n = -np.einsum("fqk,tfqk->tfq", normal_projector(normals), _stress_at(model, sig, fb.tind, x))
         dx = np.asarray(fb.dx)
         rhs = np.zeros((p.shape[0], n_scalar))
