@@ -103,7 +103,8 @@ class HertzReference:
     obstacle : int
         Index of the indenter among the model's obstacles (a :class:`~.obstacles.Ball`).
     force_factor : float
-        The full body's force over the modelled part's (2 for a half, 4 for a quarter).
+        The full body's force over the modelled part's (2 for a half, 4 for a quarter): the
+        model's ``symmetry_factor`` (a model refuses a reference with another one).
     """
 
     youngs_modulus: float

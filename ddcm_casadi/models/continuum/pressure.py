@@ -58,10 +58,17 @@ def normal_projector(normals: np.ndarray) -> np.ndarray:
                      _SQRT2 * n[..., 0] * n[..., 2], _SQRT2 * n[..., 0] * n[..., 1]], axis=-1)
 
 
-def _facet_basis(model: ContactModel, facets: np.ndarray) -> skfem.FacetBasis:
-    disc = model.discretisation
-    # the quadrature of the tributary areas, so that a_i and the projection integrate alike
-    return skfem.FacetBasis(disc.mesh, disc.scalar_basis.elem, facets=facets, intorder=max(2, 2 * disc.degree))
+def _facet_basis(model: ContactModel, surface: int) -> skfem.FacetBasis:
+    """The scalar basis on contact surface ``surface``'s facets (built once per model), with the
+    quadrature of the tributary areas, so that ``a_i`` and the projection integrate alike."""
+    key = ("contact_facet_basis", surface)
+    fb = model._cache.get(key)
+    if fb is None:
+        disc = model.discretisation
+        fb = skfem.FacetBasis(disc.mesh, disc.scalar_basis.elem, facets=model.contact_facets[surface],
+                              intorder=max(2, 2 * disc.degree))
+        model._cache[key] = fb
+    return fb
 
 
 def _stress_at(model: ContactModel, stress: np.ndarray, elements: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -115,7 +122,7 @@ def pressure_field(model: ContactModel, pressure: np.ndarray, stress: np.ndarray
         pairs = np.flatnonzero(np.asarray(model.contact_obstacle) == s)
         if not pairs.size or not len(facets):
             continue
-        fb = _facet_basis(model, facets)
+        fb = _facet_basis(model, s)
         normals = np.moveaxis(np.asarray(fb.normals), 0, -1)  # (nf, nq, d), outward
         x = np.asarray(fb.global_coordinates())
         t_n = -np.einsum("fqk,tfqk->tfq", normal_projector(normals), _stress_at(model, sig, fb.tind, x))
