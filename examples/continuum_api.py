@@ -55,9 +55,11 @@ def hertz(cmp: Comparison) -> dict[str, dict]:
     """Per run, the last step against Hertz at its own force
     (:meth:`~ddcm_casadi.models.continuum.hertz.HertzReference.measure`: ``force`` in N/m,
     ``error_p0``, ``error_a``, ...)."""
-    model = cmp.model
-    return {f"{variant}/{name}": model.reference.measure(model, cmp.fields(variant, name)["contact_pressure"][-1])
-            for variant, name in cmp.results}
+    model, out = cmp.model, {}
+    for variant, name in cmp.results:
+        f = cmp.fields(variant, name)
+        out[f"{variant}/{name}"] = model.reference.measure(model, f["contact_pressure"][-1], f["stress"][-1])
+    return out
 
 
 if __name__ == "__main__":

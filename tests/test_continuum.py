@@ -167,8 +167,10 @@ def test_every_formulation_and_variant_on_a_small_body(dim, tmp_path):
     assert len([n for n in names if n.endswith(".vtu")]) == 2 * len(cmp.results) * model.n_steps
     assert "ddcm_fischer_burmeister_points.pvd" in names
     kept = model.results_fields(cmp.fields("ddcm", "fischer_burmeister"))
-    assert set(kept) == {"contact_coordinates", "contact_obstacle", "contact_pressure", "total_contact_force",
-                         "converged"}
+    assert set(kept) == {"contact_coordinates", "contact_obstacle", "contact_pressure", "contact_pressure_recovered",
+                         "contact_gap", "total_contact_force", "obstacle_names", "obstacle_travel_directions",
+                         "contact_force_vector_as_modelled", "contact_force_along_travel_as_modelled",
+                         "symmetry_factor", "contact_force_along_travel_full_body", "converged", "notes"}
 
 
 # ----------------------------------------------------------------------------------- Hertz

@@ -239,3 +239,32 @@ def test_p1_mesh_cells_are_the_points(tmp_path):
         assert {"strain", "stress", "von_mises", "von_mises_in_plane", "data_stress", "ddcm_distance"} <= set(cells)
         for name in ("stress", "data_stress", "ddcm_distance", "von_mises_in_plane"):
             np.testing.assert_array_equal(cells[name][0], points[name])
+
+
+# ------------------------------------------------- small kinematics: every element kind writes its points
+@pytest.mark.parametrize("dim,degree", [(2, 1), (2, 2), (3, 1), (3, 2)])
+def test_small_strain_point_cloud_of_every_element(tmp_path, dim, degree):
+    """Small kinematics, P1 and P2 in 2-D and 3-D (a block under a traction; quadratic tetrahedra
+    take no contact): one vertex per material point, and for DDCM its datum (set, row, strain,
+    stress), its distance and the data-range flag."""
+    from ddcm_casadi.models.continuum import Traction
+
+    C = isotropic_elasticity(E, NU, dim)[0]
+    data = MaterialDataset.hookean_grid(C, -1e-4, 1e-4, 3, c=Metric(C))
+    body = mesh.rectangle(0.01, 0.01, nx=2, ny=2) if dim == 2 else mesh.box(0.01, 0.01, 0.01, nx=1, ny=1, nz=1)
+    top = "ymax" if dim == 2 else "zmax"
+    traction = (0.0, -1e6) if dim == 2 else (0.0, 0.0, -1e6)
+    model = continuum_model(body, degree=degree, materials=[Material(youngs_modulus=E, poisson_ratio=NU, data=0)],
+                            supports=[Support("ymin" if dim == 2 else "zmin", "xyz"[:dim])],
+                            tractions=[Traction(top, traction)], load_factors=[0.5, 1.0], datasets=[data])
+    assert model.kinematics == "small"
+    _run(model, tmp_path)
+    for variant in ("classical", "ddcm"):
+        cloud = _cloud(tmp_path, variant, 1)
+        assert cloud.points.shape[0] == model.n_points
+        np.testing.assert_allclose(cloud.points[:, :dim], model.discretisation.quadrature_points(), atol=1e-15)
+        assert {"strain", "stress", "strain_mandel", "stress_mandel"} <= set(cloud.point_data)
+        if variant == "ddcm":
+            assert {"data_set", "data_index", "data_strain_mandel", "data_stress_mandel", "ddcm_distance",
+                    "beyond_data"} <= set(cloud.point_data)
+            assert datum_mismatch(model, cloud) == 0.0

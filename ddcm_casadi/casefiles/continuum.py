@@ -37,6 +37,8 @@ Continua
     refine_near = { point = [0.0, 0.0], radius = 0.004, levels = 4 }   # optional grading: the
                                  # radius shrinks by shrink (0.5) per level, plus buffer elements
     degree = 1                   # Lagrange elements: 1 (P1) or 2 (P2; no contact on P2 tetrahedra)
+    symmetry_factor = 1          # the full body's force over the modelled part's (a half: 2, a
+                                 # quarter: 4): the full-body forces of the results and Hertz's
 
     [material]                   # or [[material]] tables with region = "<subdomain name>"
     youngs_modulus = 200e9       # Pa; with poisson_ratio the classical law (optional if DDCM only)
@@ -84,7 +86,8 @@ Continua
 
     [hertz]                      # optional: validate against Hertz (one isotropic material)
     obstacle = 0                 # the [[contact]] table of the indenter
-    force_factor = 2             # the body's force over the modelled part's (symmetry: 2, 4)
+                                 # (its force is the full body's: [mesh] symmetry_factor; an older
+                                 # force_factor here must equal it)
 
     [data]                       # strain_1..k,stress_1..k CSV (Mandel: k = 3 in 2-D, 6 in 3-D),
     hookean = { strain_min = -0.01, strain_max = 0.01, points = 21 }    # or a linear law on a
@@ -112,12 +115,33 @@ ANNOUNCE_DATA_POINTS = 200_000
 MEMORY_WARNING_SHARE = 0.5
 
 _MESH = {"shape", "size", "divisions", "origin", "radius", "center", "refine", "path", "degree", "refine_near",
-         "signs", "body"}
+         "signs", "body", "symmetry_factor"}
+#: The [mesh] keys of the whole model, not of one body.
+_WHOLE_MESH = {"degree", "body", "symmetry_factor"}
 _HOOKEAN = {"strain_min", "strain_max", "points", "youngs_modulus", "poisson_ratio", "grading"}
 _GRID = _HOOKEAN
 _SAMPLES = {"strain_min", "strain_max", "count", "seed", "youngs_modulus", "poisson_ratio"}
 _SHAPES = ("rectangle", "box", "disc", "half_disc", "quarter_disc", "ball", "ball_octant")
 _OBSTACLES = ("plane", "circle", "sphere", "cylinder", "punch")
+
+
+def _symmetry_factor(doc: dict) -> float:
+    """``[mesh] symmetry_factor`` (default 1), the one symmetry setting of a case: ``[hertz]
+    force_factor`` (its older place) is taken when it is alone and must equal it when both are given."""
+    given = {}
+    if "symmetry_factor" in doc["mesh"]:
+        given["[mesh] symmetry_factor"] = number("mesh", "symmetry_factor", doc["mesh"]["symmetry_factor"])
+    if "force_factor" in doc.get("hertz", {}):
+        given["[hertz] force_factor"] = number("hertz", "force_factor", doc["hertz"]["force_factor"])
+    values = set(given.values())
+    if len(values) > 1:
+        raise InputError(f"{' and '.join(f'{k} = {v:g}' for k, v in given.items())} differ: give one symmetry "
+                         "factor, [mesh] symmetry_factor")
+    factor = values.pop() if values else 1.0
+    if not factor >= 1:
+        raise InputError(f"{next(iter(given))} must be >= 1 (the full body's force over the modelled part's: "
+                         f"a half 2, a quarter 4), got {factor:g}")
+    return factor
 
 
 def _keys(label: str, table: dict, known: set) -> None:
@@ -133,15 +157,16 @@ def _shape_mesh(doc: dict, base_dir: Path):
     if "body" in m:
         from ddcm_casadi.models.continuum.bodies import join
 
-        extra = sorted(set(m) & (_MESH - {"degree", "body"}))
+        extra = sorted(set(m) & (_MESH - _WHOLE_MESH))
         if extra:
-            raise InputError(f"[mesh] with [[mesh.body]] tables takes only 'degree'; {extra[0]!r} goes in a body")
+            raise InputError(f"[mesh] with [[mesh.body]] tables takes only {', '.join(sorted(_WHOLE_MESH - {'body'}))}; "
+                             f"{extra[0]!r} goes in a body")
         bodies = {}
         for i, table in enumerate(_tables(m, "body")):
             label = f"mesh.body {i}"
             if not isinstance(table, dict):
                 raise InputError(f"[{label}] must be a table")
-            _keys(label, table, (_MESH - {"degree", "body"}) | {"name"})
+            _keys(label, table, (_MESH - _WHOLE_MESH) | {"name"})
             name = table.get("name")
             if not isinstance(name, str) or not name or name in bodies:
                 raise InputError(f"[{label}] needs a unique 'name' (a string), got {show(name)}")
@@ -531,6 +556,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
         contacts.append(_body_contact(label, t, d) if "slave" in t or "master" in t
                         else Contact(_obstacle(label, t, d), _boundary(label, t, d)))
 
+    symmetry = _symmetry_factor(doc)
     reference = None
     if "hertz" in doc:
         h = doc["hertz"]
@@ -541,13 +567,13 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
         if not contacts or getattr(getattr(contacts[ob], "obstacle", None), "kind", None) != "ball":
             raise InputError("[hertz] needs a circle (2-D) or sphere (3-D) obstacle")
         reference = HertzReference(materials[0].youngs_modulus, materials[0].poisson_ratio, obstacle=ob,
-                                   force_factor=number("hertz", "force_factor", h.get("force_factor", 1.0)))
+                                   force_factor=symmetry)
 
     datasets = _datasets(doc, base_dir, k, materials) if n_data else []
     max_outer, options = casefile.run_options(doc)
     model = continuum_model(mesh, materials=materials, supports=supports, contacts=contacts, degree=degree,
                             tractions=tractions, body_forces=body_forces, load_factors=load_factors,
-                            datasets=datasets, name=name, reference=reference,
+                            datasets=datasets, name=name, reference=reference, symmetry_factor=symmetry,
                             # the case's top-level kinematics replaces this; built to fit the laws
                             # so that the model checks the pair (law, kinematics) the user wrote
                             kinematics="finite" if any(hyperelastic.get_law(m.law).finite for m in materials)

@@ -4,8 +4,10 @@ For every run (variant x formulation) two series in ``vtu/``, one VTU file per s
 
 - the mesh, ``<variant>_<formulation>.pvd``, at its reference positions: point data
   ``displacement`` (at every node, P2 midpoints included; ParaView's *Warp By Vector* with scale 1
-  shows the deformed configuration), and on the contact nodes ``contact_pressure`` (zero elsewhere:
-  no contact traction acts there), ``contact_gap`` (NaN elsewhere: a gap has no meaning off the
+  shows the deformed configuration), and on the contact nodes ``contact_pressure`` (the solvers'
+  nodal pressure; zero elsewhere: no contact traction acts there), ``contact_pressure_recovered``
+  (the pressure recovered from the boundary elements' stresses,
+  :func:`~ddcm_casadi.models.continuum.pressure.pressure_field`), ``contact_gap`` (NaN elsewhere: a gap has no meaning off the
   contact surfaces, and a zero would read as touching; ParaView leaves NaN out of the colour range
   and draws it in its NaN colour) and ``contact_node`` (1 on a contact node, for *Threshold*); a node
   with pairs to several obstacles shows their summed pressure and its smallest gap. Cell data
@@ -66,6 +68,7 @@ from ddcm_casadi.outputs.continuum import figure_deformed_body, figure_pressure_
 from ddcm_casadi.outputs.marks import (
     BEYOND, BEYOND_LABEL, FAILED, FAILED_LABEL, LOCAL, LOCAL_LABEL, MARKERS, STYLES, mark_steps, run_title,
 )
+from ddcm_casadi.models.continuum.pressure import measured_pressure, pressure_field, surface_forces
 from ddcm_casadi.outputs.point_cloud import finite_state, point_fields, sigma_zz, write_point_cloud
 
 if TYPE_CHECKING:
@@ -106,14 +109,16 @@ def _per_element(model, values: np.ndarray) -> np.ndarray:
 
 def _contact_fields(model: ContinuumModel, step) -> dict[str, np.ndarray]:
     """Pressure (summed), gap (smallest) and a flag at every scalar dof of the mesh file; the pairs'
-    dofs only (see the module for why the gap is NaN elsewhere). At finite strain the pressure
-    twice, nominal and true."""
+    dofs only (see the module for why the gap is NaN elsewhere). At small kinematics the nodal
+    pressure and the recovered one (:func:`~ddcm_casadi.models.continuum.pressure.pressure_field`),
+    at finite strain the pressure nominal and true."""
     n = model.discretisation.scalar_basis.N
     gap, node = np.full(n, np.inf), np.zeros(n, dtype=np.uint8)
     dofs = np.asarray(model.contact_dofs, dtype=np.intp)
     p = np.asarray(step.p, dtype=float)
     pressures = {"contact_pressure_nominal": p, "contact_pressure_true": model.true_pressure(step.u, p)} \
-        if model.finite else {"contact_pressure": p}
+        if model.finite else {"contact_pressure": p,
+                              "contact_pressure_recovered": pressure_field(model, p, np.asarray(step.stress, float))}
     out = {}
     for name, values in pressures.items():
         out[name] = np.zeros(n)
@@ -198,13 +203,15 @@ def draw_pressure_profile(cmp: Comparison) -> Figure:
     for (variant, name), r in cmp.results.items():
         last = r.steps[-1]
         p, xr = np.asarray(last.p, dtype=float), x
+        if not model.finite:  # the pressure the measures use (recovered on linear tetrahedra)
+            p = measured_pressure(model, p, np.asarray(last.stress, float))
         if current:
             p = model.true_pressure(last.u, p)
             xr = x + model.dof_displacement(last.u, last.step)[model.contact_dofs[pairs], 0]
         runs.append(dict(label=f"{variant}/{name}", x=xr, pressure=p[pairs],
                          converged=bool(last.converged), style=styles[variant]))
         if hertz is None and model.reference is not None and variant == "classical" and last.converged:
-            hertz = model.reference.curve(model, last.p)
+            hertz = model.reference.curve(model, last.p, last.stress)
     xlabel = ("distance from the indenter's axis (m)" if model.reference is not None
               else "current x (m)" if current else "x (m)")
     what = "true contact pressure (per current area)" if current else "contact pressure"
@@ -291,15 +298,8 @@ def obstacle_forces(model: ContinuumModel, u: np.ndarray, p: np.ndarray) -> tupl
         Each resolved along its obstacle's direction of travel (positive: pushing the body the way
         the obstacle moves).
     """
-    u, p = np.atleast_2d(np.asarray(u, dtype=float)), np.atleast_2d(np.asarray(p, dtype=float))
-    n_obstacles, d = len(model.obstacles), model.dimension
-    vectors = np.full((u.shape[0], n_obstacles, d), np.nan)
-    for k in range(u.shape[0]):
-        if np.all(np.isfinite(u[k])) and np.all(np.isfinite(p[k])):
-            pair_forces = (model.contact_area * p[k])[:, None] * model.current_normals(u[k], k)
-            for o in range(n_obstacles):
-                vectors[k, o] = pair_forces[np.asarray(model.contact_obstacle) == o].sum(axis=0)
-    directions = np.stack([ob.offset(1.0) for ob in model.obstacles]) if n_obstacles else np.zeros((0, d))
+    vectors = surface_forces(model, u, p)
+    directions = np.stack([ob.offset(1.0) for ob in model.obstacles]) if model.obstacles else np.zeros((0, model.dimension))
     return vectors, np.einsum("kod,od->ko", vectors, directions)
 
 

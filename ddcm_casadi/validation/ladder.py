@@ -319,6 +319,7 @@ RUNGS: dict[str, Callable] = {
     "4-member truss without contact": rung_no_contact,
     "active sets (enumeration)": rung_active_sets,
     "Hertz contact in plane strain": continuum_rungs.rung_hertz,
+    "Hertz contact in 3-D (recovered pressure)": continuum_rungs.rung_hertz_3d,
     "DDCM on a continuum with data size": continuum_rungs.rung_continuum_ddcm,
     "DDCM search quality on noisy data": rung_search_quality,
     "von Mises truss snap-through (finite kinematics)": rung_von_mises,

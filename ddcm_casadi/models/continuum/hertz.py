@@ -16,17 +16,24 @@ modulus is ``E* = E / (1 - nu^2)`` (``docs/maths.md``, "Hertz contact").
 
 The indentation depth of a 2-D body depends on its size, so the reference is evaluated for the
 *measured* contact force of the finite-element solution, and the finite-element pressure is
-compared with that Hertz profile:
+compared with that Hertz profile. The finite-element pressure is the one every measure uses,
+:func:`~ddcm_casadi.models.continuum.pressure.measured_pressure` (on linear tetrahedra the
+pressure recovered from the boundary elements' stresses, elsewhere the nodal pressure):
 
-- ``p0``: the largest nodal contact pressure;
+- ``p0``: its largest value over the pairs;
 - ``a`` from the pressure's second moment, which for the Hertz profile is
   ``int x^2 p / int p = a^2 / 4`` (2-D) and ``int r^2 p dA / int p dA = 2 a^2 / 5`` (3-D): an
   integral measure, free of the one-element uncertainty of "the last node in contact";
 - the relative L2 error of the pressure over the contact surface, with the nodal (lumped)
-  quadrature of the tributary areas.
+  quadrature of the tributary areas;
+- ``scatter``: the largest deviation, relative to ``p0`` of the fit, of the pressure at the pairs
+  with ``r < 0.8 a`` from a least-squares fit ``c0 + c1 (r/a)^2 + c2 (r/a)^4`` through them (node-to-node
+  noise, free of the discretisation's smooth error); NaN with fewer than 4 such pairs.
 
-A model of a symmetric part of the body (half in 2-D, a quarter in 3-D) sets ``force_factor``
-(2 or 4): the measured force is multiplied by it.
+The force is the nodal forces' resultant along the indenter's travel (the one the solution is in
+equilibrium with). A model of a symmetric part of the body (half in 2-D, a quarter in 3-D) has
+the model's ``symmetry_factor`` (2 or 4; ``force_factor`` here, the same number: the model
+refuses two different ones): the measured force is multiplied by it.
 """
 
 from __future__ import annotations
@@ -71,6 +78,20 @@ def profile(x: np.ndarray, a: float, p0: float) -> np.ndarray:
     return p0 * np.sqrt(np.clip(1.0 - (x / a) ** 2, 0.0, None))
 
 
+def scatter(r: np.ndarray, p: np.ndarray, a: float, inside: float = 0.8) -> float:
+    """Node-to-node scatter of a pressure ``p`` at distances ``r`` from the axis: the largest
+    ``|p - fit| / fit(0)`` over the points with ``r < inside a``, ``fit = c0 + c1 (r/a)^2 + c2 (r/a)^4``
+    by least squares through them (smooth in ``r`` like the Hertz profile, so the fit keeps the
+    discretisation's smooth error and leaves the noise); NaN with fewer than 4 such points."""
+    r, p = np.asarray(r, float), np.asarray(p, float)
+    keep = r < inside * a if a > 0 else np.zeros(r.shape, bool)
+    if int(np.sum(keep)) < 4:
+        return float("nan")
+    V = np.vander((r[keep] / a) ** 2, 3, increasing=True)
+    c = np.linalg.lstsq(V, p[keep], rcond=None)[0]
+    return float(np.max(np.abs(p[keep] - V @ c)) / c[0]) if c[0] > 0 else float("nan")
+
+
 @dataclass(frozen=True)
 class HertzReference:
     """The Hertz solution for one rigid round obstacle of a continuum model.
@@ -82,7 +103,8 @@ class HertzReference:
     obstacle : int
         Index of the indenter among the model's obstacles (a :class:`~.obstacles.Ball`).
     force_factor : float
-        The full body's force over the modelled part's (2 for a half, 4 for a quarter).
+        The full body's force over the modelled part's (2 for a half, 4 for a quarter): the
+        model's ``symmetry_factor`` (a model refuses a reference with another one).
     """
 
     youngs_modulus: float
@@ -125,19 +147,32 @@ class HertzReference:
         return pairs, np.linalg.norm(lateral, axis=1)
 
     # ----------------------------------------------------------------- measures
-    def measure(self, model, pressure: np.ndarray) -> dict:
+    def measure(self, model, pressure: np.ndarray, stress: np.ndarray | None = None) -> dict:
         """Compare one step's contact pressures (Pa, one per pair) with Hertz.
+
+        Parameters
+        ----------
+        model : ContinuumModel
+        pressure : ndarray, shape (nc,)
+            The solvers' nodal pressures.
+        stress : ndarray, shape (m k,), optional
+            The step's material-point stresses; required on linear tetrahedra, whose measures
+            use the recovered pressure (:func:`~ddcm_casadi.models.continuum.pressure.measured_pressure`).
 
         Returns
         -------
         dict
             ``force`` (the full body's, along the indenter's travel), ``a_hertz``, ``p0_hertz``,
             ``a_fe``, ``p0_fe``, ``error_a``, ``error_p0`` (relative), ``error_l2`` (relative L2
-            of the pressure profile), ``nodes_in_contact``.
+            of the pressure profile), ``scatter`` (see the module), ``nodes_in_contact``,
+            ``p0_nodal`` (the largest nodal pressure, for comparison) and ``pressure_measure``
+            (``"recovered"`` or ``"nodal"``).
         """
+        from ddcm_casadi.models.continuum.pressure import measured_pressure, uses_recovered
+
         ob = self._indenter(model)
         pairs, x = self.coordinates(model)
-        p = np.asarray(pressure, float)[pairs]
+        p = measured_pressure(model, pressure, stress)[pairs]
         area = model.contact_area[pairs]
         d = np.asarray(ob.direction, float) / np.linalg.norm(ob.direction)
         # The contact forces a p n resolved against the travel d. A step without contact sums
@@ -157,19 +192,23 @@ class HertzReference:
         l2 = math.sqrt(float(np.sum(area * (p - ref) ** 2))) / den if den > 0 else float("nan")
         p0_fe = float(np.max(p)) if p.size else 0.0
         rel = (lambda v, r: abs(v - r) / r if r > 0 else float("nan"))  # noqa: E731
+        nodal = np.asarray(pressure, float)[pairs]
         return dict(force=force, a_hertz=a_h, p0_hertz=p0_h, a_fe=a_fe, p0_fe=p0_fe,
                     error_a=rel(a_fe, a_h), error_p0=rel(p0_fe, p0_h), error_l2=l2,
-                    nodes_in_contact=int(np.sum(model.active_contacts(p))))
+                    scatter=scatter(np.abs(x), p, a_h), nodes_in_contact=int(np.sum(model.active_contacts(nodal))),
+                    p0_nodal=float(np.max(nodal)) if nodal.size else 0.0,
+                    pressure_measure="recovered" if uses_recovered(model) else "nodal")
 
-    def step_summary(self, model, pressure: np.ndarray) -> dict:
-        """The per-step columns of ``results.csv``: force, ``a`` and ``p0`` errors."""
-        m = self.measure(model, pressure)
+    def step_summary(self, model, pressure: np.ndarray, stress: np.ndarray | None = None) -> dict:
+        """The per-step columns of ``results.csv``: the full body's force along the travel,
+        ``a`` and ``p0`` errors, the profile's L2 error and scatter (:meth:`measure`)."""
+        m = self.measure(model, pressure, stress)
         return dict(hertz_force=m["force"], hertz_error_a=m["error_a"], hertz_error_p0=m["error_p0"],
-                    hertz_error_l2=m["error_l2"])
+                    hertz_error_l2=m["error_l2"], hertz_pressure_scatter=m["scatter"])
 
-    def curve(self, model, pressure: np.ndarray, n: int = 201) -> dict:
+    def curve(self, model, pressure: np.ndarray, stress: np.ndarray | None = None, n: int = 201) -> dict:
         """The Hertz profile for the measured force, for figures: ``{"x", "pressure", "label"}``."""
-        m = self.measure(model, pressure)
+        m = self.measure(model, pressure, stress)
         a = m["a_hertz"]
         lo = -1.3 * a if model.dimension == 2 and self._two_sided(model) else 0.0
         x = np.linspace(lo, 1.3 * a, n)

@@ -46,6 +46,7 @@ from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materi
 from ddcm_casadi.models.continuum.inputs import BodyContact, BodyForce, Contact, Material, Support, Traction
 from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
 from ddcm_casadi.models.continuum.prescribed import check_kinematics, continuum_prescribed, device_step_count
+from ddcm_casadi.models.continuum.pressure import check_symmetry_factor, contact_force_columns, contact_results
 
 #: Above this Poisson's ratio, linear (P1) elements lock (:meth:`ContinuumModel.path_warnings`):
 #: the bulk modulus over the shear modulus, ``2 (1 + nu) / (3 (1 - 2 nu))``, passes 9.7 at 0.45
@@ -71,10 +72,12 @@ class ContinuumModel(ContactModel):
     contact_facets: tuple = ()                    # boundary facets of each contact surface
     reference: object | None = None               # e.g. a HertzReference
     laws: tuple = ()                              # the classical law of each region (hyperelastic.LAWS)
+    symmetry_factor: float = 1.0                  # the full body's force over the modelled part's
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check_kinematics(self)
+        check_symmetry_factor(self.symmetry_factor, self.reference)
         for law in set(self.laws):
             if hyperelastic.get_law(law).finite != (self.kinematics == "finite") and self.youngs_modulus is not None:
                 want = ("\"saint_venant_kirchhoff\" or \"neo_hookean\"" if self.kinematics == "finite"
@@ -365,14 +368,19 @@ class ContinuumModel(ContactModel):
             out["reference"] = self.reference.describe()
         return out
 
-    def step_summary(self, u: np.ndarray, p: np.ndarray) -> dict:
+    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None) -> dict:
         """:meth:`ContactModel.step_summary` (``total_contact_force`` is ``sum a_0 p``, the sum of
-        the nodal contact forces' magnitudes), the reference's columns, and at finite strain
-        ``min_J`` (the smallest ``det F`` of the material points) and ``max_contact_pressure_true``
-        (the largest pressure per current area, :meth:`true_pressure`)."""
+        the nodal contact forces' magnitudes of the modelled part, along no direction), the
+        resultant contact force along each obstacle's travel
+        (:func:`~ddcm_casadi.models.continuum.pressure.contact_force_columns`: as modelled and for
+        the full body, times :attr:`symmetry_factor`), the reference's columns (measured with
+        ``stress``), and at finite strain ``min_J`` (the smallest ``det F`` of the material points)
+        and ``max_contact_pressure_true`` (the largest pressure per current area, :meth:`true_pressure`)."""
         out = super().step_summary(u, p)
+        if self.n_contacts:
+            out.update(contact_force_columns(self, u, p))
         if self.reference is not None:
-            out.update(self.reference.step_summary(self, p))
+            out.update(self.reference.step_summary(self, p, stress))
         if self.finite:
             finite_u = bool(np.all(np.isfinite(u)))
             out["min_J"] = float(np.min(finite.jacobian(self.displacement_gradient(u)))) if finite_u else float("nan")
@@ -385,59 +393,10 @@ class ContinuumModel(ContactModel):
                 for o, x in zip(self.contact_obstacle, self.contact_points)]
 
     def results_fields(self, fields: dict) -> dict:
-        """What ``results.json`` keeps of a run's fields: the contact only; the full fields go to
-        the VTU files.
-
-        Small kinematics: ``contact_coordinates``, ``contact_obstacle``, ``contact_pressure`` and
-        ``total_contact_force`` (``sum a p``) per step, ``converged``. Finite strain (every number
-        named by what it is; ``notes`` says it in words): ``contact_pressure_nominal`` (the solver's
-        ``p``, force per reference area) and ``contact_pressure_true`` (per current area,
-        :meth:`true_pressure`) per step and pair, ``contact_area_reference`` and
-        ``contact_area_current`` (the lumped areas, :meth:`current_contact_area`),
-        ``total_contact_force`` (``sum a_0 p``), and per step and obstacle (``obstacle_names``,
-        ``obstacle_travel_directions``) the force on the body as modelled, ``sum a_0 p n`` with
-        the obstacle normals at the current contact points (:meth:`current_normals`):
-        ``contact_force_vector_as_modelled`` ``(n_steps, n_obstacles, d)`` and
-        ``contact_force_along_travel_as_modelled`` ``(n_steps, n_obstacles)``. Non-finite fields
-        (a failed step) give NaN (``null``)."""
-        p = np.asarray(fields["contact_pressure"], dtype=float)
-        out = dict(contact_coordinates=self.contact_points, contact_obstacle=self.contact_obstacle)
-        if not self.finite:
-            return dict(out, contact_pressure=p, total_contact_force=np.sum(self.contact_area * p, axis=-1),
-                        converged=fields["converged"])
-        u = np.asarray(fields["u"], dtype=float)
-        n_steps, d, n_obstacles = p.shape[0], self.dimension, len(self.obstacles)
-        true, area = np.full(p.shape, np.nan), np.full(p.shape, np.nan)
-        vectors = np.full((n_steps, n_obstacles, d), np.nan)
-        pair_obstacle = np.asarray(self.contact_obstacle, dtype=int)
-        for k in range(n_steps):
-            if not (np.all(np.isfinite(u[k])) and np.all(np.isfinite(p[k]))):
-                continue
-            area[k] = self.current_contact_area(u[k])
-            true[k] = self.true_pressure(u[k], p[k])
-            pair_forces = (self.contact_area * p[k])[:, None] * self.current_normals(u[k], k)
-            for o in range(n_obstacles):
-                vectors[k, o] = pair_forces[pair_obstacle == o].sum(axis=0)
-        directions = np.array([ob.offset(1.0) for ob in self.obstacles], dtype=float).reshape(n_obstacles, d)
-        unit = "N per unit thickness" if d == 2 else "N"
-        notes = dict(
-            contact_pressure_nominal="Pa; the solver's p: contact force per reference (undeformed) area",
-            contact_pressure_true="Pa; contact force per current (deformed) area: a_0 p / a",
-            contact_area_reference="the lumped area a_0 of each pair in the reference configuration",
-            contact_area_current="the same lumping on the deformed mesh, per step: a",
-            total_contact_force=f"{unit}; sum of a_0 p over the pairs (the magnitudes of the nodal forces)",
-            contact_force_vector_as_modelled=f"{unit}; per step and obstacle: sum of a_0 p n over its pairs, "
-                                             "n the obstacle normal at the current contact point (force on the body)",
-            contact_force_along_travel_as_modelled=f"{unit}; that vector resolved along the obstacle's direction "
-                                                   "of travel (positive: pushing the body the way it moves)",
-        )
-        return dict(out, contact_pressure_nominal=p, contact_pressure_true=true,
-                    contact_area_reference=self.contact_area, contact_area_current=area,
-                    total_contact_force=np.sum(self.contact_area * p, axis=-1),
-                    obstacle_names=[ob.name for ob in self.obstacles], obstacle_travel_directions=directions,
-                    contact_force_vector_as_modelled=vectors,
-                    contact_force_along_travel_as_modelled=np.einsum("kod,od->ko", vectors, directions),
-                    converged=fields["converged"], notes=notes)
+        """What ``results.json`` keeps of a run's fields: the contact only, every number named by
+        what it is (:func:`~ddcm_casadi.models.continuum.pressure.contact_results`); the full
+        fields go to the VTU files."""
+        return contact_results(self, fields)
 
     def field_outputs(self) -> tuple[str, ...]:
         """One VTU file per step and run with a ``.pvd`` series each
@@ -467,7 +426,8 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
                     contacts: Sequence[Contact] = (), degree: int = 1, tractions: Sequence[Traction] = (),
                     body_forces: Sequence[BodyForce] = (), load_factors: Sequence[float] | None = None,
                     datasets: Sequence[MaterialDataset] = (), name: str = "continuum",
-                    reference=None, kinematics: str = "small") -> ContinuumModel:
+                    reference=None, kinematics: str = "small",
+                    symmetry_factor: float | None = None) -> ContinuumModel:
     """Build a :class:`ContinuumModel`.
 
     Parameters
@@ -499,6 +459,10 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
         ``"finite"``: total Lagrangian, Green-Lagrange strains, hyperelastic laws
         (``Material.law``) and gaps at the current configuration
         (:mod:`~ddcm_casadi.models.continuum.finite`).
+    symmetry_factor : float, optional
+        The full body's force over the modelled part's (a half: 2, a quarter: 4), for the
+        full-body forces of the outputs and the Hertz reference; default the reference's
+        ``force_factor`` if it has one, else 1. A different ``force_factor`` is refused.
     """
     check_mesh(mesh)
     disc = fem.Discretisation.create(mesh, int(degree) if degree in (1, 2) else _bad_degree(degree))
@@ -536,6 +500,7 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
         poisson_ratio=nu, free_dofs=free, point_region=point_region,
         region_names=tuple(m.region or "(rest)" for m in materials), obstacles=tuple(obstacles),
         reference=reference, laws=tuple(m.law for m in materials), kinematics=kinematics, prescribed=prescribed,
+        symmetry_factor=(getattr(reference, "force_factor", 1.0) if symmetry_factor is None else symmetry_factor),
         **contact)
     _check_held(model)
     return model
