@@ -87,7 +87,7 @@ def test_patch_test_every_formulation_and_variant():
 def test_nafems_exact_formulations_agree_and_penalty_within_its_bound():
     """On one coarse grading every formulation solves NAFEMS 1; the exact ones agree to their
     stopping tests (1e-8 relative) and penalty's pressures differ by its O(1/gamma) share."""
-    model, ref = two_body_rungs.nafems_model(2, steps=2)
+    model = two_body_rungs.nafems_model(2, steps=2)
     cmp = compare(model, variants=("classical",))
     p = {name: np.asarray(r.steps[-1].p) for (_, name), r in cmp.results.items()}
     assert all(s.converged for r in cmp.results.values() for s in r.steps)
@@ -95,7 +95,7 @@ def test_nafems_exact_formulations_agree_and_penalty_within_its_bound():
     for name in ("augmented_lagrangian", "mpcc"):
         assert np.max(np.abs(p[name] - p["fischer_burmeister"])) < 1e-8 * scale, name
     assert np.max(np.abs(p["penalty"] - p["fischer_burmeister"])) < 0.05 * scale
-    m = two_body_rungs.hertz_measure(model, p["fischer_burmeister"], ref, (0.0, 1.0))
+    m = model.reference.measure(model, p["fischer_burmeister"])
     assert m["force"] == pytest.approx(two_body_rungs.NAFEMS["load"], rel=1e-9)  # the load, all of it
     assert m["p0_hertz"] == pytest.approx(two_body_rungs.NAFEMS_REFERENCE["p0"], rel=1e-3)
     assert m["a_hertz"] == pytest.approx(two_body_rungs.NAFEMS_REFERENCE["a"], rel=1e-2)
@@ -172,20 +172,26 @@ def test_a_body_held_only_by_a_contact_it_does_not_touch_is_refused_with_a_hint(
                         contacts=[BodyContact("punch/ymin", "block/ymax")])
 
 
-@pytest.mark.parametrize("case, radius, force_factor", [("gmsh_cylinder_on_block.toml", 0.05, 2.0),
-                                                        ("two_spheres.toml", 0.005, 4.0)])
-def test_two_body_examples_against_hertz(case, radius, force_factor):
-    """The Gmsh-made NAFEMS case and the two spheres run and agree with Hertz for the measured force
-    within what their meshes resolve (the rung's sequences: 0.1 % and 2 % in a, a few % in p0)."""
+#: The examples' discretisation errors against Hertz (a, p0), from the mesh sequences of
+#: ``python -m ddcm_casadi.validation.two_body_rungs`` at the examples' element sizes (NAFEMS
+#: level 4: 1.2 % and 6.3 %; two spheres level 4: 1.7 % and 3.8 %; the Gmsh mesh, 0.5 mm at the
+#: contact: 0.1 % and 0.01 %), rounded up: a regression bound, not the method's accuracy.
+EXAMPLE_ERRORS = {"nafems1.toml": (0.02, 0.07), "two_spheres.toml": (0.02, 0.05),
+                  "gmsh_cylinder_on_block.toml": (0.01, 0.01)}
+
+
+@pytest.mark.parametrize("case", sorted(EXAMPLE_ERRORS))
+def test_two_body_examples_against_hertz(case):
+    """The two-body examples run and agree with Hertz for the measured force within what their
+    meshes resolve (:data:`EXAMPLE_ERRORS`)."""
     model = load_case(CASES / case).model
     r = compare(model, ["fischer_burmeister"], variants=("classical",))["classical", "fischer_burmeister"]
     assert all(s.converged for s in r.steps)
-    d = model.dimension
-    e = model.youngs_modulus[[0, -1]]  # the two bodies' moduli
-    ref = two_body_rungs.TwoBodyHertz(radius, two_body_rungs.combined_modulus(e[0], 0.3, e[1], 0.3),
-                                      force_factor=force_factor)
-    m = two_body_rungs.hertz_measure(model, r.steps[-1].p, ref, np.eye(d)[-1])
-    assert m["error_a"] < 0.03 and m["error_p0"] < 0.06, m
+    m = model.reference.measure(model, r.steps[-1].p, r.steps[-1].stress)
+    bound_a, bound_p0 = EXAMPLE_ERRORS[case]
+    assert m["error_a"] < bound_a and m["error_p0"] < bound_p0, m
+    full = r.steps[-1]
+    assert model.step_summary(full.u, full.p, full.stress)["hertz_force"] == pytest.approx(m["force"])
 
 
 def test_ddcm_on_two_bodies_every_formulation():
@@ -196,10 +202,10 @@ def test_ddcm_on_two_bodies_every_formulation():
 
     data = [MaterialDataset.hookean_grid(isotropic_elasticity(E, 0.3, 2)[0], -0.03, 0.03, 15, c="estimated")
             for E in (210e9, 70e9)]
-    model, ref = two_body_rungs.nafems_model(1, datasets=data)
+    model = two_body_rungs.nafems_model(1, datasets=data)
     cmp = compare(model, variants=("ddcm",))
     for (_, name), r in cmp.results.items():
         last = r.steps[-1]
         assert last.converged, (name, last.message)
-        m = two_body_rungs.hertz_measure(model, last.p, ref, (0.0, 1.0))
+        m = model.reference.measure(model, last.p)
         assert m["force"] == pytest.approx(two_body_rungs.NAFEMS["load"], rel=1e-6), name

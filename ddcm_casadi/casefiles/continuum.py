@@ -16,7 +16,7 @@ from ddcm_casadi.data import hyperelastic
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.data.metric import COMPONENTS, Metric, isotropic_elasticity
-from ddcm_casadi.models.continuum.hertz import HertzReference
+from ddcm_casadi.models.continuum.hertz import BodyHertzReference, HertzReference
 from ddcm_casadi.models.continuum.obstacles import Ball, Cylinder, FlatPunch, Plane
 
 # scikit-fem and meshio are imported when a [mesh] case is parsed, not when the kind registers:
@@ -88,6 +88,10 @@ Continua
     obstacle = 0                 # the [[contact]] table of the indenter
                                  # (its force is the full body's: [mesh] symmetry_factor; an older
                                  # force_factor here must equal it)
+    # contact = 0               # or two round bodies: the [[contact]] between them and
+    # radius = 0.05              # R* (1/R* = 1/R1 + 1/R2); E* from the two sides' materials
+    # direction = [0.0, -1.0]    # the line of centres, slave to master (default: the normal of
+                                 # the first point of contact; give it on a symmetry plane)
 
     [data]                       # strain_1..k,stress_1..k CSV (Mandel: k = 3 in 2-D, 6 in 3-D),
     hookean = { strain_min = -0.01, strain_max = 0.01, points = 21 }    # or a linear law on a
@@ -560,14 +564,22 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     reference = None
     if "hertz" in doc:
         h = doc["hertz"]
-        if len(materials) != 1 or materials[0].youngs_modulus is None:
-            raise InputError("[hertz] needs one material with youngs_modulus and poisson_ratio")
-        ob = integer("hertz", "obstacle", h.get("obstacle", 0), low=0, high=max(len(contacts) - 1, 0),
-                     what="a [[contact]] index")
-        if not contacts or getattr(getattr(contacts[ob], "obstacle", None), "kind", None) != "ball":
-            raise InputError("[hertz] needs a circle (2-D) or sphere (3-D) obstacle")
-        reference = HertzReference(materials[0].youngs_modulus, materials[0].poisson_ratio, obstacle=ob,
-                                   force_factor=symmetry)
+        key = "contact" if "contact" in h else "obstacle"
+        index = integer("hertz", key, h.get(key, 0), low=0, high=max(len(contacts) - 1, 0), what="a [[contact]] index")
+        if key == "contact":  # between two bodies: R* given, E* from the two sides' materials
+            if "radius" not in h or contacts[index].kind != "bodies":
+                raise InputError("[hertz] contact = <index> needs a [[contact]] between bodies (slave, master) and "
+                                 "radius (the effective radius 1/R* = 1/R1 + 1/R2)")
+            direction = tuple(vector("hertz", "direction", h["direction"], d)) if "direction" in h else None
+            reference = BodyHertzReference(positive("hertz", "radius", h["radius"]), contact=index,
+                                           force_factor=symmetry, direction_of_centres=direction)
+        else:
+            if len(materials) != 1 or materials[0].youngs_modulus is None:
+                raise InputError("[hertz] needs one material with youngs_modulus and poisson_ratio")
+            if not contacts or getattr(getattr(contacts[index], "obstacle", None), "kind", None) != "ball":
+                raise InputError("[hertz] needs a circle (2-D) or sphere (3-D) obstacle")
+            reference = HertzReference(materials[0].youngs_modulus, materials[0].poisson_ratio, obstacle=index,
+                                       force_factor=symmetry)
 
     datasets = _datasets(doc, base_dir, k, materials) if n_data else []
     max_outer, options = casefile.run_options(doc)
@@ -587,6 +599,6 @@ register_case_kind(
               "supports": {"boundary", "fix", "displacement"}, "loads": {"boundary", "traction", "body_force", "region"},
               "contact": {"boundary", "obstacle", "radius", "center", "point", "normal", "axis", "half_width",
                           "edge_radius", "direction", "travel", "name", "slave", "master", "search_distance"},
-              "loading": {"load_factors"}, "hertz": {"obstacle", "force_factor"}},
+              "loading": {"load_factors"}, "hertz": {"obstacle", "force_factor", "contact", "radius", "direction"}},
     arrays={"supports", "loads", "contact"}, tables={"material"}, parse=parse_case,
     uses="[material], [[supports]] and [[contact]]", default_name="continuum", kinematics=("small", "finite"))

@@ -12,21 +12,21 @@ r"""Contact between two deformable bodies, against closed forms: the models and 
   element sizes, one pressed onto the other by a uniform traction; the uniform stress state must
   cross the interface to round-off (:func:`patch_model`).
 
-:func:`hertz_measure` compares one step's pressures of a pair with Hertz: ``p0`` the largest
-pressure, ``a`` from the pressure's second moment (``int x^2 p / int p = a^2/4`` in 2-D,
-``int r^2 p dA / int p dA = 2 a^2 / 5`` in 3-D), the force the resultant of ``a_j p_j n_j``.
+The measures are those of :class:`~ddcm_casadi.models.continuum.hertz.BodyHertzReference`
+(``p0`` the largest pair pressure, or on linear tetrahedra the largest recovered pressure; ``a``
+from the pressure's second moment; the force the resultant along the line of centres).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from ddcm_casadi.models.continuum import mesh as meshes
 from ddcm_casadi.models.continuum.bodies import join
-from ddcm_casadi.models.continuum.hertz import hertz_2d, hertz_3d
+from ddcm_casadi.models.continuum.hertz import BodyHertzReference
 from ddcm_casadi.models.continuum.inputs import BodyContact, Material, Support, Traction
 from ddcm_casadi.models.continuum.model import ContinuumModel, continuum_model
 from ddcm_casadi.models.continuum.mortar import Surface, element_centroids, mortar_coupling
@@ -39,63 +39,6 @@ NAFEMS = dict(radius=0.05, cylinder_modulus=210e9, block_modulus=70e9, poisson_r
 SPHERE_SHRINK = 0.7
 #: Its published reference values: contact half-width (m), peak pressure (Pa).
 NAFEMS_REFERENCE = dict(a=6.21e-3, p0=3585e6)
-
-
-def combined_modulus(e1: float, nu1: float, e2: float, nu2: float) -> float:
-    """``E*`` of two elastic bodies: ``1/E* = (1 - nu1^2)/E1 + (1 - nu2^2)/E2``."""
-    return 1.0 / ((1.0 - nu1 ** 2) / e1 + (1.0 - nu2 ** 2) / e2)
-
-
-@dataclass(frozen=True)
-class TwoBodyHertz:
-    """Hertz's solution for the pairs of one contact between two round bodies.
-
-    Parameters
-    ----------
-    radius : float
-        The effective radius ``R*`` (``1/R* = 1/R1 + 1/R2``; a flat block: ``R1``).
-    e_star : float
-        The combined modulus (:func:`combined_modulus`).
-    contact : int
-        The index of the contact pair among the model's contacts.
-    force_factor : float
-        The full bodies' force over the modelled part's (4 for a quarter model).
-    """
-
-    radius: float
-    e_star: float
-    contact: int = 0
-    force_factor: float = 1.0
-
-
-def hertz_measure(model: ContinuumModel, pressure: np.ndarray, ref: TwoBodyHertz, axis: np.ndarray) -> dict:
-    """Compare one step's pressures of ``ref.contact`` with Hertz for the measured force.
-
-    ``axis``: the line of centres, through the origin (the first point of contact). Returns
-    ``force``, ``a_hertz``, ``p0_hertz``, ``a_fe``, ``p0_fe``, ``error_a``, ``error_p0`` and
-    ``nodes_in_contact``.
-    """
-    pairs = np.flatnonzero(model.contact_obstacle == ref.contact)
-    p = np.asarray(pressure, float)[pairs]
-    w = model.contact_area[pairs] * p
-    axis = np.asarray(axis, float) / np.linalg.norm(axis)
-    # along the line of centres: the lateral components of a symmetric part's pairs are borne
-    # by its symmetry supports
-    force = ref.force_factor * abs(float(w @ model.contact_normals[pairs] @ axis))
-    x = model.contact_points[pairs]
-    lateral = np.linalg.norm(x - np.outer(x @ axis, axis), axis=1)
-    moment = float(np.sum(w * lateral ** 2) / np.sum(w)) if np.sum(w) > 0 else 0.0
-    if model.dimension == 2:
-        a_h, p0_h = hertz_2d(force, ref.radius, ref.e_star)
-        a_fe = 2.0 * math.sqrt(moment)
-    else:
-        a_h, p0_h = hertz_3d(force, ref.radius, ref.e_star)
-        a_fe = math.sqrt(2.5 * moment)
-    p0_fe = float(np.max(p)) if p.size else 0.0
-    return dict(force=force, a_hertz=a_h, p0_hertz=p0_h, a_fe=a_fe, p0_fe=p0_fe,
-                error_a=abs(a_fe - a_h) / a_h if a_h > 0 else float("nan"),
-                error_p0=abs(p0_fe - p0_h) / p0_h if p0_h > 0 else float("nan"),
-                nodes_in_contact=int(np.sum(model.active_contacts(p))))
 
 
 def touching(bodies: dict, slave: str, master: str, reach: float):
@@ -115,7 +58,7 @@ def touching(bodies: dict, slave: str, master: str, reach: float):
 
 
 def nafems_model(levels: int, *, steps: int = 1, refine: int = 3, block_divisions: int = 8,
-                 datasets=(), name: str = "nafems1") -> tuple[ContinuumModel, TwoBodyHertz]:
+                 datasets=(), name: str = "nafems1") -> ContinuumModel:
     """NAFEMS benchmark 1 (see the module), graded ``levels`` times towards the contact point.
 
     A half model (symmetry plane ``x = 0``, ``u_x = 0`` there on both bodies): the quarter
@@ -139,14 +82,14 @@ def nafems_model(levels: int, *, steps: int = 1, refine: int = 3, block_division
         supports=[Support("block/ymin", "y"), Support("block/xmin", "x"), Support("cylinder/axis", "x")],
         tractions=[Traction("cylinder/flat", (0.0, -F / (2 * R)))],
         contacts=[BodyContact("cylinder/arc", "block/ymax", name="cylinder on block", search_distance=0.2 * R)],
-        load_factors=[(i + 1) / steps for i in range(steps)])
-    e_star = combined_modulus(NAFEMS["cylinder_modulus"], nu, NAFEMS["block_modulus"], nu)
-    return model, TwoBodyHertz(R, e_star, force_factor=2.0)
+        load_factors=[(i + 1) / steps for i in range(steps)], symmetry_factor=2.0,
+        reference=BodyHertzReference(R, contact=0, force_factor=2.0, direction_of_centres=(0.0, -1.0)))
+    return model
 
 
 def two_spheres_model(levels: int, *, radius: float = 0.01, youngs_modulus: float = 200e9,
                       poisson_ratio: float = 0.3, force: float = 1e4, refine: int = 2,
-                      datasets=(), name: str = "two spheres") -> tuple[ContinuumModel, TwoBodyHertz]:
+                      datasets=(), name: str = "two spheres") -> ContinuumModel:
 
     """Two equal spheres touching at the origin (:func:`touching`), a quarter model (symmetry planes ``x = 0`` and
     ``y = 0``): octants of balls (:func:`~ddcm_casadi.models.continuum.mesh.ball_octant`) graded
@@ -168,9 +111,9 @@ def two_spheres_model(levels: int, *, radius: float = 0.01, youngs_modulus: floa
         mesh, materials=materials, degree=1, datasets=datasets, name=name, supports=supports,
         tractions=[Traction("upper/z0", (0.0, 0.0, -force / (math.pi * R ** 2)))],
         contacts=[BodyContact("upper/surface", "lower/surface", name="sphere on sphere", search_distance=0.3 * R)],
-        load_factors=[1.0])
-    e_star = combined_modulus(youngs_modulus, poisson_ratio, youngs_modulus, poisson_ratio)
-    return model, TwoBodyHertz(R / 2, e_star, force_factor=4.0)
+        load_factors=[1.0], symmetry_factor=4.0, reference=BodyHertzReference(R / 2, contact=0, force_factor=4.0,
+                                                                         direction_of_centres=(0.0, 0.0, -1.0)))
+    return model
 
 
 #: The patch test's load steps (equal increments of the traction): one, so that DDCM starts at the
@@ -264,19 +207,20 @@ def rung_patch_test() -> list[Check]:
     return out
 
 
-def hertz_sequence(build, levels, axis, formulation: str = "fischer_burmeister") -> list[dict]:
-    """Classical runs of ``build(level)`` for each level: the Hertz measures of the last step, the
-    size and the solver's figures."""
+def hertz_sequence(build, levels, formulation: str = "fischer_burmeister") -> list[dict]:
+    """Classical runs of ``build(level)`` for each level: the Hertz measures of the last step (the
+    model's :class:`~ddcm_casadi.models.continuum.hertz.BodyHertzReference`), the size and the
+    solver's figures."""
     from ddcm_casadi.drivers.harness import compare
 
     rows = []
     for level in levels:
-        model, ref = build(level)
+        model = build(level)
         r = compare(model, [formulation], variants=("classical",))["classical", formulation]
         last = r.steps[-1]
         rows.append(dict(level=level, unknowns=model.n_dofs, pairs=model.n_contacts,
                          converged=all(s.converged for s in r.steps), iterations=last.iterations,
-                         **hertz_measure(model, last.p, ref, axis)))
+                         **model.reference.measure(model, last.p, last.stress)))
     return rows
 
 
@@ -285,7 +229,7 @@ def rung_nafems(levels=(3, 4, 5, 6)) -> list[Check]:
     level): the peak pressure's error falls at the fitted rate ~1 (the largest nodal pressure
     carries an O(h) bias), and on the finest mesh ``p0`` is within 3 % and ``a`` within 1 % of
     Hertz (``a`` levels off near 0.3 %: the block is finite, Hertz's half-space is not)."""
-    rows = hertz_sequence(nafems_model, levels, (0.0, 1.0))
+    rows = hertz_sequence(nafems_model, levels)
     name = "NAFEMS 1 cylinder on block (mortar, P1) / classical / fischer_burmeister"
     h = 2.0 ** -np.asarray(levels, float)
     rate, se = fitted_rate(h, [r["error_p0"] for r in rows])
@@ -303,7 +247,7 @@ def rung_two_spheres(levels=(4,)) -> list[Check]:
     """Two equal spheres (quarter model, mortar, P1) against Hertz on the finest of ``levels``:
     ``a`` within 2 % and ``p0`` within 5 % (the sequence to 3e4 unknowns, :func:`main`, gives
     0.5 % and 3.2 %)."""
-    rows = hertz_sequence(two_spheres_model, levels, (0.0, 0.0, 1.0))
+    rows = hertz_sequence(two_spheres_model, levels)
     name = "two spheres (mortar, P1, quarter model) / classical / fischer_burmeister"
     last = rows[-1]
     note = (f"{last['unknowns']} dofs; F = {last['force']:.4g} N, Hertz a = {last['a_hertz'] * 1e3:.4f} mm, "
@@ -330,11 +274,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--levels", default="2,3,4,5,6,7", help="NAFEMS gradings (default 2..7)")
     parser.add_argument("--sphere-levels", default="2,3,4,5", help="two-sphere gradings (default 2..5)")
     args = parser.parse_args(argv)
-    for title, build, levels, axis in (("NAFEMS benchmark 1", nafems_model, args.levels, (0.0, 1.0)),
-                                       ("two spheres", two_spheres_model, args.sphere_levels, (0.0, 0.0, 1.0))):
+    for title, build, levels in (("NAFEMS benchmark 1", nafems_model, args.levels),
+                                 ("two spheres", two_spheres_model, args.sphere_levels)):
         print(f"\n{title}\n| level | unknowns | pairs | in contact | p0 (MPa) | p0 Hertz | error p0 | a (mm) | a Hertz | error a |")
         print("|---|---|---|---|---|---|---|---|---|---|")
-        for r in hertz_sequence(build, [int(v) for v in levels.split(",") if v], axis):
+        for r in hertz_sequence(build, [int(v) for v in levels.split(",") if v]):
             print(f"| {r['level']} | {r['unknowns']} | {r['pairs']} | {r['nodes_in_contact']} | {r['p0_fe'] / 1e6:.1f} | "
                   f"{r['p0_hertz'] / 1e6:.1f} | {r['error_p0']:.2%} | {r['a_fe'] * 1e3:.4f} | {r['a_hertz'] * 1e3:.4f} | "
                   f"{r['error_a']:.2%} |" + ("" if r["converged"] else " not converged"), flush=True)

@@ -296,7 +296,7 @@ def _body_pairs(disc: fem.Discretisation, c: BodyContact, index: int, n_steps: i
     perm = np.concatenate([vd[i, :mesh.p.shape[1]] for i in range(d)])
     rows = sp.csr_matrix((rows.data, perm[rows.indices], rows.indptr), shape=(nc, disc.n_dofs))
     gap0 = np.repeat(coupling.gaps(X)[None, :], n_steps, axis=0)
-    surface = mortar.MasterSurface(name=c.name, dimension=d, facet_pairs=coupling.facet_pairs,
+    surface = mortar.MasterSurface(name=c.name, dimension=d, facets=master, facet_pairs=coupling.facet_pairs,
                                    dropped=coupling.dropped, search_distance=reach)
     return PairSet(coupling.nodes, X[coupling.nodes], coupling.normals, coupling.area, gap0, rows, slave, surface)
 

@@ -92,61 +92,17 @@ def scatter(r: np.ndarray, p: np.ndarray, a: float, inside: float = 0.8) -> floa
     return float(np.max(np.abs(p[keep] - V @ c)) / c[0]) if c[0] > 0 else float("nan")
 
 
-@dataclass(frozen=True)
-class HertzReference:
-    """The Hertz solution for one rigid round obstacle of a continuum model.
+class _HertzMeasures:
+    """What every Hertz reference measures, given where its pairs are (:meth:`coordinates`),
+    the direction its force is resolved along (:meth:`direction`) and its radius and modulus
+    (:meth:`geometry`)."""
 
-    Parameters
-    ----------
-    youngs_modulus, poisson_ratio : float
-        The body's isotropic law.
-    obstacle : int
-        Index of the indenter among the model's obstacles (a :class:`~.obstacles.Ball`).
-    force_factor : float
-        The full body's force over the modelled part's (2 for a half, 4 for a quarter): the
-        model's ``symmetry_factor`` (a model refuses a reference with another one).
-    """
+    force_factor: float
 
-    youngs_modulus: float
-    poisson_ratio: float
-    obstacle: int = 0
-    force_factor: float = 1.0
-
-    def __post_init__(self) -> None:
+    def _check_force_factor(self) -> None:
         if not (math.isfinite(self.force_factor) and self.force_factor >= 1):
             raise InputError(f"[hertz] force_factor must be a number >= 1, got {self.force_factor!r}")
 
-    @property
-    def e_star(self) -> float:
-        return effective_modulus(self.youngs_modulus, self.poisson_ratio)
-
-    def describe(self) -> dict:
-        return dict(kind="hertz", youngs_modulus=self.youngs_modulus, poisson_ratio=self.poisson_ratio,
-                    e_star=self.e_star, obstacle=self.obstacle, force_factor=self.force_factor)
-
-    # ------------------------------------------------------------------ geometry
-    def _indenter(self, model):
-        try:
-            ob = model.obstacles[self.obstacle]
-        except IndexError:
-            raise InputError(f"[hertz] obstacle {self.obstacle} does not exist") from None
-        if getattr(ob, "kind", None) != "ball":
-            raise InputError("[hertz] needs a circle (2-D) or sphere (3-D) obstacle")
-        return ob
-
-    def coordinates(self, model) -> tuple[np.ndarray, np.ndarray]:
-        """The indenter's pairs and their distance from its axis (2-D: signed ``x``; 3-D: ``r``)."""
-        ob = self._indenter(model)
-        pairs = np.flatnonzero(model.contact_obstacle == self.obstacle)
-        d = np.asarray(ob.direction, float) / np.linalg.norm(ob.direction)
-        rel = model.contact_points[pairs] - ob.center
-        lateral = rel - np.outer(rel @ d, d)
-        if model.dimension == 2:
-            t = np.array([-d[1], d[0]])
-            return pairs, lateral @ t
-        return pairs, np.linalg.norm(lateral, axis=1)
-
-    # ----------------------------------------------------------------- measures
     def measure(self, model, pressure: np.ndarray, stress: np.ndarray | None = None) -> dict:
         """Compare one step's contact pressures (Pa, one per pair) with Hertz.
 
@@ -162,7 +118,7 @@ class HertzReference:
         Returns
         -------
         dict
-            ``force`` (the full body's, along the indenter's travel), ``a_hertz``, ``p0_hertz``,
+            ``force`` (the full body's, along :meth:`direction`), ``a_hertz``, ``p0_hertz``,
             ``a_fe``, ``p0_fe``, ``error_a``, ``error_p0`` (relative), ``error_l2`` (relative L2
             of the pressure profile), ``scatter`` (see the module), ``nodes_in_contact``,
             ``p0_nodal`` (the largest nodal pressure, for comparison) and ``pressure_measure``
@@ -170,22 +126,21 @@ class HertzReference:
         """
         from ddcm_casadi.models.continuum.pressure import measured_pressure, uses_recovered
 
-        ob = self._indenter(model)
         pairs, x = self.coordinates(model)
+        radius, e_star = self.geometry(model)
         p = measured_pressure(model, pressure, stress)[pairs]
         area = model.contact_area[pairs]
-        d = np.asarray(ob.direction, float) / np.linalg.norm(ob.direction)
-        # The contact forces a p n resolved against the travel d. A step without contact sums
+        # The contact forces a p n resolved along the direction. A step without contact sums
         # roundoff of either sign (penalty: -1e-20 Pa): no load.
-        along = model.contact_force_vectors(pressure)[pairs] @ d
+        along = model.contact_force_vectors(pressure)[pairs] @ self.direction(model)
         force = max(0.0, self.force_factor * float(np.sum(along)))
         w = area * p
         moment = float(np.sum(w * x ** 2) / np.sum(w)) if np.sum(w) > 0 else 0.0
         if model.dimension == 2:
-            a_h, p0_h = hertz_2d(force, ob.radius, self.e_star)
+            a_h, p0_h = hertz_2d(force, radius, e_star)
             a_fe = 2.0 * math.sqrt(moment)
         else:
-            a_h, p0_h = hertz_3d(force, ob.radius, self.e_star)
+            a_h, p0_h = hertz_3d(force, radius, e_star)
             a_fe = math.sqrt(2.5 * moment)
         ref = profile(x, a_h, p0_h)
         den = math.sqrt(float(np.sum(area * ref ** 2)))
@@ -218,3 +173,151 @@ class HertzReference:
     def _two_sided(self, model) -> bool:
         _, x = self.coordinates(model)
         return bool(np.any(x < 0) and np.any(x > 0))
+
+
+@dataclass(frozen=True)
+class HertzReference(_HertzMeasures):
+    """The Hertz solution for one rigid round obstacle of a continuum model.
+
+    Parameters
+    ----------
+    youngs_modulus, poisson_ratio : float
+        The body's isotropic law.
+    obstacle : int
+        Index of the indenter among the model's obstacles (a :class:`~.obstacles.Ball`).
+    force_factor : float
+        The full body's force over the modelled part's (2 for a half, 4 for a quarter): the
+        model's ``symmetry_factor`` (a model refuses a reference with another one).
+    """
+
+    youngs_modulus: float
+    poisson_ratio: float
+    obstacle: int = 0
+    force_factor: float = 1.0
+
+    def __post_init__(self) -> None:
+        self._check_force_factor()
+
+    @property
+    def e_star(self) -> float:
+        return effective_modulus(self.youngs_modulus, self.poisson_ratio)
+
+    def describe(self) -> dict:
+        return dict(kind="hertz", youngs_modulus=self.youngs_modulus, poisson_ratio=self.poisson_ratio,
+                    e_star=self.e_star, obstacle=self.obstacle, force_factor=self.force_factor)
+
+    # ------------------------------------------------------------------ geometry
+    def _indenter(self, model):
+        try:
+            ob = model.obstacles[self.obstacle]
+        except IndexError:
+            raise InputError(f"[hertz] obstacle {self.obstacle} does not exist") from None
+        if getattr(ob, "kind", None) != "ball":
+            raise InputError("[hertz] needs a circle (2-D) or sphere (3-D) obstacle")
+        return ob
+
+    def geometry(self, model) -> tuple[float, float]:
+        """The indenter's radius and ``E*`` of the body against a rigid one."""
+        return self._indenter(model).radius, self.e_star
+
+    def direction(self, model) -> np.ndarray:
+        """The indenter's direction of travel."""
+        d = np.asarray(self._indenter(model).direction, float)
+        return d / np.linalg.norm(d)
+
+    def coordinates(self, model) -> tuple[np.ndarray, np.ndarray]:
+        """The indenter's pairs and their distance from its axis (2-D: signed ``x``; 3-D: ``r``)."""
+        ob = self._indenter(model)
+        pairs = np.flatnonzero(model.contact_obstacle == self.obstacle)
+        return pairs, _lateral(model.contact_points[pairs] - ob.center, self.direction(model))
+
+
+@dataclass(frozen=True)
+class BodyHertzReference(_HertzMeasures):
+    """The Hertz solution for a contact between two round elastic bodies (a cylinder or sphere on
+    a block, two cylinders or spheres): the pairs of the model's contact ``contact``
+    (:class:`~.inputs.BodyContact`), with the effective radius ``1/R* = 1/R1 + 1/R2`` and the
+    combined modulus ``1/E* = (1 - nu1^2)/E1 + (1 - nu2^2)/E2`` of the slave's and the master's
+    materials (read off the model: one material on each side).
+
+    The line of centres passes through the pair that is closest at the first step (the first
+    point of contact), along ``direction``; the force is resolved along it.
+
+    Parameters
+    ----------
+    radius : float
+        ``R*`` (a flat master: the slave's radius).
+    contact : int
+        Index of the contact among the model's contacts.
+    force_factor : float
+        The model's ``symmetry_factor``.
+    direction : sequence of float, optional
+        The line of centres, from the slave towards the master. Default: the normal of the first
+        point of contact (on a symmetry plane give it: a node there has half its facets, and a
+        tilted normal).
+    """
+
+    radius: float
+    contact: int = 0
+    force_factor: float = 1.0
+    direction_of_centres: tuple | None = None
+
+    def __post_init__(self) -> None:
+        self._check_force_factor()
+        if not (math.isfinite(self.radius) and self.radius > 0):
+            raise InputError(f"[hertz] radius must be a positive length, got {self.radius!r}")
+
+    def describe(self) -> dict:
+        return dict(kind="hertz between bodies", radius=self.radius, contact=self.contact,
+                    force_factor=self.force_factor,
+                    direction=None if self.direction_of_centres is None else list(self.direction_of_centres))
+
+    def _pairs(self, model) -> np.ndarray:
+        pairs = np.flatnonzero(model.contact_obstacle == self.contact)
+        surface = model.obstacles[self.contact] if self.contact < len(model.obstacles) else None
+        if getattr(surface, "kind", None) != "surface" or not pairs.size:
+            raise InputError(f"[hertz] contact {self.contact} is not a contact between bodies with pairs")
+        return pairs
+
+    def _first(self, model) -> int:
+        pairs = self._pairs(model)
+        return int(pairs[np.argmin(model.gap_offsets[0, pairs])])
+
+    def direction(self, model) -> np.ndarray:
+        """The line of centres (from the slave to the master)."""
+        if self.direction_of_centres is None:
+            return model.contact_normals[self._first(model)]
+        d = np.asarray(self.direction_of_centres, float)
+        if d.shape != (model.dimension,) or not np.all(np.isfinite(d)) or not np.any(d):
+            raise InputError(f"[hertz] direction must be {model.dimension} finite numbers, not all zero")
+        return d / np.linalg.norm(d)
+
+    def coordinates(self, model) -> tuple[np.ndarray, np.ndarray]:
+        pairs = self._pairs(model)
+        return pairs, _lateral(model.contact_points[pairs] - model.contact_points[self._first(model)],
+                               self.direction(model))
+
+    def geometry(self, model) -> tuple[float, float]:
+        """``R*`` and the combined modulus of the two sides' materials."""
+        laws = []
+        for facets in (model.contact_facets[self.contact], model.obstacles[self.contact].facets):
+            points = model.mesh.f2t[0, facets] * model.discretisation.points_per_element
+            E, nu = np.unique(model.youngs_modulus[points]), np.unique(model.poisson_ratio[points])
+            if E.size != 1 or nu.size != 1:
+                raise InputError(f"[hertz] contact {self.contact}: each side needs one isotropic material")
+            laws.append((float(E[0]), float(nu[0])))
+        return self.radius, combined_modulus(*laws[0], *laws[1])
+
+
+def combined_modulus(e1: float, nu1: float, e2: float, nu2: float) -> float:
+    """``E*`` of two elastic bodies: ``1/E* = (1 - nu1^2)/E1 + (1 - nu2^2)/E2``."""
+    return 1.0 / ((1.0 - nu1 ** 2) / e1 + (1.0 - nu2 ** 2) / e2)
+
+
+def _lateral(rel: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Distances of points ``rel`` (relative to a point of the axis ``d``) from the axis: signed
+    along the in-plane tangent in 2-D, radial in 3-D."""
+    lateral = rel - np.outer(rel @ d, d)
+    if rel.shape[1] == 2:
+        return lateral @ np.array([-d[1], d[0]])
+    return np.linalg.norm(lateral, axis=1)

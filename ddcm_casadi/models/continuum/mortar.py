@@ -42,7 +42,7 @@ no pair; choose as slave the surface that stays within the other.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -315,6 +315,7 @@ class MasterSurface:
 
     name: str
     dimension: int
+    facets: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # the master's boundary facets
     facet_pairs: int = 0
     dropped: int = 0
     search_distance: float = 0.0
