@@ -217,7 +217,8 @@ def load_path_warnings(model: ContactModel) -> list[str]:
         n, first = starting
         out.append(f"the obstacles start inside the body: {n} contact pair(s) penetrate by up to {first:.3g} m "
                    f"at the first step ({model.load_parameter_name}={model.load_parameter[0]:.6g}), so there are "
-                   f"contact forces before any load")
+                   f"contact forces before any load (unless a body held only by its contacts is free to move out "
+                   f"of the overlap)")
     if model.kinematics != "small":  # large strains and rotations are what finite kinematics model
         return out
     kind = "classical" if model.youngs_modulus is not None else "ddcm"
@@ -226,19 +227,29 @@ def load_path_warnings(model: ContactModel) -> list[str]:
                   default=0.0)
     if imposed > LARGE_STRAIN:  # else the quick estimate (every pair held) is the larger: nothing to look at
         worst = int(np.argmin(np.min(model.gap_offsets, axis=1))) if model.n_contacts else 0
-        where = f"{model.load_parameter_name}={model.load_parameter[worst]:.6g}"
-        state = _linear_state(model, kind, worst)
-        compression = _compression(model, state)
-        if compression >= 1.0 - 1e-4:
-            raise InputError(f"the obstacles impose a strain of about {compression:.2g} at {where} (penetration "
-                             f"{-np.min(model.gap_offsets):.3g} m): pushed past a fixed end or through the body; "
-                             f"a small-strain model is meaningless there")
-        strain = max(compression, float(np.max(state, initial=0.0)))
-        if strain > LARGE_STRAIN:
-            out.append(f"the obstacles impose a strain of about {strain:.2g} at {where} (a linear elastic solve of "
-                       f"that step): far beyond the small-strain model (> {LARGE_STRAIN:g})")
+        out += _imposed_strain(
+            model, kind, worst,
+            lambda c, where: (f"the obstacles impose a strain of about {c:.2g} at {where} (penetration "
+                              f"{-np.min(model.gap_offsets):.3g} m): pushed past a fixed end or through the body; "
+                              f"a small-strain model is meaningless there"),
+            lambda e, where: (f"the obstacles impose a strain of about {e:.2g} at {where} (a linear elastic solve of "
+                              f"that step): far beyond the small-strain model (> {LARGE_STRAIN:g})"))
     out += _prescribed_warnings(model, kind)
     return out
+
+
+def _imposed_strain(model: ContactModel, kind: str, step: int, refusal, warning) -> list[str]:
+    """The strain of a linear elastic solve of ``step`` (contacts by an active set): an
+    ``InputError`` of ``refusal(compression, where)`` where it shortens a fibre to zero length or
+    beyond (the body inverted, meaningless under small kinematics), ``[warning(strain, where)]``
+    beyond :data:`LARGE_STRAIN` (a well-posed stretch, however large, is a warning only), else ``[]``."""
+    where = f"{model.load_parameter_name}={model.load_parameter[step]:.6g}"
+    state = _linear_state(model, kind, step)
+    compression = _compression(model, state)
+    if compression >= 1.0 - 1e-4:
+        raise InputError(refusal(compression, where))
+    strain = max(compression, float(np.max(np.abs(state), initial=0.0)))
+    return [warning(strain, where)] if strain > LARGE_STRAIN else []
 
 
 def _compression(model: ContactModel, strain: np.ndarray) -> float:
@@ -267,19 +278,15 @@ def _prescribed_warnings(model: ContactModel, kind: str) -> list[str]:
     if pr is None or model._cache.get(("prescribed_strain", kind), 0.0) <= LARGE_STRAIN:
         return []
     step = int(np.argmax(np.max(np.abs(pr.values), axis=1)))
-    where = f"{model.load_parameter_name}={model.load_parameter[step]:.6g}"
-    state = _linear_state(model, kind, step)
-    compression = _compression(model, state)
-    if compression >= 1.0 - 1e-4:
-        raise InputError(f"the prescribed displacements compress the body to a strain of about {-compression:.2g} at "
-                         f"{where} (largest prescribed displacement {float(np.max(np.abs(pr.values[step]))):.3g} m): "
-                         f"shortened past zero length, the body inverted; a small-strain model is meaningless there")
-    strain = max(compression, float(np.max(np.abs(state), initial=0.0)))
-    if strain > LARGE_STRAIN:
-        return [f"the prescribed displacements impose a strain of about {strain:.2g} at {where} (a linear elastic "
-                f"solve of that step): far beyond the small-strain model (> {LARGE_STRAIN:g}); "
-                f"kinematics = \"finite\" models large strains"]
-    return []
+    largest = float(np.max(np.abs(pr.values[step])))
+    return _imposed_strain(
+        model, kind, step,
+        lambda c, where: (f"the prescribed displacements compress the body to a strain of about {-c:.2g} at {where} "
+                          f"(largest prescribed displacement {largest:.3g} m): shortened past zero length, the body "
+                          f"inverted; a small-strain model is meaningless there"),
+        lambda e, where: (f"the prescribed displacements impose a strain of about {e:.2g} at {where} (a linear "
+                          f"elastic solve of that step): far beyond the small-strain model (> {LARGE_STRAIN:g}); "
+                          f"kinematics = \"finite\" models large strains"))
 
 
 def _starting_penetration(model: ContactModel) -> tuple[int, float] | None:
