@@ -69,6 +69,12 @@ FIGURES = (
                                                    str(ROOT / "examples/cases/indentation3d_finite.toml"),
                                                    "--formulations", "fischer_burmeister", "--out", "{out}", "-q"),
            "force_indentation.png", False),
+    Figure("nafems1_pressure_profile.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/nafems1.toml"),
+                                            "--formulations", "fischer_burmeister,penalty", "--out", "{out}", "-q"),
+           "pressure_profile.png", False),
+    Figure("nafems1_deformed.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/nafems1.toml"),
+                                    "--formulations", "fischer_burmeister", "--out", "{out}", "-q"),
+           "deformed_classical.png", False),
 )
 
 
