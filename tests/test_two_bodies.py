@@ -209,3 +209,33 @@ def test_ddcm_on_two_bodies_every_formulation():
         assert last.converged, (name, last.message)
         m = model.reference.measure(model, last.p)
         assert m["force"] == pytest.approx(two_body_rungs.NAFEMS["load"], rel=1e-6), name
+
+
+@pytest.mark.parametrize("formulation", sorted(formulations.available()))
+def test_two_blocks_squeezed_by_a_hard_device(formulation):
+    """Displacement control across a mortar interface: the punch's top moved down by ``delta``
+    over two blocks in series (rollers elsewhere). Uniform uniaxial stress in plane strain, lateral
+    faces free: ``sigma = -delta / sum(h_i (1 - nu_i^2) / E_i)``, the pairs' pressure ``-sigma``
+    and the device's force ``sigma`` times the width; penalty within its O(1/gamma) share."""
+    h, delta = 0.5, 1e-3
+    laws = dict(block=(1e9, 0.3), punch=(2e9, 0.25))
+    mesh = join(dict(block=meshes.rectangle(1.0, h, nx=7, ny=4, origin=(0.0, -h)),
+                     punch=meshes.rectangle(1.0, h, nx=5, ny=3, origin=(0.0, 0.0))))
+    model = continuum_model(
+        mesh, materials=[Material(b, E, nu) for b, (E, nu) in laws.items()],
+        supports=[Support("block/ymin", "y"), Support("block/xmin", "x"), Support("punch/xmin", "x"),
+                  Support("punch/ymax", "y", displacement=(0.0, -delta))],
+        contacts=[BodyContact("punch/ymin", "block/ymax")], load_factors=[0.5, 1.0])
+    compliance = sum(h * (1 - nu ** 2) / E for E, nu in laws.values())  # m/Pa, the two blocks in series
+    sigma = -delta / compliance
+    cmp = compare(model, [formulation], variants=("classical",))
+    r = cmp["classical", formulation]
+    last = r.steps[-1]
+    assert all(s.converged for s in r.steps)
+    stress = np.asarray(last.stress).reshape(-1, 3)
+    # exact formulations: their stopping tests (1e-9); penalty: the spring 1/gamma in series adds
+    # to the compliance, a relative error 1/(gamma compliance), to first order
+    gamma = next(f for f in cmp.formulations if f.name == formulation).penalty_stiffness(cmp.problems.classical)
+    rel = 1e-9 if gamma is None else 2.0 / (gamma * compliance)
+    assert np.max(np.abs(stress[:, 1] - sigma)) < rel * abs(sigma)
+    assert np.max(np.abs(np.asarray(last.p) + sigma)) < rel * abs(sigma)
