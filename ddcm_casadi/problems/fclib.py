@@ -1,0 +1,287 @@
+r"""FCLIB frictional contact problems: reading, writing, the natural-map error, and a reference
+solver.
+
+FCLIB (Acary et al., INRIA RT-0444, 2014) stores discrete 3-D frictional contact problems in HDF5:
+
+- **local** (``/fclib_local``: ``W``, ``q``, ``mu``): find the local velocities ``u`` and
+  reactions ``r`` (three per contact, normal component first) with
+
+  .. math::  u = W r + q,\qquad \hat u = u + [\mu |u_T|, 0, 0],\qquad
+             K^* \ni \hat u \perp r \in K,\qquad K = \{ |r_T| \le \mu r_N \};
+
+- **global** (``/fclib_global``: ``M``, ``H``, ``f``, ``w``, ``mu``; optional ``G``, ``b``):
+  ``M v = H r + f``, ``u = H^T v + w``, the same cone conditions. Without ``G`` it reduces to the
+  local problem ``W = H^T M^{-1} H``, ``q = H^T M^{-1} f + w`` (:meth:`GlobalProblem.local`,
+  by one sparse factorisation of ``M``).
+
+A sparse matrix is stored as ``m, n, nz, nzmax, p, i, x`` (CSparse's layout): ``nz = -2``
+compressed rows, ``nz = -1`` compressed columns, ``nz >= 0`` triplets (``i`` the rows, ``p`` the
+columns, as the sample files' index ranges show).
+
+The error of a candidate ``r`` is the natural map of the De Saxce modified velocity,
+
+.. math::  e(r) = \sqrt{\sum_c |r_c - P_K(r_c - \hat u_c)|^2} \,/\, |q| ,
+
+the measure of the FCLIB benchmarks (solved at ``1e-4`` and ``1e-8``) (:func:`natural_map_error`).
+:func:`solve_projected_gauss_seidel` is an independent reference (projected Gauss-Seidel with
+the De Saxce fixed point per contact, as Siconos' NSGS), not one of the project's formulations.
+
+HDF5 is read with ``h5py`` (the ``fclib`` extra), imported where a file is read or written.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ddcm_casadi.errors import InputError
+
+
+# --------------------------------------------------------------------------------- problems
+@dataclass(frozen=True)
+class LocalProblem:
+    """``u = W r + q`` with Coulomb's law at ``nc`` contacts (see the module).
+
+    Attributes
+    ----------
+    W : sparse (3 nc, 3 nc)
+        The Delassus operator.
+    q : (3 nc,)
+    mu : (nc,)
+        Friction coefficients.
+    title : str
+    """
+
+    W: sp.csr_matrix
+    q: np.ndarray
+    mu: np.ndarray
+    title: str = ""
+
+    def __post_init__(self) -> None:
+        W = sp.csr_matrix(self.W, dtype=float)
+        q = np.asarray(self.q, float).ravel()
+        mu = np.atleast_1d(np.asarray(self.mu, float)).ravel()
+        if W.shape != (q.size, q.size) or q.size != 3 * mu.size:
+            raise InputError(f"an FCLIB local problem needs W (3 nc x 3 nc), q (3 nc) and mu (nc); got W {W.shape}, "
+                             f"q {q.size}, mu {mu.size}")
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(W.data)) and np.all(mu >= 0)):
+            raise InputError("an FCLIB local problem needs finite W and q and friction coefficients >= 0")
+        object.__setattr__(self, "W", W)
+        object.__setattr__(self, "q", q)
+        object.__setattr__(self, "mu", mu)
+
+    @property
+    def n_contacts(self) -> int:
+        return self.mu.size
+
+    def local(self) -> "LocalProblem":
+        return self
+
+
+@dataclass(frozen=True)
+class GlobalProblem:
+    """``M v = H r + f``, ``u = H^T v + w`` with Coulomb's law (see the module).
+
+    Attributes
+    ----------
+    M : sparse (n, n)
+    H : sparse (n, 3 nc)
+    f : (n,)
+    w : (3 nc,)
+    mu : (nc,)
+    title : str
+    """
+
+    M: sp.csr_matrix
+    H: sp.csr_matrix
+    f: np.ndarray
+    w: np.ndarray
+    mu: np.ndarray
+    title: str = ""
+
+    @property
+    def n_contacts(self) -> int:
+        return np.atleast_1d(self.mu).size
+
+    def local(self) -> LocalProblem:
+        """The local problem: ``W = H^T M^{-1} H``, ``q = H^T M^{-1} f + w`` (one sparse LU of ``M``;
+        ``W`` is dense in ``3 nc x 3 nc``, kept sparse in type)."""
+        M = sp.csc_matrix(self.M, dtype=float)
+        H = sp.csc_matrix(self.H, dtype=float)
+        try:
+            lu = spla.splu(M)
+        except RuntimeError as err:
+            raise InputError(f"the global problem's M is singular ({err}); it cannot be reduced to a local one") from None
+        MiH = lu.solve(H.toarray())
+        W = H.T @ MiH
+        q = H.T @ lu.solve(np.asarray(self.f, float)) + np.asarray(self.w, float)
+        return LocalProblem(sp.csr_matrix(W), q, self.mu, self.title)
+
+
+# ------------------------------------------------------------------------------- HDF5 files
+def _read_matrix(group) -> sp.csr_matrix:
+    m, n, nz = (int(np.asarray(group[k]).ravel()[0]) for k in ("m", "n", "nz"))
+    p, i, x = (np.asarray(group[k]).ravel() for k in ("p", "i", "x"))
+    if nz == -2:
+        return sp.csr_matrix((x, i, p), shape=(m, n))
+    if nz == -1:
+        return sp.csc_matrix((x, i, p), shape=(m, n)).tocsr()
+    if nz >= 0:
+        return sp.coo_matrix((x[:nz], (i[:nz], p[:nz])), shape=(m, n)).tocsr()  # CSparse triplets: i rows, p columns
+    raise InputError(f"an FCLIB matrix has nz = {nz}: expected -2 (rows), -1 (columns) or >= 0 (triplets)")
+
+
+def _write_matrix(group, A: sp.spmatrix) -> None:
+    A = sp.csr_matrix(A)
+    for key, value in dict(m=[A.shape[0]], n=[A.shape[1]], nz=[-2], nzmax=[A.nnz]).items():
+        group.create_dataset(key, data=np.asarray(value, dtype=np.int32))
+    group.create_dataset("p", data=A.indptr.astype(np.int32))
+    group.create_dataset("i", data=A.indices.astype(np.int32))
+    group.create_dataset("x", data=A.data.astype(float))
+
+
+def _h5py():
+    try:
+        import h5py
+    except ImportError:
+        raise InputError("FCLIB files are HDF5: install h5py (pip install 'ddcm-casadi[fclib]')") from None
+    return h5py
+
+
+def read_fclib(path: str | os.PathLike) -> LocalProblem | GlobalProblem:
+    """The local or global problem of an FCLIB file (``/fclib_local`` or ``/fclib_global``)."""
+    h5py = _h5py()
+    path = Path(path)
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise InputError(f"{path}: not a readable HDF5 file ({err})") from None
+    with f:
+        title = ""
+        for kind in ("fclib_local", "fclib_global"):
+            if kind in f:
+                g = f[kind]
+                if "info" in g and "title" in g["info"]:
+                    raw = g["info"]["title"][()]
+                    title = raw.decode(errors="replace") if isinstance(raw, bytes) else str(raw)
+                spacedim = int(np.asarray(g["spacedim"]).ravel()[0]) if "spacedim" in g else 3
+                if spacedim != 3:
+                    raise InputError(f"{path}: a {spacedim}-D FCLIB problem; 3-D only")
+                v = g["vectors"]
+                if kind == "fclib_local":
+                    return LocalProblem(_read_matrix(g["W"]), np.asarray(v["q"]), np.asarray(v["mu"]), title)
+                if "G" in g:
+                    raise InputError(f"{path}: a global problem with equality constraints (G, b) is not supported")
+                return GlobalProblem(_read_matrix(g["M"]), _read_matrix(g["H"]), np.asarray(v["f"], float),
+                                     np.asarray(v["w"], float), np.atleast_1d(np.asarray(v["mu"], float)), title)
+        raise InputError(f"{path}: neither /fclib_local nor /fclib_global: not an FCLIB problem")
+
+
+def write_fclib(path: str | os.PathLike, problem: LocalProblem | GlobalProblem) -> Path:
+    """Write ``problem`` as an FCLIB file (atomically: a temporary file, then a rename)."""
+    h5py = _h5py()
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(suffix=".hdf5", dir=path.parent)
+    os.close(fd)
+    try:
+        with h5py.File(tmp, "w") as f:
+            local = isinstance(problem, LocalProblem)
+            g = f.create_group("fclib_local" if local else "fclib_global")
+            g.create_dataset("spacedim", data=np.array([3], dtype=np.int32))
+            g.create_group("info").create_dataset("title", data=np.bytes_(problem.title))
+            v = g.create_group("vectors")
+            v.create_dataset("mu", data=np.atleast_1d(np.asarray(problem.mu, float)))
+            if local:
+                _write_matrix(g.create_group("W"), problem.W)
+                v.create_dataset("q", data=problem.q)
+            else:
+                _write_matrix(g.create_group("M"), problem.M)
+                _write_matrix(g.create_group("H"), problem.H)
+                v.create_dataset("f", data=np.asarray(problem.f, float))
+                v.create_dataset("w", data=np.asarray(problem.w, float))
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
+# ------------------------------------------------------------------------- cones and errors
+def project_cone(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Projection of ``x`` ``(nc, 3)`` (normal first) onto the Coulomb cones ``|x_T| <= mu x_N``."""
+    x = np.asarray(x, float).reshape(-1, 3)
+    mu = np.asarray(mu, float).reshape(-1)
+    n, t = x[:, 0], np.linalg.norm(x[:, 1:], axis=1)
+    out = x.copy()
+    polar = mu * t <= -n  # in the polar cone: the apex
+    out[polar] = 0.0
+    between = ~polar & (t > mu * n)  # outside both: onto the cone's surface
+    s = (mu[between] * t[between] + n[between]) / (1.0 + mu[between] ** 2)
+    out[between, 0] = s
+    direction = x[between, 1:] / np.where(t[between] > 0, t[between], 1.0)[:, None]
+    out[between, 1:] = (mu[between] * s)[:, None] * direction
+    return out
+
+
+def modified_velocity(problem: LocalProblem, r: np.ndarray) -> np.ndarray:
+    """``u_hat = W r + q + [mu |u_T|, 0, 0]`` per contact, ``(nc, 3)``."""
+    u = (problem.W @ np.asarray(r, float).ravel() + problem.q).reshape(-1, 3)
+    u[:, 0] += problem.mu * np.linalg.norm(u[:, 1:], axis=1)
+    return u
+
+
+def natural_map_error(problem: LocalProblem, r: np.ndarray) -> float:
+    """``sqrt(sum_c |r_c - P_K(r_c - u_hat_c)|^2) / |q|`` (``|q| = 0``: not divided)."""
+    r = np.asarray(r, float).reshape(-1, 3)
+    res = r - project_cone(r - modified_velocity(problem, r), problem.mu)
+    scale = float(np.linalg.norm(problem.q))
+    return float(np.linalg.norm(res)) / (scale if scale > 0 else 1.0)
+
+
+@dataclass(frozen=True)
+class FrictionSolution:
+    """A reference solve: reactions ``r`` and velocities ``u`` ``(nc, 3)``, the natural-map
+    error, sweeps, seconds, and whether the error reached the tolerance."""
+
+    r: np.ndarray
+    u: np.ndarray
+    error: float
+    iterations: int
+    seconds: float
+    converged: bool
+
+
+def solve_projected_gauss_seidel(problem: LocalProblem, *, tol: float = 1e-8, max_sweeps: int = 10_000,
+                                 r0: np.ndarray | None = None) -> FrictionSolution:
+    """Projected Gauss-Seidel (an independent reference): sweep the contacts, each updated by the
+    De Saxce fixed point ``r_c <- P_K(r_c - rho_c u_hat_c)`` with ``rho_c = 1 / max eig(W_cc)``
+    and its own block of ``u`` refreshed, until :func:`natural_map_error` is below ``tol``. Not
+    guaranteed to converge (Coulomb friction is not a potential); ``converged`` says."""
+    t0 = time.perf_counter()
+    local = problem.local()
+    W = sp.csr_matrix(local.W)
+    nc = local.n_contacts
+    blocks = [W[3 * c:3 * c + 3, 3 * c:3 * c + 3].toarray() for c in range(nc)]
+    rho = np.array([1.0 / max(float(np.max(np.linalg.eigvalsh(0.5 * (B + B.T)))), 1e-300) for B in blocks])
+    r = np.zeros(3 * nc) if r0 is None else np.asarray(r0, float).ravel().copy()
+    rows = [W[3 * c:3 * c + 3] for c in range(nc)]
+    error = natural_map_error(local, r)
+    sweep = 0
+    while error > tol and sweep < max_sweeps:
+        for c in range(nc):
+            sl = slice(3 * c, 3 * c + 3)
+            uc = rows[c] @ r + local.q[sl]
+            uhat = uc.copy()
+            uhat[0] += local.mu[c] * np.linalg.norm(uc[1:])
+            r[sl] = project_cone((r[sl] - rho[c] * uhat)[None, :], local.mu[c:c + 1])[0]
+        sweep += 1
+        error = natural_map_error(local, r)
+    return FrictionSolution(r.reshape(-1, 3), (W @ r + local.q).reshape(-1, 3), error, sweep,
+                            time.perf_counter() - t0, bool(error <= tol))
