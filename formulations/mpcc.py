@@ -120,6 +120,13 @@ class _BuiltMPCC(BuiltFormulation):
         ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
                  "acceptable_tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500,
                  "mu_strategy": "adaptive"}
+        if problem.kind == "mcp":
+            # The classical NLP is a feasibility problem: its KKT matrix has a zero Hessian block.
+            # MUMPS's automatic ordering (as SCOTCH or PORD) then gives steps on which IPOPT needs
+            # 257 iterations of 0.2 s for one relaxed solve of the Hertz example, AMD 14 of 0.01 s
+            # (docs/performance.md, 2026-11-26). With the distance objective (DDCM) the automatic
+            # ordering is the faster one (38 ms against 117 ms an iteration).
+            ipopt["mumps_pivot_order"] = 0
         ipopt.update(dict(opts.ipopt))
         # SX throughout, local terms (finite strain) written out element by element: IPOPT's
         # Hessians of MX maps cost more than the expansion (measured on the 822-dof indentation:

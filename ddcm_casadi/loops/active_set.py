@@ -153,6 +153,14 @@ class ActiveSetSolver:
             if polished is not None:
                 total += polished.iterations
                 best = polished
+        if not best.converged and system.proximal:
+            # The augmented Lagrangian's inner systems: the branch finish (a few solves with kept
+            # piece factors) before the smoothing continuation (up to 350 Newton steps, each a
+            # factorisation; docs/performance.md, 2026-11-26). Same acceptance tests either way.
+            finish, spent = self.branch_finish((best.z,), base, opts, corner_tol=corner_tol)
+            total += spent
+            if finish is not None:
+                best = finish
         if not best.converged:
             best, mu, stages = smoothed_newton_solve(system.rj, system.r, z0, pack, smoothing=opts.smoothing,
                                                      try_plain=False, **kw)
