@@ -56,7 +56,7 @@ import numpy as np
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.parameters import Parameters
 from ddcm_casadi.loops.active_set import ActiveSetSolver
-from ddcm_casadi.loops.newton import SMOOTHING, plus, smoothed_newton_solve
+from ddcm_casadi.loops.newton import SMOOTHING, JacobianFactors, plus, smoothed_newton_solve
 from ddcm_casadi.loops.uzawa import method_of_multipliers, uzawa
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
@@ -92,13 +92,6 @@ class AugmentedLagrangian(Formulation):
             Fallback smoothing continuation of the inner Newton.
         anderson : int
             Classical only: depth of the Anderson acceleration of the Uzawa updates (0: plain Uzawa).
-        early_branch : bool
-            DDCM only: after an inner solve whose ``c`` is above ``tol``, finish on the branch it
-            identifies (``a_i = 0`` where ``a_i <= b_i``, else ``b_i = 0``; the primal-dual
-            active-set branch finish), accepted only if its signs hold strictly or it is a
-            B-stationary corner: then ``c = 0`` exactly and the updates stop. Measured on the Hertz
-            example: the multiplier updates cost 6-7 inner solves of 10-30 Newton steps per
-            projection, the branch finish a few solves with kept factors.
         max_updates : int
             Maximum Uzawa / multiplier updates.
         """
@@ -114,7 +107,6 @@ class AugmentedLagrangian(Formulation):
         max_updates: int = 500
         smoothing: tuple = SMOOTHING
         anderson: int = 5
-        early_branch: bool = True
 
     DEFAULT_GAMMA_FACTOR = 100.0
 
@@ -153,6 +145,9 @@ class _BuiltAL(BuiltFormulation):
             self._rj, self._r, self._jac = built.rj, built.r, built.jacobian
             self._update = S.values("uzawa", [p_of_x])
             self._system = NewtonSystem("augmented_lagrangian (inner)", Parameters(x=problem.n_x), P, built)
+            # A linear model's inner Jacobian depends only on the active set: Newton steps and
+            # Uzawa updates on one active set share a factorisation.
+            self._factors = JacobianFactors() if problem.affine else None
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)
             self.solver = ActiveSetSolver(self.system, predictor=False)
@@ -181,7 +176,8 @@ class _BuiltAL(BuiltFormulation):
         def inner(lam, z):
             return smoothed_newton_solve(self._rj, self._r, z, lambda mu: P.pack(params, multiplier=lam, mu=mu),
                                          smoothing=o.smoothing, jacobian=self._jac, tol=o.newton_tol,
-                                         residual_tol=o.residual_tol, max_iter=o.max_iter)[0]
+                                         residual_tol=o.residual_tol, max_iter=o.max_iter,
+                                         factors=self._factors)[0]
 
         def update(z, lam):
             return np.asarray(self._update(z, P.pack(params, multiplier=lam, mu=0.0)), float).ravel()
@@ -211,15 +207,7 @@ class _BuiltAL(BuiltFormulation):
             # A projection onto the corner g = p = 0 needs an unbounded multiplier: the updates
             # would only creep. Finish on the biactive branch when it is B-stationary.
             corner = self.solver.polish_corner(z, base(lam, rho), self._inner)
-            if corner is not None:
-                return corner.z, system.split(corner.z)[2], corner.iterations
-            if not o.early_branch:
-                return None
-            # The branch the inner solution identifies, finished exactly (the class notes: an
-            # accepted branch KKT point is the exact projection and lam = theta a fixed point of
-            # the updates), instead of the updates converging to it one inner solve at a time.
-            finish, spent = self.solver.branch_finish((z,), base(lam, rho), self._inner)
-            return None if finish is None else (finish.z, system.split(finish.z)[2], spent)
+            return None if corner is None else (corner.z, system.split(corner.z)[2], corner.iterations)
 
         def done(z):
             x, p, _ = system.split(z)
