@@ -95,7 +95,11 @@ class AugmentedLagrangian(Formulation):
         max_updates : int
             Maximum Uzawa / multiplier updates.
         predictor : bool
-            DDCM only: each inner solve first tries the active-set predictor (the primal-dual
+            Classical: before the Uzawa loop, the active-set predictor (the primal-dual active-set
+            iteration on ``F = 0`` with ``g_i = 0`` or ``p_i = 0`` from the start's branches, one
+            kept factorisation per active set); its result is accepted only if it passes the
+            loop's own stopping test, and then ``p = <p - gamma g>_+`` is a fixed point of the
+            update. DDCM: each inner solve first tries the active-set predictor (the primal-dual
             active-set iteration on the pieces of ``Z_E`` from the start's branches, one kept
             factorisation per active set; :class:`~ddcm_casadi.loops.active_set.ActiveSetSolver`).
             Its result is accepted only if every sign holds strictly or it is a B-stationary
@@ -158,11 +162,13 @@ class _BuiltAL(BuiltFormulation):
             # A linear model's inner Jacobian depends only on the active set: Newton steps and
             # Uzawa updates on one active set share a factorisation.
             self._factors = JacobianFactors() if problem.affine else None
+            # The predictor's piece systems (F = 0 with a_i = 0 or b_i = 0), scaled as the DDCM system.
+            self.solver = ActiveSetSolver(FBSystem(problem, gamma, 1.0), predictor=True) if opts.predictor else None
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)
             self.solver = ActiveSetSolver(self.system, predictor=opts.predictor)
-            # The inner solver reads these names from its options.
-            self._inner = _InnerOptions(opts.newton_tol, opts.residual_tol, opts.max_iter, opts.smoothing)
+        # The inner solver reads these names from its options.
+        self._inner = _InnerOptions(opts.newton_tol, opts.residual_tol, opts.max_iter, opts.smoothing)
 
     def newton_system(self):
         """The inner Newton system (the multipliers are its parameters)."""
@@ -197,6 +203,15 @@ class _BuiltAL(BuiltFormulation):
             residual, comp, pen, _ = self.metrics(z, lam_T, params)
             return comp <= o.tol and pen <= o.tol and residual <= o.residual_tol
 
+        if self.solver is not None:
+            system = self.solver.system
+            start = system.start(np.asarray(x0, float), np.maximum(np.asarray(p0, float), 0.0), None)
+            predicted, spent = self.solver.branch_finish((start,), params, self._inner)
+            if predicted is not None:
+                x, p, _ = system.split(predicted.z)
+                if done(x, p):  # p = <p - gamma g>_+: a fixed point of the Uzawa update
+                    return self._finish(x, p, params, converged=True, iterations=spent, outer=0,
+                                        message="converged (active-set predictor)")
         out = uzawa(inner, update, done, np.asarray(x0, float), np.maximum(np.asarray(p0, float), 0.0),
                     anderson=o.anderson, max_updates=o.max_updates)
         return self._finish(out.z, out.multiplier, params, converged=out.converged, iterations=out.inner_iterations,
