@@ -95,11 +95,11 @@ class AugmentedLagrangian(Formulation):
         max_updates : int
             Maximum Uzawa / multiplier updates.
         predictor : bool
-            Classical: before the Uzawa loop, the active-set predictor (the primal-dual active-set
-            iteration on ``F = 0`` with ``g_i = 0`` or ``p_i = 0`` from the start's branches, one
-            kept factorisation per active set); its result is accepted only if it passes the
-            loop's own stopping test, and then ``p = <p - gamma g>_+`` is a fixed point of the
-            update. DDCM: each inner solve first tries the active-set predictor (the primal-dual
+            Classical, small strain: before the Uzawa loop, the active-set predictor (the
+            primal-dual active-set iteration on ``F = 0`` with ``g_i = 0`` or ``p_i = 0`` from the
+            start's branches, one kept factorisation per active set); its result is accepted only
+            if it passes the loop's own stopping test, and then ``p = <p - gamma g>_+`` is a
+            fixed point of the update. DDCM: each inner solve first tries the active-set predictor (the primal-dual
             active-set iteration on the pieces of ``Z_E`` from the start's branches, one kept
             factorisation per active set; :class:`~ddcm_casadi.loops.active_set.ActiveSetSolver`).
             Its result is accepted only if every sign holds strictly or it is a B-stationary
@@ -162,8 +162,11 @@ class _BuiltAL(BuiltFormulation):
             # A linear model's inner Jacobian depends only on the active set: Newton steps and
             # Uzawa updates on one active set share a factorisation.
             self._factors = JacobianFactors() if problem.affine else None
-            # The predictor's piece systems (F = 0 with a_i = 0 or b_i = 0), scaled as the DDCM system.
-            self.solver = ActiveSetSolver(FBSystem(problem, gamma, 1.0), predictor=True) if opts.predictor else None
+            # The predictor's piece systems (F = 0 with a_i = 0 or b_i = 0), scaled as the DDCM
+            # system. A linear model only: with finite kinematics the loop's path picks the
+            # equilibrium (a snap-through truss has several), as without the predictor.
+            self.solver = (ActiveSetSolver(FBSystem(problem, gamma, 1.0), predictor=True)
+                           if opts.predictor and problem.affine else None)
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)
             self.solver = ActiveSetSolver(self.system, predictor=opts.predictor)
