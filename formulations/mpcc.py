@@ -120,11 +120,14 @@ class _BuiltMPCC(BuiltFormulation):
         base = problem.parameters.extend(anchor=nx) if self._anchored else problem.parameters
         self._base = base
         self.parameters = base.extend(tau=1)
-        # warm_start_init_point: IPOPT ignores the homotopy's warm multipliers without it (a deep
-        # relaxed solve then took 150-450 iterations on the Hertz example's projections).
         ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
                  "acceptable_tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500,
-                 "mu_strategy": "adaptive", "warm_start_init_point": "yes"}
+                 "mu_strategy": "adaptive"}
+        if problem.affine:
+            # IPOPT ignores the homotopy's warm multipliers without this (a deep relaxed solve then
+            # took 150-450 iterations on the Hertz example's projections). Not with finite
+            # kinematics: on the von Mises truss the step after the snap then fails.
+            ipopt["warm_start_init_point"] = "yes"
         if problem.kind == "mcp":
             # The classical NLP is a feasibility problem: its KKT matrix has a zero Hessian block.
             # MUMPS's automatic ordering (as SCOTCH or PORD) then gives steps on which IPOPT needs
