@@ -5,8 +5,10 @@
 The example case ``examples/cases/hertz2d.toml`` with ``levels`` gradings of the contact zone
 (level 2 is the example's own mesh), every formulation, both variants, its 5 load steps and its
 21^3 Hookean data. Prints one row per mesh x variant x formulation: unknowns, converged steps,
-build and solve seconds, iterations per step, and the Hertz error of ``p0`` at the last step. The
-machines are shared and noisy: compare rows of one run, not runs.
+build and solve seconds, iterations per step, and the Hertz error of ``p0`` at the last step; then
+each run's solve time over Fischer-Burmeister's in the same mesh and variant (the targets of issue
+28: augmented Lagrangian at most 3, MPCC at most 10). The machines are shared and noisy: compare
+rows of one run, not runs.
 """
 
 from __future__ import annotations
@@ -45,6 +47,14 @@ def main(argv=None) -> list[dict]:
                 print(f"L{lev:>3} {row['unknowns']:8d} {row['stress_unknowns']:7d} {variant:9} {name:22} "
                       f"{row['converged']:>2}/{row['steps']:<2} {row['build_seconds']:8.1f} {row['solve_seconds']:8.1f} "
                       f"{row['iterations_per_step']:8.1f} {row['error_p0']:7.2%}", flush=True)
+    fb = {(r["levels"], r["variant"]): r["solve_seconds"] for r in rows if r["formulation"] == "fischer_burmeister"}
+    if fb:
+        print(f"\n{'mesh':>4} {'variant':9} {'formulation':22} {'solve / FB solve':>16}")
+    for row in rows:
+        ref = fb.get((row["levels"], row["variant"]))
+        if ref:
+            row["ratio_to_fb"] = row["solve_seconds"] / ref
+            print(f"L{row['levels']:>3} {row['variant']:9} {row['formulation']:22} {row['ratio_to_fb']:16.1f}")
     return rows
 
 

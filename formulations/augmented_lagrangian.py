@@ -56,7 +56,7 @@ import numpy as np
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.parameters import Parameters
 from ddcm_casadi.loops.active_set import ActiveSetSolver
-from ddcm_casadi.loops.newton import SMOOTHING, plus, smoothed_newton_solve
+from ddcm_casadi.loops.newton import SMOOTHING, JacobianFactors, plus, smoothed_newton_solve
 from ddcm_casadi.loops.uzawa import method_of_multipliers, uzawa
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
@@ -94,6 +94,19 @@ class AugmentedLagrangian(Formulation):
             Classical only: depth of the Anderson acceleration of the Uzawa updates (0: plain Uzawa).
         max_updates : int
             Maximum Uzawa / multiplier updates.
+        predictor : bool
+            Classical, small strain: before the Uzawa loop, the active-set predictor (the
+            primal-dual active-set iteration on ``F = 0`` with ``g_i = 0`` or ``p_i = 0`` from the
+            start's branches, one kept factorisation per active set); its result is accepted only
+            if it passes the loop's own stopping test, and then ``p = <p - gamma g>_+`` is a
+            fixed point of the update. DDCM: each inner solve first tries the active-set predictor (the primal-dual
+            active-set iteration on the pieces of ``Z_E`` from the start's branches, one kept
+            factorisation per active set; :class:`~ddcm_casadi.loops.active_set.ActiveSetSolver`).
+            Its result is accepted only if every sign holds strictly or it is a B-stationary
+            corner; then ``c = 0`` exactly, ``theta`` is a fixed point of the multiplier update
+            and the loop stops after one update. Otherwise semismooth Newton on the proximal
+            system runs as without it. Measured on the Hertz example: 0.69 s against 45 s for the
+            DDCM run, the same fixed points (docs/performance.md, 2026-11-26).
         """
 
         gamma: float | None = None
@@ -107,6 +120,7 @@ class AugmentedLagrangian(Formulation):
         max_updates: int = 500
         smoothing: tuple = SMOOTHING
         anderson: int = 5
+        predictor: bool = True
 
     DEFAULT_GAMMA_FACTOR = 100.0
 
@@ -145,11 +159,19 @@ class _BuiltAL(BuiltFormulation):
             self._rj, self._r, self._jac = built.rj, built.r, built.jacobian
             self._update = S.values("uzawa", [p_of_x])
             self._system = NewtonSystem("augmented_lagrangian (inner)", Parameters(x=problem.n_x), P, built)
+            # A linear model's inner Jacobian depends only on the active set: Newton steps and
+            # Uzawa updates on one active set share a factorisation.
+            self._factors = JacobianFactors() if problem.affine else None
+            # The predictor's piece systems (F = 0 with a_i = 0 or b_i = 0), scaled as the DDCM
+            # system. A linear model only: with finite kinematics the loop's path picks the
+            # equilibrium (a snap-through truss has several), as without the predictor.
+            self.solver = (ActiveSetSolver(FBSystem(problem, gamma, 1.0), predictor=True)
+                           if opts.predictor and problem.affine else None)
         else:
             self.system = FBSystem(problem, gamma, 1.0, proximal=True)
-            self.solver = ActiveSetSolver(self.system, predictor=False)
-            # The inner solver reads these names from its options.
-            self._inner = _InnerOptions(opts.newton_tol, opts.residual_tol, opts.max_iter, opts.smoothing)
+            self.solver = ActiveSetSolver(self.system, predictor=opts.predictor)
+        # The inner solver reads these names from its options.
+        self._inner = _InnerOptions(opts.newton_tol, opts.residual_tol, opts.max_iter, opts.smoothing)
 
     def newton_system(self):
         """The inner Newton system (the multipliers are its parameters)."""
@@ -173,7 +195,8 @@ class _BuiltAL(BuiltFormulation):
         def inner(lam, z):
             return smoothed_newton_solve(self._rj, self._r, z, lambda mu: P.pack(params, multiplier=lam, mu=mu),
                                          smoothing=o.smoothing, jacobian=self._jac, tol=o.newton_tol,
-                                         residual_tol=o.residual_tol, max_iter=o.max_iter)[0]
+                                         residual_tol=o.residual_tol, max_iter=o.max_iter,
+                                         factors=self._factors)[0]
 
         def update(z, lam):
             return np.asarray(self._update(z, P.pack(params, multiplier=lam, mu=0.0)), float).ravel()
@@ -183,6 +206,15 @@ class _BuiltAL(BuiltFormulation):
             residual, comp, pen, _ = self.metrics(z, lam_T, params)
             return comp <= o.tol and pen <= o.tol and residual <= o.residual_tol
 
+        if self.solver is not None:
+            system = self.solver.system
+            start = system.start(np.asarray(x0, float), np.maximum(np.asarray(p0, float), 0.0), None)
+            predicted, spent = self.solver.branch_finish((start,), params, self._inner)
+            if predicted is not None:
+                x, p, _ = system.split(predicted.z)
+                if done(x, p):  # p = <p - gamma g>_+: a fixed point of the Uzawa update
+                    return self._finish(x, p, params, converged=True, iterations=spent, outer=0,
+                                        message="converged (active-set predictor)")
         out = uzawa(inner, update, done, np.asarray(x0, float), np.maximum(np.asarray(p0, float), 0.0),
                     anderson=o.anderson, max_updates=o.max_updates)
         return self._finish(out.z, out.multiplier, params, converged=out.converged, iterations=out.inner_iterations,

@@ -70,6 +70,9 @@ class MPCC(Formulation):
             After each relaxed solve, also try the branch NLP of the branch identified there
             (``g_i = 0`` where ``g_i <= p_i``, else ``p_i = 0``; mpecopt's phase II), at most this
             many times while it fails; 0: only when the homotopy converges near a corner or stalls.
+            The default tries it after every relaxed solve: a branch NLP costs about one IPOPT
+            iteration on a linear model, the relaxed solves near ``tau = 1e-10`` and below 150-450
+            (measured on the Hertz example, docs/performance.md 2026-11-26).
             An accepted branch solution passes the same tests (signs, B-stationarity,
             ``comp_tol``, ``residual_tol``) as at the end of the homotopy.
         warm_branch : bool
@@ -86,7 +89,7 @@ class MPCC(Formulation):
         comp_tol: float = 1e-11
         residual_tol: float = 1e-10
         max_homotopy: int = 30
-        early_branch: int = 2
+        early_branch: int = 30
         warm_branch: bool = True
         ipopt: dict = field(default_factory=dict)
 
@@ -120,6 +123,18 @@ class _BuiltMPCC(BuiltFormulation):
         ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
                  "acceptable_tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500,
                  "mu_strategy": "adaptive"}
+        if problem.affine:
+            # IPOPT ignores the homotopy's warm multipliers without this (a deep relaxed solve then
+            # took 150-450 iterations on the Hertz example's projections). Not with finite
+            # kinematics: on the von Mises truss the step after the snap then fails.
+            ipopt["warm_start_init_point"] = "yes"
+        if problem.kind == "mcp":
+            # The classical NLP is a feasibility problem: its KKT matrix has a zero Hessian block.
+            # MUMPS's automatic ordering (as SCOTCH or PORD) then gives steps on which IPOPT needs
+            # 257 iterations of 0.2 s for one relaxed solve of the Hertz example, AMD 14 of 0.01 s
+            # (docs/performance.md, 2026-11-26). With the distance objective (DDCM) the automatic
+            # ordering is the faster one (38 ms against 117 ms an iteration).
+            ipopt["mumps_pivot_order"] = 0
         ipopt.update(dict(opts.ipopt))
         # SX throughout, local terms (finite strain) written out element by element: IPOPT's
         # Hessians of MX maps cost more than the expansion (measured on the 822-dof indentation:

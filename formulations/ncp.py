@@ -65,7 +65,7 @@ class FBSystem:
     piece that solves the ``Phi`` system exactly (there ``grad Phi = -grad a_i`` or ``-grad b_i``,
     so ``theta`` is the same multiplier); biactive pairs go to the corner polish.
 
-    Active-set predictor (``predictor=True``, not with ``proximal``). Between DDCM iterations only
+    Active-set predictor (``predictor=True``). Between DDCM iterations only
     the assigned data change, and between load steps only the loads; the active set mostly stays.
     Before semismooth Newton, the system of the piece the start lies on is solved (the branch
     system above; for ``mcp``, ``F = 0`` with ``a_i = 0`` or ``b_i = 0``). For a linear model its

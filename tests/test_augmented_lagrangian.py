@@ -11,10 +11,12 @@ from ddcm_casadi.validation.fixed_points import check_fixed_points
 FACTORS = [1e-3, 1e-1, 1e1, 1e3, 1e6]
 
 
+@pytest.mark.parametrize("predictor", [True, False])
 @pytest.mark.parametrize("factor", FACTORS)
-def test_any_gamma_converges_and_is_exact(paper, factor):
+def test_any_gamma_converges_and_is_exact(paper, factor, predictor):
+    """With and without the active-set predictor (which ends the loops at their fixed point)."""
     gamma = factor * paper.contact_stiffness
-    cmp = compare(paper, {"augmented_lagrangian": {"gamma": gamma}})
+    cmp = compare(paper, {"augmented_lagrangian": {"gamma": gamma, "predictor": predictor}})
     classical = cmp["classical", "augmented_lagrangian"]
     assert classical.converged
     err = cmp.errors("classical", "augmented_lagrangian")
@@ -28,12 +30,14 @@ def test_any_gamma_converges_and_is_exact(paper, factor):
 
 def test_plain_uzawa_follows_its_contraction_rate(paper):
     """Plain Uzawa contracts the multiplier error by k / (k + gamma), k = E/l0, per update:
-    it needs about log(tol) / log(k / (k + gamma)) updates; Anderson mixing needs a few."""
+    it needs about log(tol) / log(k / (k + gamma)) updates; Anderson mixing needs a few. (Without
+    the active-set predictor, which would start the loop at its fixed point.)"""
     k = paper.contact_stiffness
     gamma = 0.1 * k
-    plain = compare(paper, {"augmented_lagrangian": {"gamma": gamma, "anderson": 0, "max_updates": 2000}},
+    plain = compare(paper, {"augmented_lagrangian": {"gamma": gamma, "anderson": 0, "max_updates": 2000,
+                                                     "predictor": False}},
                     variants=["classical"])["classical", "augmented_lagrangian"]
-    fast = compare(paper, {"augmented_lagrangian": {"gamma": gamma}},
+    fast = compare(paper, {"augmented_lagrangian": {"gamma": gamma, "predictor": False}},
                    variants=["classical"])["classical", "augmented_lagrangian"]
     assert plain.converged and fast.converged
     tol = formulations.get("augmented_lagrangian").options.tol  # the stopping test on the pairs

@@ -97,7 +97,10 @@ class ActiveSetSolver:
     ----------
     system : FBSystem
     predictor : bool
-        Try the active-set predictor before semismooth Newton (not for proximal systems).
+        Try the active-set predictor before semismooth Newton. For a proximal system (the
+        augmented Lagrangian's) an accepted prediction is a KKT point of a piece of ``Z_E``:
+        ``Phi = 0`` there, so it is the exact projection whatever ``lam`` and ``rho`` (as the
+        branch finish's result).
     """
 
     #: Factors of piece systems kept (one per active set).
@@ -107,7 +110,7 @@ class ActiveSetSolver:
 
     def __init__(self, system, *, predictor: bool = True) -> None:
         self.system = system
-        self.predictor = bool(predictor) and not system.proximal
+        self.predictor = bool(predictor)
         self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
         self._pieces = PieceFactorCache(self.LU_CACHE, self.FACTORS_KEPT)
         self._reference: ReferenceFactor | None = None  # the last piece matrix factorised itself
@@ -153,6 +156,14 @@ class ActiveSetSolver:
             if polished is not None:
                 total += polished.iterations
                 best = polished
+        if not best.converged and system.proximal:
+            # The augmented Lagrangian's inner systems: the branch finish (a few solves with kept
+            # piece factors) before the smoothing continuation (up to 350 Newton steps, each a
+            # factorisation; docs/performance.md, 2026-11-26). Same acceptance tests either way.
+            finish, spent = self.branch_finish((best.z,), base, opts, corner_tol=corner_tol)
+            total += spent
+            if finish is not None:
+                best = finish
         if not best.converged:
             best, mu, stages = smoothed_newton_solve(system.rj, system.r, z0, pack, smoothing=opts.smoothing,
                                                      try_plain=False, **kw)

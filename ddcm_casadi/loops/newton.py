@@ -8,6 +8,8 @@ Convergence is declared when the relative increment (as in the paper) *and* the 
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Callable
 
@@ -54,10 +56,41 @@ class SparseJacobian:
         return sp.csc_matrix((np.asarray(J, dtype=float), self.indices, self.indptr), shape=self.shape)
 
 
-def solve_linear(J: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray:
-    """Sparse LU solve; a singular (semismooth) Jacobian falls back to a tiny Levenberg shift."""
+class JacobianFactors:
+    """Factorisations of the Jacobians Newton met, kept by their values (at most ``size``).
+
+    A linear model's semismooth Jacobian is piecewise constant: it changes only when a pair
+    changes piece, so the Newton steps and the multiplier updates of one active set share one
+    factorisation (the classical augmented Lagrangian's inner solves: 75 factorisations in 33
+    updates on the Hertz example, most of them repeats). A repeat is recognised by a hash of the
+    matrix's pattern and values, so a kept factor is the one a new factorisation would give.
+    """
+
+    def __init__(self, size: int = 4) -> None:
+        self.size = int(size)
+        self._factors: OrderedDict[bytes, object] = OrderedDict()
+
+    def factor(self, J: sp.csc_matrix):
+        """The factor of ``J`` (kept, or computed and kept); raises :class:`SingularMatrix`."""
+        h = hashlib.blake2b(digest_size=16)
+        for part in (np.asarray(J.shape, np.int64), J.indptr, J.indices, J.data):
+            h.update(np.ascontiguousarray(part).tobytes())
+        key = h.digest()
+        lu = self._factors.pop(key, None)
+        if lu is None:
+            lu = factorize(J, iterated=True)
+        self._factors[key] = lu
+        while len(self._factors) > self.size:
+            self._factors.popitem(last=False)
+        return lu
+
+
+def solve_linear(J: sp.csc_matrix, rhs: np.ndarray, factors: JacobianFactors | None = None) -> np.ndarray:
+    """Sparse LU solve; a singular (semismooth) Jacobian falls back to a tiny Levenberg shift.
+    ``factors``: reuse the factorisations of Jacobians met before."""
     try:
-        d = factorize(J, iterated=True).solve(rhs)  # Newton corrects an inexact step
+        lu = factors.factor(J) if factors is not None else factorize(J, iterated=True)
+        d = lu.solve(rhs)  # Newton corrects an inexact step
         if np.all(np.isfinite(d)):
             return d
     except SingularMatrix:
@@ -87,7 +120,8 @@ def roundoff_floor(J: sp.csc_matrix, z: np.ndarray) -> float:
 
 def newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params: np.ndarray, *,
                  jacobian: SparseJacobian | None = None, tol: float = 1e-9, residual_tol: float = 1e-9,
-                 max_iter: int = 50, armijo: float = 1e-4, max_backtracks: int = 40) -> NewtonResult:
+                 max_iter: int = 50, armijo: float = 1e-4, max_backtracks: int = 40,
+                 factors: JacobianFactors | None = None) -> NewtonResult:
     """Solve ``r(z; params) = 0`` by Newton with an Armijo line search on ``0.5 ||r||^2``.
 
     Parameters
@@ -101,6 +135,8 @@ def newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params
     residual_tol : float
         Tolerance on ``||r||_inf``; both tests must pass. A residual at the roundoff floor of
         its terms (:func:`roundoff_floor`) passes too.
+    factors : JacobianFactors, optional
+        Reuse the factorisations of Jacobians met before (a piecewise constant Jacobian).
     """
     to_csc = jacobian or SparseJacobian(rj)
     z = np.array(z0, dtype=float)
@@ -112,7 +148,7 @@ def newton_solve(rj: NumericFunction, r: NumericFunction, z0: np.ndarray, params
     for it in range(1, max_iter + 1):
         if not np.all(np.isfinite(res)):
             return NewtonResult(z, False, it - 1, np.inf, increment, "non-finite residual")
-        dz = solve_linear(to_csc(J), -res)
+        dz = solve_linear(to_csc(J), -res, factors)
         if not np.all(np.isfinite(dz)):
             return NewtonResult(z, False, it, rnorm, increment, "non-finite Newton step")
         phi = 0.5 * float(res @ res)
