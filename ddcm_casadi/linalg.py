@@ -30,6 +30,7 @@ Low-rank updates of a factor (the active-set solver's, when a few pairs switch p
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import importlib.util
 import queue
@@ -472,12 +473,15 @@ class _FactorThread:
         self._thread: threading.Thread | None = None
         #: Factors made so far and released so far (for the tests of their ownership).
         self.made, self.released = 0, 0
+        self._closed = False
 
     def _run(self) -> None:
         while True:
             item = self._queue.get()
             kind, payload = item
             del item
+            if kind == "stop":
+                return
             if kind == "release":
                 del payload  # the factor's last reference: freed in this thread
                 self.released += 1
@@ -495,8 +499,20 @@ class _FactorThread:
                 del done
 
     def _release(self, factor: Factor) -> None:
-        """Queue ``factor`` (its last reference) to be dropped in this thread."""
-        self._queue.put(("release", factor))
+        """Queue ``factor`` (its last reference) to be dropped in this thread; once the
+        interpreter exits (:meth:`close`), drop it here: the memory goes with the process."""
+        if not self._closed:
+            self._queue.put(("release", factor))
+
+    def close(self) -> None:
+        """At exit: stop the thread once its queue is done, unless a factorisation abandoned by
+        Ctrl-C still runs (then the process leaves without waiting). Releases queued while the
+        interpreter shuts down, with the thread frozen, printed errors at every exit."""
+        self._closed = True
+        thread = self._thread
+        if thread is not None and thread.is_alive() and not abandoned_work():
+            self._queue.put(("stop", None))
+            thread.join()
 
     def submit(self, fn: Callable[[], Factor]) -> Factor:
         """``fn()`` in this thread while the caller waits; Ctrl-C (``KeyboardInterrupt``) reaches
@@ -521,6 +537,7 @@ class _FactorThread:
 
 
 _FACTOR_THREAD = _FactorThread()
+atexit.register(_FACTOR_THREAD.close)
 
 
 def _interruptible(fn: Callable[[], Factor]) -> Factor:
