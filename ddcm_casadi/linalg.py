@@ -30,8 +30,10 @@ Low-rank updates of a factor (the active-set solver's, when a few pairs switch p
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import importlib.util
+import queue
 import threading
 from typing import Callable, Protocol
 
@@ -408,25 +410,25 @@ def unavailable_solvers() -> dict[str, str]:
     return {name: reason for name in _SOLVERS if (reason := _check_loads(name)) is not None}
 
 
-#: Unknowns from which a factorisation called from the main thread runs in a helper thread, so
-#: that Ctrl-C acts at once (:func:`factorize`). SuperLU holds no GIL while it factorises but
-#: Python runs its SIGINT handler only between bytecodes of the main thread: called directly, a
-#: 3-D system of 64 000 unknowns took Ctrl-C 8.1 s to act (the whole factorisation), and 263 s
-#: on a 3-D mesh of 1e5 dofs. Below this size a factorisation takes well under a second and the
-#: thread (about 0.1 ms) is not worth it.
+#: Unknowns from which a factorisation called from the main thread runs in the factorising
+#: thread (:class:`_FactorThread`), so that Ctrl-C acts at once (:func:`factorize`). SuperLU holds
+#: no GIL while it factorises but Python runs its SIGINT handler only between bytecodes of the
+#: main thread: called directly, a 3-D system of 64 000 unknowns took Ctrl-C 8.1 s to act (the
+#: whole factorisation), and 263 s on a 3-D mesh of 1e5 dofs. Below this size a factorisation
+#: takes well under a second and the hand-over (about 0.1 ms) is not worth it.
 INTERRUPTIBLE_MIN_SIZE = 20_000
-#: Seconds between two looks of the waiting main thread at its helper (Ctrl-C needs none: the
-#: wait itself is interrupted).
+#: Seconds between two looks of the waiting main thread at the factorising thread (Ctrl-C needs
+#: none: the wait itself is interrupted).
 _WAIT = 0.25
-#: The "done" events of helper threads left factorising after Ctrl-C (:func:`abandoned_work`):
-#: an event, not ``Thread.is_alive``, which Python 3.11 reports false after an interrupted join.
+#: The "done" events of factorisations left running after Ctrl-C (:func:`abandoned_work`): an
+#: event, not ``Thread.is_alive``, which Python 3.11 reports false after an interrupted join.
 _ABANDONED: list = []
 
 
 def abandoned_work() -> bool:
-    """Whether a factorisation abandoned by Ctrl-C is still running in its helper thread.
+    """Whether a factorisation abandoned by Ctrl-C is still running in the factorising thread.
 
-    Its thread cannot be stopped (the solver's C code knows no cancellation): it ends when the
+    It cannot be stopped (the solver's C code knows no cancellation): it ends when the
     factorisation does. An interpreter that shuts down while it runs frees memory under it (and
     may crash on the way out), so a command that ends after Ctrl-C leaves at once instead
     (:func:`ddcm_casadi.commands.base.run_guarded`)."""
@@ -434,31 +436,113 @@ def abandoned_work() -> bool:
     return bool(_ABANDONED)
 
 
-def _interruptible(fn: Callable[[], Factor]) -> Factor:
-    """``fn()`` in a daemon helper thread while the main thread waits for it, so that Ctrl-C
-    (``KeyboardInterrupt``) reaches the caller within :data:`_WAIT` seconds; the thread is then
-    abandoned (:func:`abandoned_work`). Its exceptions are raised here."""
-    box: dict = {}
-    done = threading.Event()
+class _ThreadOwned:
+    """A factor made in the factorising thread, released there too (:class:`_FactorThread`).
 
-    def work() -> None:
+    scipy's SuperLU records every block it allocates in a table of the allocating thread and
+    frees a block only if it is in the table of the thread that frees it: a factor made in one
+    thread and dropped in another is never freed. Dropped from the main thread, each factor of
+    the 20 478-unknown finite-strain projection leaked (memory grew past 16 GB); so this wrapper
+    hands its factor back to the thread that made it."""
+
+    def __init__(self, factor: Factor, release: Callable) -> None:
+        self._factor, self._release = factor, release
+        self.nnz = getattr(factor, "nnz", None)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return self._factor.solve(rhs)
+
+    def __getattr__(self, name: str):  # the solver's own attributes (perturbed, L, U, ...)
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self._factor, name)
+
+    def __del__(self) -> None:
+        factor = self.__dict__.pop("_factor", None)
+        if factor is not None:
+            self._release(factor)  # a bound method: no module global is looked up at shutdown
+
+
+class _FactorThread:
+    """One long-lived daemon thread that makes, and releases, the large factors (see
+    :class:`_ThreadOwned` for why one thread must do both): jobs and releases queue in order."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        #: Factors made so far and released so far (for the tests of their ownership).
+        self.made, self.released = 0, 0
+        self._closed = False
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            kind, payload = item
+            del item
+            if kind == "stop":
+                return
+            if kind == "release":
+                del payload  # the factor's last reference: freed in this thread
+                self.released += 1
+                continue
+            fn, box, done = payload
+            del payload
+            try:
+                box["factor"] = _ThreadOwned(fn(), self._release)
+                self.made += 1
+            except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread and raised there
+                box["error"] = exc
+            finally:
+                del fn, box  # an abandoned job's factor goes here, in this thread
+                done.set()
+                del done
+
+    def _release(self, factor: Factor) -> None:
+        """Queue ``factor`` (its last reference) to be dropped in this thread; once the
+        interpreter exits (:meth:`close`), drop it here: the memory goes with the process."""
+        if not self._closed:
+            self._queue.put(("release", factor))
+
+    def close(self) -> None:
+        """At exit: stop the thread once its queue is done, unless a factorisation abandoned by
+        Ctrl-C still runs (then the process leaves without waiting). Releases queued while the
+        interpreter shuts down, with the thread frozen, printed errors at every exit."""
+        self._closed = True
+        thread = self._thread
+        if thread is not None and thread.is_alive() and not abandoned_work():
+            self._queue.put(("stop", None))
+            thread.join()
+
+    def submit(self, fn: Callable[[], Factor]) -> Factor:
+        """``fn()`` in this thread while the caller waits; Ctrl-C (``KeyboardInterrupt``) reaches
+        the caller within :data:`_WAIT` seconds and the job is abandoned (:func:`abandoned_work`).
+        Its exceptions are raised here."""
+        with self._lock:
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(target=self._run, name="ddcm-factorize", daemon=True)
+                self._thread.start()
+        box: dict = {}
+        done = threading.Event()
+        self._queue.put(("job", (fn, box, done)))
         try:
-            box["factor"] = fn()
-        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread and raised there
-            box["error"] = exc
-        finally:
-            done.set()
+            while not done.wait(_WAIT):
+                pass
+        except KeyboardInterrupt:
+            _ABANDONED.append(done)
+            raise
+        if "error" in box:
+            raise box.pop("error")
+        return box.pop("factor")
 
-    threading.Thread(target=work, name="ddcm-factorize", daemon=True).start()
-    try:
-        while not done.wait(_WAIT):
-            pass
-    except KeyboardInterrupt:
-        _ABANDONED.append(done)
-        raise
-    if "error" in box:
-        raise box["error"]
-    return box["factor"]
+
+_FACTOR_THREAD = _FactorThread()
+atexit.register(_FACTOR_THREAD.close)
+
+
+def _interruptible(fn: Callable[[], Factor]) -> Factor:
+    """``fn()`` in the factorising thread (:class:`_FactorThread`), the factor released there."""
+    return _FACTOR_THREAD.submit(fn)
 
 
 def factorize(A: sp.spmatrix, *, iterated: bool = False) -> Factor:
@@ -469,8 +553,9 @@ def factorize(A: sp.spmatrix, *, iterated: bool = False) -> Factor:
     :data:`BACKWARD_ERROR` (a symmetric-mode factor then needs no refinement of its own).
 
     A matrix of :data:`INTERRUPTIBLE_MIN_SIZE` unknowns or more, factorised from the main thread,
-    is factorised in a helper thread (:func:`_interruptible`): Ctrl-C acts within a fraction of a
-    second instead of at the end of the factorisation."""
+    is factorised in the factorising thread (:func:`_interruptible`): Ctrl-C acts within a fraction
+    of a second instead of at the end of the factorisation. Its factor is released in that thread
+    too (:class:`_ThreadOwned`)."""
     tolerance = ITERATED_BACKWARD_ERROR if iterated else BACKWARD_ERROR
     A = sp.csc_matrix(A)
     solver = _SOLVERS[_ACTIVE[0]]
