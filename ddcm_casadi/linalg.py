@@ -33,6 +33,7 @@ from __future__ import annotations
 import atexit
 import importlib
 import importlib.util
+import os
 import queue
 import threading
 from typing import Callable, Protocol
@@ -504,6 +505,18 @@ class _FactorThread:
         if not self._closed:
             self._queue.put(("release", factor))
 
+    @property
+    def thread(self) -> threading.Thread | None:
+        return self._thread
+
+    def after_fork_in_child(self) -> None:
+        """In a forked child: the thread was not copied. Start afresh with a new queue and lock;
+        the child's copies of the parent's factors are freed with the child's memory (a thread of
+        the child cannot free them, :class:`_ThreadOwned`)."""
+        self._queue = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._thread = None
+
     def close(self) -> None:
         """At exit: stop the thread once its queue is done, unless a factorisation abandoned by
         Ctrl-C still runs (then the process leaves without waiting). Releases queued while the
@@ -538,6 +551,16 @@ class _FactorThread:
 
 _FACTOR_THREAD = _FactorThread()
 atexit.register(_FACTOR_THREAD.close)
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_FACTOR_THREAD.after_fork_in_child)
+
+
+def fork_safe(thread: threading.Thread) -> bool:
+    """Whether a fork may leave ``thread`` behind: the factorising thread while it has no
+    abandoned work (it then waits on its own queue, which the child replaces,
+    :meth:`_FactorThread.after_fork_in_child`). :func:`~ddcm_casadi.parallel.map_forked` forks
+    only when every other thread is such."""
+    return thread is _FACTOR_THREAD.thread and not abandoned_work()
 
 
 def _interruptible(fn: Callable[[], Factor]) -> Factor:

@@ -53,6 +53,15 @@ def resolve_jobs(jobs: int | None, tasks: int) -> int:
     return max(1, min(n, tasks))
 
 
+def _other_threads() -> bool:
+    """Whether threads other than this one run that a fork must not leave behind (the idle
+    factorising thread of :mod:`ddcm_casadi.linalg` may be: :func:`~ddcm_casadi.linalg.fork_safe`)."""
+    from ddcm_casadi.linalg import fork_safe
+
+    me = threading.current_thread()
+    return any(t is not me and not fork_safe(t) for t in threading.enumerate())
+
+
 def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> list[R]:
     """``[function(item) for item in items]``, in up to ``jobs`` processes (this one included).
 
@@ -65,7 +74,8 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
     jobs : int
         Processes, this one included. Runs are serial here with 1, on a platform without
         ``fork``, and in a process with other Python threads (a dask worker, say): a fork copies
-        only the calling thread, so a lock another thread holds would never be released.
+        only the calling thread, so a lock another thread holds would never be released (the
+        idle factorising thread excepted, :func:`~ddcm_casadi.linalg.fork_safe`).
 
     Returns
     -------
@@ -74,7 +84,7 @@ def map_forked(function: Callable[[T], R], items: Sequence[T], *, jobs: int) -> 
     """
     items = list(items)
     jobs = max(1, min(int(jobs), len(items)))
-    if jobs == 1 or not hasattr(os, "fork") or threading.active_count() > 1:
+    if jobs == 1 or not hasattr(os, "fork") or _other_threads():
         return [function(x) for x in items]
     take, stop = _counter(len(items))
     sys.stdout.flush()  # else a worker inherits, and would repeat, what is still buffered

@@ -172,3 +172,28 @@ def test_map_forked_is_serial_where_other_threads_run():
         stop.set()
         other.join()
     assert set(pids) == {os.getpid()}
+
+
+@fork_only
+def test_map_forked_forks_beside_the_factorising_thread():
+    """A large factorisation leaves the factorising thread running (it frees its factors,
+    ``ddcm_casadi.linalg``); forks still share the work, and a child factorises large matrices in
+    a thread of its own."""
+    import scipy.sparse as sp
+
+    from ddcm_casadi.linalg import INTERRUPTIBLE_MIN_SIZE, factorize
+
+    n = INTERRUPTIBLE_MIN_SIZE
+    A = sp.diags([np.full(n - 1, -1.0), np.full(n, 2.0), np.full(n - 1, -1.0)], [-1, 0, 1], format="csc")
+    factorize(A).solve(np.ones(n))  # starts the factorising thread in this process
+    assert threading.active_count() > 1
+
+    def run(i):
+        time.sleep(0.05)
+        x = factorize(A).solve(np.full(n, float(i)))
+        return float(x[0]), os.getpid()
+
+    out = map_forked(run, range(4), jobs=2)
+    reference = factorize(A).solve(np.ones(n))[0]
+    assert [v for v, _ in out] == pytest.approx([i * reference for i in range(4)])
+    assert len({pid for _, pid in out}) > 1
