@@ -76,17 +76,21 @@ def test_finite_strain_bar_pulled_by_a_device(variant):
             np.testing.assert_allclose(force, S * (1 + U), atol=3 * spacing)
 
 
-def test_truss_case_file_with_a_displacement(tmp_path):
-    path = tmp_path / "truss.toml"
-    path.write_text("""
+def _two_bar_truss(path, device: str):
+    """A two-bar truss case file whose node 2 carries the hard device ``device`` (TOML)."""
+    path.write_text(f"""
 [structure]
 nodes = [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]
 members = [[0, 1], [1, 2]]
 area = 1e-4
 youngs_modulus = 200e9
-supports = [[0, "xy"], [1, "y"], [2, "xy", [[0.001, 0.0], [0.002, 0.0]]]]
+supports = [[0, "xy"], [1, "y"], [2, "xy", {device}]]
 """)
-    m = load_case(path).model
+    return path
+
+
+def test_truss_case_file_with_a_displacement(tmp_path):
+    m = load_case(_two_bar_truss(tmp_path / "truss.toml", "[[0.001, 0.0], [0.002, 0.0]]")).model
     assert m.n_steps == 2 and m.prescribed.size == 2
     cmp = compare(m, ["fischer_burmeister"], variants=["classical"])
     force = cmp.fields("classical", "fischer_burmeister")["hard_device_force"][:, 0]
@@ -111,17 +115,8 @@ def test_truss_device_errors_are_one_line(supports, load_factors, message):
 
 
 def test_case_file_device_of_the_wrong_length(tmp_path):
-    path = tmp_path / "bad.toml"
-    path.write_text("""
-[structure]
-nodes = [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]
-members = [[0, 1], [1, 2]]
-area = 1e-4
-youngs_modulus = 200e9
-supports = [[0, "xy"], [1, "y"], [2, "xy", [0.001, 0.0, 0.0]]]
-""")
     with pytest.raises(InputError, match="must have 2 components"):
-        load_case(path)
+        load_case(_two_bar_truss(tmp_path / "bad.toml", "[0.001, 0.0, 0.0]"))
 
 
 def test_contact_on_a_prescribed_node():
