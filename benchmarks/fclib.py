@@ -1,13 +1,13 @@
 """FCLIB frictional contact problems: the reference solver's table (the baseline the frictional
 formulations of issue 26 will be compared with).
 
-    python benchmarks/fclib.py --data ../shared/fclib [--tol 1e-8] [--max-sweeps 3000] [--out DIR]
+    python benchmarks/fclib.py --data DIR [--tol 1e-8] [--max-sweeps 3000] [--out DIR]
 
 For every ``*.hdf5`` in ``--data``: read it (:func:`ddcm_casadi.problems.fclib.read_fclib`; a global
 problem is reduced to its local one), solve it with the projected Gauss-Seidel reference
 (:func:`~ddcm_casadi.problems.fclib.solve_projected_gauss_seidel`) and report contacts, sweeps,
 seconds, the natural-map error, and whether it is solved at 1e-4 and at 1e-8 (the FCLIB
-benchmarks' levels). Writes ``DIR/fclib.json``; the machines are shared and noisy: compare ratios
+benchmarks' levels; ``docs/maths.md``, section 15). Writes ``DIR/fclib.json``; the machines are shared and noisy: compare ratios
 within one run.
 """
 

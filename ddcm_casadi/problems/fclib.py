@@ -1,5 +1,5 @@
 r"""FCLIB frictional contact problems: reading, writing, the natural-map error, and a reference
-solver.
+solver (``docs/maths.md``, section 15).
 
 FCLIB (Acary et al., INRIA RT-0444, 2014) stores discrete 3-D frictional contact problems in HDF5:
 
