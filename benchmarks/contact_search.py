@@ -30,7 +30,7 @@ from ddcm_casadi.io import write_json_atomic
 from ddcm_casadi.models.continuum import fem
 from ddcm_casadi.models.continuum import mesh as meshes
 from ddcm_casadi.models.continuum.bodies import join
-from ddcm_casadi.models.continuum.mortar import Surface, candidate_facets, element_centroids, mortar_coupling
+from ddcm_casadi.models.continuum.mortar import Surface, candidate_facets, mortar_coupling
 
 #: Cubes per edge of the lower box: about 1e5 and 1e6 unknowns (three per node) in the two boxes.
 SIZES = {"1e5": 32, "1e6": 69}
@@ -49,14 +49,11 @@ def measure(n: int) -> dict:
     slave, master = mesh.boundaries["upper/zmin"], mesh.boundaries["lower/zmax"]
     x = mesh.p.T
     S, M = Surface.of(mesh, slave), Surface.of(mesh, master)
-    s_in, m_in = element_centroids(mesh, slave), element_centroids(mesh, master)
     reach = 0.05
-    n_s, _, c_s = S.geometry(x, s_in)
-    n_m, _, c_m = M.geometry(x, m_in)
-    r_s = np.max(np.linalg.norm(x[S.nodes] - c_s[:, None], axis=2), axis=1)
-    r_m = np.max(np.linalg.norm(x[M.nodes] - c_m[:, None], axis=2), axis=1)
-    (cand, t_search) = _timed(lambda: candidate_facets(c_s, r_s, c_m, r_m, reach))
-    (coupling, t_coupling) = _timed(lambda: mortar_coupling(x, S, s_in, M, m_in, reach))
+    _, _, c_s = S.geometry(x)
+    _, _, c_m = M.geometry(x)
+    (cand, t_search) = _timed(lambda: candidate_facets(c_s, S.radii(x, c_s), c_m, M.radii(x, c_m), reach))
+    (coupling, t_coupling) = _timed(lambda: mortar_coupling(x, S, M, reach))
     disc = fem.Discretisation.create(mesh, 1)
     (_, t_strain) = _timed(lambda: fem.strain_operator(disc))
     loads = np.asarray(coupling.master_weights.T @ coupling.area).ravel()

@@ -16,7 +16,7 @@ from ddcm_casadi.models.continuum import mesh as meshes
 from ddcm_casadi.models.continuum.bodies import join
 from ddcm_casadi.models.continuum.inputs import BodyContact, Material, Support, Traction
 from ddcm_casadi.models.continuum.model import continuum_model
-from ddcm_casadi.models.continuum.mortar import Surface, candidate_facets, element_centroids, mortar_coupling
+from ddcm_casadi.models.continuum.mortar import Surface, candidate_facets, mortar_coupling
 from ddcm_casadi.validation import two_body_rungs
 
 from .test_bad_input import assert_input_error, run_cli
@@ -39,8 +39,7 @@ def _blocks(d: int):
 
 def _coupling(mesh, slave, master, reach=0.1):
     s, m = mesh.boundaries[slave], mesh.boundaries[master]
-    return mortar_coupling(mesh.p.T, Surface.of(mesh, s), element_centroids(mesh, s), Surface.of(mesh, m),
-                           element_centroids(mesh, m), reach)
+    return mortar_coupling(mesh.p.T, Surface.of(mesh, s), Surface.of(mesh, m), reach)
 
 
 @pytest.mark.parametrize("d", [2, 3])

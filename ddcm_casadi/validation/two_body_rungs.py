@@ -29,7 +29,7 @@ from ddcm_casadi.models.continuum.bodies import join
 from ddcm_casadi.models.continuum.hertz import BodyHertzReference
 from ddcm_casadi.models.continuum.inputs import BodyContact, Material, Support, Traction
 from ddcm_casadi.models.continuum.model import ContinuumModel, continuum_model
-from ddcm_casadi.models.continuum.mortar import Surface, element_centroids, mortar_coupling
+from ddcm_casadi.models.continuum.mortar import Surface, mortar_coupling
 from ddcm_casadi.validation.verification import Check, fitted_rate
 
 #: NAFEMS benchmark 1, SI units: radius (m), moduli (Pa), Poisson's ratio, load (N per m of thickness).
@@ -48,8 +48,7 @@ def touching(bodies: dict, slave: str, master: str, reach: float):
     facets: on a curved slave it is ``O(h^2 / R)`` above the nodal distance, which is zero."""
     mesh = join(bodies)
     s_f, m_f = mesh.boundaries[slave], mesh.boundaries[master]
-    c = mortar_coupling(mesh.p.T, Surface.of(mesh, s_f), element_centroids(mesh, s_f), Surface.of(mesh, m_f),
-                        element_centroids(mesh, m_f), reach)
+    c = mortar_coupling(mesh.p.T, Surface.of(mesh, s_f), Surface.of(mesh, m_f), reach)
     gaps = c.gaps(mesh.p.T)
     j = int(np.argmin(gaps))
     first, *rest = bodies

@@ -284,17 +284,16 @@ def _body_pairs(disc: fem.Discretisation, c: BodyContact, index: int, n_steps: i
     if not (np.isfinite(reach) and reach > 0):
         raise InputError(f"contact {index} ({c.name!r}): search_distance must be a positive length, got {reach!r}")
     X = mesh.p.T
-    coupling = mortar.mortar_coupling(X, mortar.Surface.of(mesh, slave), mortar.element_centroids(mesh, slave),
-                                      mortar.Surface.of(mesh, master), mortar.element_centroids(mesh, master), reach)
+    coupling = mortar.mortar_coupling(X, mortar.Surface.of(mesh, slave), mortar.Surface.of(mesh, master), reach)
     if not coupling.nodes.size:
         raise InputError(f"contact {index} ({c.name!r}): no slave node faces the master surface within "
                          f"{reach:.3g} m (search_distance); check the boundaries, or increase the search distance")
-    nc = coupling.nodes.size
-    W = coupling.master_weights - coupling.slave_weights  # (nc, n_nodes); P1: node = scalar dof
+    # dg_j/du: the weights of node k times n_j on its component dofs (P1: node = scalar dof)
+    W = (coupling.master_weights - coupling.slave_weights).tocoo()
     vd = disc.vector_dofs()
-    rows = sp.hstack([sp.diags(coupling.normals[:, i]) @ W for i in range(d)]).tocsr()
-    perm = np.concatenate([vd[i, :mesh.p.shape[1]] for i in range(d)])
-    rows = sp.csr_matrix((rows.data, perm[rows.indices], rows.indptr), shape=(nc, disc.n_dofs))
+    rows = sp.csr_matrix((np.concatenate([W.data * coupling.normals[W.row, i] for i in range(d)]),
+                          (np.tile(W.row, d), np.concatenate([vd[i, W.col] for i in range(d)]))),
+                         shape=(coupling.nodes.size, disc.n_dofs))
     gap0 = np.repeat(coupling.gaps(X)[None, :], n_steps, axis=0)
     surface = mortar.MasterSurface(name=c.name, dimension=d, facets=master, facet_pairs=coupling.facet_pairs,
                                    dropped=coupling.dropped, search_distance=reach)

@@ -75,20 +75,24 @@ class Surface:
         Facet indices of the mesh.
     nodes : (nf, d) int
         Their vertices (mesh node indices).
+    elements : (nf, d + 1) int
+        The vertices of the element each facet bounds (its centroid fixes the orientation, at
+        any configuration).
     """
 
     facets: np.ndarray
     nodes: np.ndarray
+    elements: np.ndarray
 
     @classmethod
     def of(cls, mesh, facets: np.ndarray) -> "Surface":
         facets = np.asarray(facets, dtype=np.int64)
-        return cls(facets, np.asarray(mesh.facets[:, facets].T, dtype=np.int64))
+        return cls(facets, np.asarray(mesh.facets[:, facets].T, dtype=np.int64),
+                   np.asarray(mesh.t[:, mesh.f2t[0, facets]].T, dtype=np.int64))
 
-    def geometry(self, x: np.ndarray, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Unit outward normals ``(nf, d)``, measures ``(nf,)`` and centroids ``(nf, d)`` at
-        node coordinates ``x`` ``(n_nodes, d)``; ``inside`` ``(nf, d)``: a point of each facet's
-        element (its centroid), which fixes the orientation."""
+        node coordinates ``x`` ``(n_nodes, d)``."""
         v = x[self.nodes]  # (nf, nv, d)
         if v.shape[2] == 2:
             t = v[:, 1] - v[:, 0]
@@ -98,14 +102,13 @@ class Surface:
             n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
             measure = 0.5 * np.linalg.norm(n, axis=1)
         n = n / np.linalg.norm(n, axis=1)[:, None]
+        inside = x[self.elements].mean(axis=1)
         n[np.einsum("fd,fd->f", n, inside - v[:, 0]) > 0] *= -1.0
         return n, measure, v.mean(axis=1)
 
-
-def element_centroids(mesh, facets: np.ndarray) -> np.ndarray:
-    """``(nf, d)`` the centroid of the element each boundary facet belongs to."""
-    elements = mesh.f2t[0, np.asarray(facets, dtype=np.int64)]
-    return mesh.p[:, mesh.t[:, elements]].mean(axis=1).T
+    def radii(self, x: np.ndarray, centroids: np.ndarray) -> np.ndarray:
+        """``(nf,)`` each facet's bounding radius about its centroid."""
+        return np.max(np.linalg.norm(x[self.nodes] - centroids[:, None], axis=2), axis=1)
 
 
 # ---------------------------------------------------------------------------- search
@@ -171,9 +174,9 @@ def _clip(poly: np.ndarray, count: np.ndarray, f: int) -> tuple[np.ndarray, np.n
     return out, n_out
 
 
-def _triangle_points(xs: np.ndarray, ns: np.ndarray, xm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _triangle_points(xs: np.ndarray, xm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """3-D: quadrature on the intersection of slave triangles ``xs`` ``(P, 3, 3)`` with master
-    triangles ``xm`` projected on their planes along the normals ``ns``. Returns weights
+    triangles ``xm`` projected on their planes along their normals. Returns weights
     ``(P, Q)`` (area) and the slave and master barycentric coordinates, ``(P, Q, 3)`` each."""
     a = xs[:, 0]
     T = np.stack([xs[:, 1] - a, xs[:, 2] - a], axis=2)  # (P, 3, 2)
@@ -242,8 +245,7 @@ class MortarCoupling:
         return np.einsum("jd,jd->j", diff, self.normals)
 
 
-def mortar_coupling(x: np.ndarray, slave: Surface, slave_inside: np.ndarray, master: Surface,
-                    master_inside: np.ndarray, reach: float) -> MortarCoupling:
+def mortar_coupling(x: np.ndarray, slave: Surface, master: Surface, reach: float) -> MortarCoupling:
     """Search and integrate one slave/master contact at node coordinates ``x`` ``(n_nodes, d)``.
 
     Parameters
@@ -251,18 +253,15 @@ def mortar_coupling(x: np.ndarray, slave: Surface, slave_inside: np.ndarray, mas
     x : (n_nodes, d)
         Node coordinates (reference, or current for finite kinematics).
     slave, master : Surface
-    slave_inside, master_inside : (nf, d)
-        A point inside each facet's element (:func:`element_centroids`).
     reach : float
         Search distance (m): master facets farther than this from a slave facet along its normal
         are no candidates.
     """
     x = np.asarray(x, float)
     d = x.shape[1]
-    n_s, meas_s, c_s = slave.geometry(x, slave_inside)
-    n_m, _, c_m = master.geometry(x, master_inside)
-    radius = lambda surf, c: np.max(np.linalg.norm(x[surf.nodes] - c[:, None], axis=2), axis=1)  # noqa: E731
-    r_s, r_m = radius(slave, c_s), radius(master, c_m)
+    n_s, meas_s, c_s = slave.geometry(x)
+    n_m, _, c_m = master.geometry(x)
+    r_s, r_m = slave.radii(x, c_s), master.radii(x, c_m)
     s, m = candidate_facets(c_s, r_s, c_m, r_m, reach)
     facing = np.einsum("pd,pd->p", n_s[s], n_m[m]) < -FACING_COSINE
     offset = c_m[m] - c_s[s]
@@ -274,7 +273,7 @@ def mortar_coupling(x: np.ndarray, slave: Surface, slave_inside: np.ndarray, mas
     if d == 2:
         w, lam, beta = _segment_points(xs, xm)
     else:
-        w, lam, beta = _triangle_points(xs, n_s[s], xm)
+        w, lam, beta = _triangle_points(xs, xm)
     overlap = np.sum(w, axis=1) > 1e-14 * meas_s[s]
     s, m, w, lam, beta = s[overlap], m[overlap], w[overlap], lam[overlap], beta[overlap]
     psi = (d + 1) * lam - 1.0  # the dual basis of a simplex facet with d vertices
