@@ -106,12 +106,12 @@ class ContinuumModel(ContactModel):
         """Mandel strains (flat, point-major): ``B u`` (small; ``+ B_D u_D`` with a hard device),
         Green-Lagrange ``E`` (finite)."""
         if not self.finite:
-            return super().strain(u) if self.prescribed is None else super().strain(u, u_prescribed)
+            return super().strain(u, u_prescribed)
         return finite.green_lagrange(self.displacement_gradient(u)).reshape(-1)
 
     def strain_expression(self, u, values=None):
         if not self.finite:
-            return super().strain_expression(u) if self.prescribed is None else super().strain_expression(u, values)
+            return super().strain_expression(u, values)
         return finite.green_lagrange_expression(self.gradient_operator(), u, self.dimension)
 
     def local_kinematics(self) -> LocalKinematics | None:
