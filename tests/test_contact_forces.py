@@ -119,3 +119,25 @@ def test_results_files_name_each_force(tmp_path):
     header = (out / "results.csv").read_text().splitlines()[0].split(",")
     assert {"contact_force_along_travel_as_modelled", "contact_force_along_travel_full_body", "hertz_force",
             "hertz_pressure_scatter"} <= set(header)
+
+
+def test_force_columns_see_the_obstacle_where_each_step_puts_it():
+    """At finite strain the normals depend on where the obstacle is: each step's row in
+    ``results.csv`` must resolve that step's forces with that step's obstacle (the whole-run
+    ``obstacle_forces`` is the reference), not the first step's."""
+    from ddcm_casadi.models.continuum import mesh as meshes
+    from ddcm_casadi.models.continuum.model import Contact, Material, Support, continuum_model
+    from ddcm_casadi.models.continuum.obstacles import Circle
+
+    R = 0.01
+    model = continuum_model(
+        meshes.rectangle(0.02, 0.01, nx=8, ny=4, origin=(0.0, -0.01)), kinematics="finite",
+        materials=[Material(None, 1e6, 0.3, law="neo_hookean")],
+        supports=[Support("ymin", "xy")],
+        contacts=[Contact(Circle((0.012, R), R, direction=(0.3, -1.0), travel=[2e-4, 6e-4, 1e-3]), "ymax")])
+    cmp = compare(model, ["fischer_burmeister"], variants=["classical"])
+    f = cmp.fields("classical", "fischer_burmeister")
+    along = obstacle_forces(model, f["u"], f["contact_pressure"])[1][:, 0]
+    rows = [r["contact_force_along_travel_as_modelled"] for r in cmp.rows()]
+    assert along[-1] > 0
+    np.testing.assert_allclose(rows, along, rtol=1e-12)

@@ -207,7 +207,7 @@ class Comparison:
             for s in r.steps:
                 row = dict(variant=variant, formulation=name, step=s.step)
                 row[m.load_parameter_name if m.load_parameter_name not in row else "load_parameter"] = s.load_parameter
-                row.update(m.step_summary(s.u, s.p, s.stress))
+                row.update(m.step_summary(s.u, s.p, s.stress, s.step))
                 row.update(m.hard_device_summary(s.step, s.u, s.stress, s.p))  # none without one
                 row.update(converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
                            residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,

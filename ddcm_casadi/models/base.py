@@ -537,9 +537,9 @@ class ContactModel:
         """One unknown, one material point, at most one pair: tables hold ``u`` and ``p`` themselves."""
         return self.n_dofs == 1 and self.n_contacts <= 1 and self.n_points == 1
 
-    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None) -> dict:
-        """The per-step columns of ``results.csv`` that describe the solution ``(u, p)`` (and the
-        material points' ``stress``, for model kinds that measure with it).
+    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None, step: int = 0) -> dict:
+        """The per-step columns of ``results.csv`` that describe the solution ``(u, p)`` of load step
+        ``step`` (and the material points' ``stress``, for model kinds that measure with it).
         ``total_contact_force`` is ``sum a p``: the sum of the pairs' nodal contact forces as
         magnitudes, of the modelled part, resolved along no direction."""
         if self.scalar:

@@ -368,7 +368,7 @@ class ContinuumModel(ContactModel):
             out["reference"] = self.reference.describe()
         return out
 
-    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None) -> dict:
+    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None, step: int = 0) -> dict:
         """:meth:`ContactModel.step_summary` (``total_contact_force`` is ``sum a_0 p``, the sum of
         the nodal contact forces' magnitudes of the modelled part, along no direction), the
         resultant contact force along each obstacle's travel
@@ -378,7 +378,7 @@ class ContinuumModel(ContactModel):
         and ``max_contact_pressure_true`` (the largest pressure per current area, :meth:`true_pressure`)."""
         out = super().step_summary(u, p)
         if self.n_contacts:
-            out.update(contact_force_columns(self, u, p))
+            out.update(contact_force_columns(self, u, p, step))
         if self.reference is not None:
             out.update(self.reference.step_summary(self, p, stress))
         if self.finite:

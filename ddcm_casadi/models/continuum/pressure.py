@@ -138,19 +138,21 @@ def pressure_field(model: ContactModel, pressure: np.ndarray, stress: np.ndarray
     return out[0] if single else out
 
 
-def surface_forces(model: ContactModel, u: np.ndarray, p: np.ndarray) -> np.ndarray:
+def surface_forces(model: ContactModel, u: np.ndarray, p: np.ndarray, steps=None) -> np.ndarray:
     """``(n_steps, n_surfaces, d)`` the resultant contact force on the body per step and contact
     surface, as modelled: ``sum a_0 p n`` over the surface's pairs, ``a_0 p`` the nodal force and
     ``n`` the normal it acts along (:meth:`~ddcm_casadi.models.continuum.model.ContinuumModel.current_normals`:
     the obstacle's at the reference configuration at small kinematics, at the current contact
-    point at finite strain). N (N per unit thickness in 2-D); NaN at a step with non-finite fields."""
+    point at finite strain, with the obstacle where load step ``steps[k]`` puts it; default: row
+    ``k`` is step ``k``). N (N per unit thickness in 2-D); NaN at a step with non-finite fields."""
     u, p = np.atleast_2d(np.asarray(u, float)), np.atleast_2d(np.asarray(p, float))
+    steps = range(u.shape[0]) if steps is None else steps
     n_surfaces, d = len(model.contact_facets), model.dimension
     owner = np.asarray(model.contact_obstacle, dtype=int)
     out = np.full((u.shape[0], n_surfaces, d), np.nan)
-    for k in range(u.shape[0]):
+    for k, step in enumerate(steps):
         if np.all(np.isfinite(u[k])) and np.all(np.isfinite(p[k])):
-            pair_forces = (model.contact_area * p[k])[:, None] * model.current_normals(u[k], k)
+            pair_forces = (model.contact_area * p[k])[:, None] * model.current_normals(u[k], step)
             for s in range(n_surfaces):
                 out[k, s] = pair_forces[owner == s].sum(axis=0)
     return out
@@ -202,14 +204,14 @@ def _directions(model: ContactModel) -> np.ndarray:
     return np.array([ob.offset(1.0) for ob in model.obstacles], dtype=float).reshape(len(model.obstacles), d)
 
 
-def contact_force_columns(model: ContactModel, u: np.ndarray, p: np.ndarray) -> dict:
-    """The per-step columns of ``results.csv`` on the contact forces: per contact surface,
+def contact_force_columns(model: ContactModel, u: np.ndarray, p: np.ndarray, step: int) -> dict:
+    """The columns of ``results.csv`` on the contact forces of load step ``step``: per contact surface,
     ``contact_force_along_travel_as_modelled`` (:func:`surface_forces` resolved along the
     obstacle's direction of travel, of the modelled part) and ``contact_force_along_travel_full_body``
     (times the model's ``symmetry_factor``: the symmetric parts' forces along the travel add up,
     their components across the symmetry planes cancel). With several surfaces the names end in
     ``[<obstacle name>]``."""
-    along = np.einsum("sd,sd->s", surface_forces(model, u, p)[0], _directions(model))
+    along = np.einsum("sd,sd->s", surface_forces(model, u, p, [step])[0], _directions(model))
     names = _names(model)
     out = {}
     for s, name in enumerate(names):
