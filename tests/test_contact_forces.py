@@ -51,13 +51,11 @@ def test_resultant_equals_the_applied_load(dim, formulation):
     assert np.max(np.abs(kept["contact_gap"][-1])) <= EXACT_TOL * DELTA
 
 
-def test_obstacle_forces_are_the_surface_forces():
-    """The force-indentation figure's forces are the same function's (generalised, not copied)."""
+def test_obstacle_force_of_a_pressed_block():
+    """The force-indentation figure's force along the travel is the uniform pressure's resultant."""
     model = pressed_block(3)
     r = compare(model, [FB], variants=("classical",))["classical", FB]
-    u, p = r.array("u"), r.array("p")
-    vectors, along = obstacle_forces(model, u, p)
-    np.testing.assert_array_equal(vectors, surface_forces(model, u, p))
+    vectors, along = obstacle_forces(model, r.array("u"), r.array("p"))
     np.testing.assert_allclose(along[-1, 0], _exact_pressure(3) * H ** 2, rtol=EXACT_TOL)
 
 
@@ -79,8 +77,6 @@ def test_symmetry_factor_is_the_hertz_force_factor():
     cmp = compare(model, [FB], variants=("classical",))
     for row in cmp.rows()[1:]:
         assert row["contact_force_along_travel_full_body"] == pytest.approx(row["hertz_force"], rel=1e-12)
-        assert row["contact_force_along_travel_full_body"] == pytest.approx(
-            4.0 * row["contact_force_along_travel_as_modelled"], rel=1e-15)
 
 
 def test_one_symmetry_setting():
@@ -113,8 +109,6 @@ def test_results_files_name_each_force(tmp_path):
     doc = json.loads((out / "results.json").read_text())
     run = doc["fields"][f"classical/{FB}"]
     assert run["symmetry_factor"] == 4.0
-    full, modelled = np.array(run["contact_force_along_travel_full_body"]), np.array(run["contact_force_along_travel_as_modelled"])
-    np.testing.assert_allclose(full, 4.0 * modelled, rtol=1e-15)
     assert len(run["contact_gap"][-1]) == len(run["contact_pressure_recovered"][-1]) == len(run["contact_obstacle"])
     header = (out / "results.csv").read_text().splitlines()[0].split(",")
     assert {"contact_force_along_travel_as_modelled", "contact_force_along_travel_full_body", "hertz_force",
