@@ -47,7 +47,6 @@ def test_stretched_block_is_homogeneous(block, formulation, variant):
                                    rtol=1e-9)
         np.testing.assert_allclose(stress[..., 0], np.repeat(sxx[:, None], stress.shape[1], axis=1), rtol=1e-9)
         np.testing.assert_allclose(force[:, 0], sxx * 0.01, rtol=1e-9)
-        assert np.all(np.abs(force[:, 1]) == 0)  # y is not prescribed by this support
     else:
         C = isotropic_elasticity(E, NU, 2)[0]
         bound = float(np.linalg.norm(C, 2)) * (0.004 / 20) * np.sqrt(3)

@@ -440,7 +440,7 @@ class ContactModel:
     def strain(self, u: np.ndarray, u_prescribed: np.ndarray | None = None) -> np.ndarray:
         """Material-point strains (flat, point-major) of the free displacements ``u``; with a hard
         device ``B u + B_D u_D`` with the step's prescribed values ``u_prescribed``
-        (:meth:`prescribed_values`), which it then needs."""
+        (``prescribed.values[step]``), which it then needs."""
         strain = self.strain_operator @ np.asarray(u)
         if self.prescribed is not None:
             strain = strain + self.prescribed.strain_operator @ self._given_prescribed(u_prescribed)
@@ -469,30 +469,25 @@ class ContactModel:
         return strain
 
     # ------------------------------------------------------------ prescribed displacements
-    def prescribed_values(self, step: int) -> np.ndarray | None:
-        """The prescribed displacements ``u_D`` of load step ``step`` (``None``: no hard device)."""
-        return None if self.prescribed is None else self.prescribed.values[step]
-
     def prescribed_strain_jacobian(self, u: np.ndarray, u_prescribed: np.ndarray):
         """``d strain / d u_D`` at ``(u, u_D)``: ``B_D`` under small kinematics (a model kind with
         finite kinematics and a hard device overrides it)."""
         return self.prescribed.strain_operator
 
-    def hard_device_forces(self, step: int, u: np.ndarray, stress: np.ndarray, p: np.ndarray,
-                           u_prescribed: np.ndarray | None = None) -> np.ndarray | None:
+    def hard_device_forces(self, step: int, u: np.ndarray, stress: np.ndarray, p: np.ndarray) -> np.ndarray | None:
         """``(n_supports, d)``: per prescribed support, the resultant force (N; per unit thickness
         in 2-D continua) the hard device exerts on the body at step ``step``,
         ``sum (B_D^T W sigma - f_D - G_D^T a p)`` over the support's prescribed dofs
         (:meth:`~ddcm_casadi.models.prescribed.Prescribed.nodal_forces`); ``None`` without a hard
-        device. ``u_prescribed``: the values if not the step's (a sub-step's)."""
+        device."""
         if self.prescribed is None:
             return None
         pr = self.prescribed
         if stress is None:  # no state to take it from
             return np.full((len(pr.support_names), pr.dimension), np.nan)
-        uD = pr.values[step] if u_prescribed is None else np.asarray(u_prescribed, float)
+        uD = pr.values[step]
         weighted = np.repeat(self.volumes, self.strain_components) * np.asarray(stress, float).reshape(-1)
-        jac = None if self.kinematics == "small" else self.prescribed_strain_jacobian(u, uD)
+        jac = self.prescribed_strain_jacobian(u, uD)
         nodal = pr.nodal_forces(weighted, self.contact_area * np.asarray(p, float).reshape(-1), step, jac)
         return pr.resultants(nodal)
 

@@ -246,11 +246,6 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
     objective's items ``1/2 sum_q d_q^T W_q d_q / energy``, ``d_q = [E_q(u) - E*_q; stress_q - S*_q]``.
     The same problems as :func:`_build_nonlinear` builds, item by item.
     """
-    if model.prescribed is not None:  # the element-by-element assembly gathers free dofs only
-        from ddcm_casadi.errors import InputError
-
-        raise InputError("prescribed displacements are not supported by the element-by-element assembly of "
-                         "finite kinematics (a continuum with kinematics = \"finite\"); use kinematics = \"small\"")
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
     ne, q = lk.dofs.shape
     nq = lk.points_per_item

@@ -28,7 +28,7 @@ from ddcm_casadi.models.prescribed import (AXES, Prescribed, displacement_path, 
                                            reconcile_steps)
 
 
-def _label(i: int, support: Support) -> str:
+def _label(i: int) -> str:
     """How messages name a support: its table in the case file."""
     return f"[supports {i}]"
 
@@ -43,7 +43,7 @@ def device_steps(supports: Sequence[Support], d: int) -> int | None:
     steps = None
     for i, s in enumerate(supports):
         if s.displacement is not None:
-            steps = reconcile_steps(steps, path_steps(s.displacement, d), f"{_label(i, s)} displacement",
+            steps = reconcile_steps(steps, path_steps(s.displacement, d), f"{_label(i)} displacement",
                                     "an earlier [[supports]] displacement")
     return steps
 
@@ -120,7 +120,7 @@ def continuum_prescribed(disc: fem.Discretisation, supports: Sequence[Support], 
                 for dof in vdofs[c, nodes]:
                     zero_by.setdefault(int(dof), i)
             continue
-        where = _label(i, s)
+        where = _label(i)
         path = displacement_path(s.displacement, d, n_steps, factors, where)
         nonzero_free_components(path, comps, where)
         for c in comps:
