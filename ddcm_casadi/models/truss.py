@@ -101,29 +101,28 @@ class TrussModel(ContactModel):
         ``l`` the current length (exact for any displacement and rotation). With a hard device the
         prescribed displacements ``u_prescribed`` of the step enter ``du``."""
         u = np.asarray(u, float)
-        if self.prescribed is None:
-            linear = self.strain_operator @ u
-            if self.kinematics == "small":
-                return linear
-            return linear + 0.5 * sum((D @ u) ** 2 for D in self._differences())
-        u_D = self._given_prescribed(u_prescribed)
-        linear = super().strain(u, u_D)
+        linear = super().strain(u, u_prescribed)
         if self.kinematics == "small":
             return linear
-        return linear + 0.5 * sum((D @ u + DD @ u_D) ** 2
-                                  for D, DD in zip(self._differences(), self._differences(True)))
+        u_D = None if self.prescribed is None else self._given_prescribed(u_prescribed)
+        return linear + 0.5 * sum(d ** 2 for d in self._member_differences(u, u_D, lambda A, v: A @ v))
 
     def strain_expression(self, u, values=None):
         """:meth:`strain` for a CasADi symbol ``u`` (``values``: the step's parameters, for the
         prescribed displacements of a hard device)."""
-        linear = super().strain_expression(u) if self.prescribed is None else super().strain_expression(u, values)
+        linear = super().strain_expression(u, values)
         if self.kinematics == "small":
             return linear
-        if self.prescribed is None:
-            return linear + 0.5 * sum(ca.mtimes(to_casadi(D), u) ** 2 for D in self._differences())
-        u_D = values("u_prescribed")
-        return linear + 0.5 * sum((ca.mtimes(to_casadi(D), u) + ca.mtimes(to_casadi(DD), u_D)) ** 2
-                                  for D, DD in zip(self._differences(), self._differences(True)))
+        u_D = None if self.prescribed is None else values("u_prescribed")
+        return linear + 0.5 * sum(d ** 2 for d in self._member_differences(
+            u, u_D, lambda A, v: ca.mtimes(to_casadi(A), v)))
+
+    def _member_differences(self, u, u_D, apply) -> list:
+        """``du_c = D_c u (+ D_Dc u_D)`` per component ``c`` (``apply(A, v)``: ``A v``, numeric or
+        symbolic; ``u_D`` ``None`` without a hard device)."""
+        if u_D is None:
+            return [apply(D, u) for D in self._differences()]
+        return [apply(D, u) + apply(DD, u_D) for D, DD in zip(self._differences(), self._differences(True))]
 
     def prescribed_strain_jacobian(self, u: np.ndarray, u_prescribed: np.ndarray):
         """``dE / du_D``: ``B_D`` (small), ``B_D + sum_c diag(D_c u + D_Dc u_D) D_Dc`` (finite)."""

@@ -68,7 +68,7 @@ class ProblemPair:
             if params is None:
                 raise ValueError("the fields of a model with prescribed displacements need the step's parameters")
             u_D = self._problem(kind).parameters.get(params, PRESCRIBED)
-        strain = self.model.strain(u) if u_D is None else self.model.strain(u, u_D)
+        strain = self.model.strain(u, u_D)
         if kind == "mpcc":
             stress = s["stress"] * np.asarray(x[n:])
         else:
@@ -155,8 +155,7 @@ def _equilibrium(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, P: Paramete
     :func:`_contact_expression`), ``t`` the size of its terms (for relative residuals) and ``g``
     the scaled gaps."""
     values = lambda name: Ps[P.slice(name)]  # noqa: E731 - the step's parameters by name
-    E = (model.strain_expression(s["displacement"] * uh) if model.prescribed is None
-         else model.strain_expression(s["displacement"] * uh, values))
+    E = model.strain_expression(s["displacement"] * uh, values)
     stress = stress_of(E)
     B = ca.jacobian(E, uh) / s["displacement"]
     w = ca.DM(np.repeat(np.asarray(model.volumes, float), model.strain_components))
