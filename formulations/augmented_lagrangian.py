@@ -60,6 +60,7 @@ from ddcm_casadi.loops.newton import SMOOTHING, JacobianFactors, plus, smoothed_
 from ddcm_casadi.loops.uzawa import method_of_multipliers, uzawa
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .friction import BuiltCoulomb
 from .ncp import FBSystem
 from .pairs import NewtonSystem
 from .systems import pair_system
@@ -72,6 +73,7 @@ class AugmentedLagrangian(Formulation):
 
     name = "augmented_lagrangian"
     title = "augmented Lagrangian"
+    supported_contact_laws = frozenset({"signorini", "coulomb"})
 
     @dataclass(frozen=True)
     class Options:
@@ -138,8 +140,13 @@ class AugmentedLagrangian(Formulation):
             opts["gamma_used"] = self.gamma(problem)
         return opts
 
-    def _build(self, problem: ComplementarityProblem) -> "_BuiltAL":
-        return _BuiltAL(problem, self.options, problem.scaled_penalty(self.gamma(problem)))
+    def _build(self, problem: ComplementarityProblem) -> BuiltFormulation:
+        gamma = problem.scaled_penalty(self.gamma(problem))
+        if problem.frictional:  # Alart-Curnier: the multiplier update's fixed point, by semismooth Newton
+            o = self.options
+            return BuiltCoulomb(problem, "alart_curnier", gamma, 1.0, tol=o.newton_tol, residual_tol=o.residual_tol,
+                                max_iter=o.max_iter, comp_tol=max(o.tol, 1e-9))
+        return _BuiltAL(problem, self.options, gamma)
 
 
 class _BuiltAL(BuiltFormulation):

@@ -37,9 +37,10 @@ class LocalSolution:
     residual : float
         ``||F||_inf`` (mcp) or ``||h||_inf`` (mpcc), scaled.
     complementarity : float
-        ``max |min(g, p)|``, scaled.
+        ``max |min(g, p)|``, scaled; with friction the largest natural-map residual of Coulomb's
+        law (:meth:`~ddcm_casadi.problems.contract.ComplementarityProblem.coulomb_residual`).
     penetration : float
-        ``max(0, -g)``, scaled.
+        ``max(0, -g)`` over the normal gaps, scaled.
     objective : float
         Scaled objective (mpcc) or ``nan``.
     state : dict
@@ -72,10 +73,16 @@ class Metrics:
 
     def __call__(self, x, p, params) -> tuple[float, float, float, float]:
         res, terms, gap, obj = self._problem.evaluate(x, p, params)
+        problem = self._problem
         p = np.asarray(p, dtype=float).ravel()
-        residual = self._problem.relative_residual(res, terms)
-        comp = float(np.max(np.abs(np.minimum(gap, p)))) if gap.size else 0.0
-        pen = float(np.max(np.maximum(0.0, -gap))) if gap.size else 0.0
+        residual = problem.relative_residual(res, terms)
+        if not gap.size:
+            return residual, 0.0, 0.0, obj
+        if problem.frictional:
+            comp = float(np.max(np.abs(problem.coulomb_residual(gap, p, params))))
+        else:
+            comp = float(np.max(np.abs(np.minimum(gap, p))))
+        pen = float(np.max(np.maximum(0.0, -problem.normal(gap))))
         return residual, comp, pen, obj
 
 
@@ -132,6 +139,8 @@ class Formulation(ABC):
         if problem.contact_law not in self.supported_contact_laws:
             return (f"formulation {self.name!r} does not support the contact law {problem.contact_law!r} "
                     f"(it supports: {', '.join(sorted(self.supported_contact_laws))})")
+        if problem.frictional and problem.kinematics != "small":
+            return f"Coulomb friction needs small kinematics (the problem has {problem.kinematics} kinematics)"
         if problem.kinematics not in self.supported_kinematics:
             return (f"formulation {self.name!r} does not support {problem.kinematics} kinematics "
                     f"(it supports: {', '.join(sorted(self.supported_kinematics))})")

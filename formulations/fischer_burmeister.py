@@ -37,11 +37,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ddcm_casadi.inputs import one_of
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.loops.active_set import ActiveSetSolver
 from ddcm_casadi.loops.newton import SMOOTHING
 
-from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .base import BuiltFormulation, Formulation, LocalSolution, option_label, positive_option
+from .friction import BuiltCoulomb
 from .ncp import FBSystem, fischer_burmeister  # noqa: F401  (re-exported)
 from .registry import register
 
@@ -52,6 +54,7 @@ class FischerBurmeister(Formulation):
 
     name = "fischer_burmeister"
     title = "Fischer-Burmeister"
+    supported_contact_laws = frozenset({"signorini", "coulomb"})
 
     @dataclass(frozen=True)
     class Options:
@@ -77,6 +80,10 @@ class FischerBurmeister(Formulation):
             ``a_i <= b_i``, else ``b_i = 0``) with a factorisation cached per active set, switching
             the pairs whose other sign is violated; accepted only if strictly complementary or a
             B-stationary corner (see :class:`ddcm_casadi.formulations.ncp.FBSystem`).
+        coulomb_function : {"fischer_burmeister", "natural_map"}
+            With Coulomb friction: the second-order-cone FB function on De Saxce's modified slip,
+            or the natural map ``r - P_K(r - u_hat)`` (a min-type function;
+            :mod:`ddcm_casadi.formulations.friction`).
         """
 
         alpha: float | None = None
@@ -87,14 +94,22 @@ class FischerBurmeister(Formulation):
         smoothing: tuple = SMOOTHING
         comp_tol: float = 1e-9
         active_set_predictor: bool = True
+        coulomb_function: str = "fischer_burmeister"
 
     def _validate(self) -> None:
         super()._validate()
         for k in ("alpha", "beta", "tol", "residual_tol", "comp_tol"):
             positive_option(self.name, k, getattr(self.options, k))
+        one_of(self.options.coulomb_function, option_label(self.name, "coulomb_function"),
+               ("fischer_burmeister", "natural_map"))
 
-    def _build(self, problem: ComplementarityProblem) -> "_BuiltFB":
-        return _BuiltFB(problem, self.options)
+    def _build(self, problem: ComplementarityProblem) -> BuiltFormulation:
+        o = self.options
+        if problem.frictional:
+            return BuiltCoulomb(problem, o.coulomb_function, (o.alpha or problem.fb_alpha) * problem.gap_ref,
+                                (o.beta or problem.fb_beta) * problem.pressure_ref, tol=o.tol,
+                                residual_tol=o.residual_tol, max_iter=o.max_iter, comp_tol=o.comp_tol)
+        return _BuiltFB(problem, o)
 
 
 class _BuiltFB(BuiltFormulation):

@@ -167,7 +167,7 @@ class SystemBuilder:
 
     def __init__(self, problem: ComplementarityProblem, n_unknowns: int, parameters: Parameters) -> None:
         self.problem = problem
-        self.nc = problem.n_pairs
+        self.nc = problem.n_contacts  # one local block per contact (its pair, or its Coulomb block)
         self.nz = int(n_unknowns)
         self.parameters = parameters
 
@@ -344,22 +344,26 @@ class PairSystem(SystemBuilder):
         return J0, T
 
     # ------------------------------------------------------------------ classical systems
-    def mcp(self, name: str, pair_equation: ca.SX) -> SystemFunctions:
-        """The classical system ``[F(x, p); pair_equation] = 0`` in ``z = [x; p]``, one pair
-        equation per pair (an expression of its local variables)."""
+    def mcp(self, name: str, *pair_equations: ca.SX) -> SystemFunctions:
+        """The classical system ``[F(x, p); pair_equations] = 0`` in ``z = [x; p]``: per contact as
+        many equations as it has components (one per pair; a Coulomb block's ``b``), each an
+        expression of the contact's local variables, component-major like ``p``."""
         problem, nc = self.problem, self.nc
         R = problem.residual_map
-        rows = problem.n_residual + nc
-        return self.build(name, linear=sp.vstack([R.z, sp.csr_matrix((nc, R.z.shape[1]))]),
-                          linear_params=sp.vstack([R.params, sp.csr_matrix((nc, R.params.shape[1]))]),
-                          outputs=[(pair_equation, scatter(rows, problem.n_residual, nc))])
+        rows = problem.n_residual + problem.n_pairs
+        return self.build(name, linear=sp.vstack([R.z, sp.csr_matrix((problem.n_pairs, R.z.shape[1]))]),
+                          linear_params=sp.vstack([R.params, sp.csr_matrix((problem.n_pairs, R.params.shape[1]))]),
+                          outputs=[(e, scatter(rows, problem.n_residual + j * nc, nc))
+                                   for j, e in enumerate(pair_equations)])
 
     # ------------------------------------------------------------------ classical, pressures eliminated
-    def eliminated(self, name: str, pressure: ca.SX) -> SystemFunctions:
-        """The classical residual ``F(x, p(x))`` in ``z = x``, with each pair's pressure an
-        expression of its local variables (the penalty and augmented Lagrangian laws)."""
-        R, nx = self.problem.residual_map, self.problem.n_x
-        return self.build(name, linear=R.z[:, :nx], linear_params=R.params, outputs=[(pressure, R.z[:, nx:])])
+    def eliminated(self, name: str, *pressures: ca.SX) -> SystemFunctions:
+        """The classical residual ``F(x, p(x))`` in ``z = x``, with each contact's pressure (and,
+        with friction, its tangential tractions: one expression per component) an expression of
+        its local variables (the penalty and augmented Lagrangian laws)."""
+        R, nx, nc = self.problem.residual_map, self.problem.n_x, self.nc
+        return self.build(name, linear=R.z[:, :nx], linear_params=R.params,
+                          outputs=[(e, R.z[:, nx + j * nc:nx + (j + 1) * nc]) for j, e in enumerate(pressures)])
 
     # ------------------------------------------------------------------ saddle points
     def saddle(self, name: str, lagrangian: ca.SX, rows=()) -> SystemFunctions:
@@ -372,7 +376,7 @@ class PairSystem(SystemBuilder):
         transposed (``Y_{x,p}^T dl/dy``).
         """
         problem, nc = self.problem, self.nc
-        nxp, ne = problem.n_x + nc, problem.n_residual
+        nxp, ne = problem.n_x + problem.n_pairs, problem.n_residual
         extra = len(rows) * nc
         total = nxp + ne + extra
         A, AP = problem.shared(("saddle", extra), lambda: _saddle_matrices(problem, extra))

@@ -33,6 +33,7 @@ from ddcm_casadi.loops.active_set import ActiveSetSolver
 from ddcm_casadi.loops.newton import SMOOTHING, plus, smoothed_newton_solve
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .friction import BuiltCoulomb
 from .ncp import FBSystem
 from .pairs import NewtonSystem
 from .systems import pair_system
@@ -45,6 +46,7 @@ class Penalty(Formulation):
 
     name = "penalty"
     title = "penalty"
+    supported_contact_laws = frozenset({"signorini", "coulomb"})
     exact = False
 
     @dataclass(frozen=True)
@@ -94,6 +96,12 @@ class Penalty(Formulation):
 
     def _build(self, problem: ComplementarityProblem) -> BuiltFormulation:
         gamma = problem.scaled_penalty(self.gamma(problem))
+        if problem.frictional:  # normal and tangential springs, the return map onto the cone
+            o = self.options
+            return BuiltCoulomb(problem, "penalty", 1.0, 1.0, tol=o.tol, residual_tol=o.residual_tol,
+                                max_iter=o.max_iter, comp_tol=o.comp_tol,
+                                law_options=dict(stiffness=gamma, tangential_stiffness=gamma),
+                                penalty_stiffness=self.penalty_stiffness(problem))
         built = (_BuiltPenalty if problem.kind == "mcp" else _BuiltCompliantProjection)(problem, self.options, gamma)
         built.penalty_stiffness = self.penalty_stiffness(problem)  # its expected penetration is p / gamma
         return built

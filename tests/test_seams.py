@@ -30,10 +30,10 @@ def two_component_law():
 
 def test_signorini_is_the_default_law():
     law = get_contact_law("signorini")
-    assert law.block == 1 and law.components == ("normal",)
+    assert law.block(2) == 1 and law.components == ("normal",)
     pair = build_problems(paper_bar())
     assert pair.classical.contact_law == pair.projection.contact_law == "signorini"
-    with pytest.raises(InputError, match="unknown contact law 'coulomb_x'; known: signorini"):
+    with pytest.raises(InputError, match="unknown contact law 'coulomb_x'; known: signorini, coulomb"):
         get_contact_law("coulomb_x")
 
 
@@ -45,7 +45,7 @@ def test_unsupported_law_is_refused_before_any_work(two_component_law, name, mon
     with pytest.raises(InputError) as err:
         compare(model, [name])
     assert str(err.value) == (f"formulation {name!r} does not support the contact law "
-                              f"'{two_component_law.name}' (it supports: signorini)")
+                              f"'{two_component_law.name}' (it supports: {', '.join(sorted(cls.supported_contact_laws))})")
 
 
 def test_unsupported_kinematics_is_refused():

@@ -7,8 +7,8 @@ declares its law by name (``ContactModel.contact_law``), the problems carry it
 (``Formulation.contact_laws``), refusing the others with one line before any work
 (:meth:`~ddcm_casadi.formulations.base.Formulation.check_supports`).
 
->>> get_contact_law("signorini").components
-('normal',)
+>>> get_contact_law("signorini").block(3), get_contact_law("coulomb").block(3)
+(1, 3)
 """
 
 from __future__ import annotations
@@ -27,19 +27,23 @@ class ContactLaw:
     name : str
         Registry name (case files, ``results.json``).
     components : tuple of str
-        The components of one contact's block, normal first.
+        The kinds of component of one contact's block, normal first (a ``"tangential"`` kind has
+        ``dimension - 1`` components: one in 2-D, two in 3-D).
     description : str
         The law's conditions, stated once.
+    history : tuple of str
+        The problem parameters the law takes from the last converged step (the frictional
+        law's tangential tractions ``traction0``, which a penalty's stick spring starts from).
     """
 
     name: str
     components: tuple
     description: str
+    history: tuple = ()
 
-    @property
-    def block(self) -> int:
-        """Components per contact."""
-        return len(self.components)
+    def block(self, dimension: int) -> int:
+        """Components per contact in ``dimension`` space dimensions."""
+        return sum(dimension - 1 if c == "tangential" else 1 for c in self.components)
 
 
 _LAWS: Registry[ContactLaw] = Registry("contact law")
@@ -63,3 +67,10 @@ def get_contact_law(name: str) -> ContactLaw:
 SIGNORINI = register_contact_law(ContactLaw(
     "signorini", ("normal",),
     "frictionless unilateral contact: gap g >= 0, pressure p >= 0, g p = 0 (one pair per contact)"))
+
+COULOMB = register_contact_law(ContactLaw(
+    "coulomb", ("normal", "tangential"),
+    "unilateral contact with Coulomb friction, incremental: gap g_N >= 0, pressure p_N >= 0, g_N p_N = 0; "
+    "tangential traction |r_T| <= mu p_N, opposing the slip s_T (the tangential displacement relative to the "
+    "obstacle since the last converged step): s_T = -lambda r_T, lambda >= 0, lambda (mu p_N - |r_T|) = 0",
+    history=("traction0",)))

@@ -44,6 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.evaluate import NumericFunction
+from ddcm_casadi.problems.coulomb import blocks, natural_map
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
 
@@ -106,6 +107,13 @@ class ComplementarityProblem:
     contact_law : str
         What the pairs mean (:mod:`ddcm_casadi.models.contact_laws`; ``"signorini"``: one normal pair per
         contact).
+    block : int
+        Components per contact (1 for Signorini; ``1 + (d - 1)`` for Coulomb friction in ``d``
+        dimensions). The ``n_pairs = block n_contacts`` "gaps" and "pressures" are component-major:
+        entry ``j n_contacts + c`` is component ``j`` of contact ``c``, the normal ones first
+        (:mod:`ddcm_casadi.problems.coulomb`). A frictional problem has the parameters
+        ``friction`` (``mu`` per contact) and ``traction0`` (the last converged step's scaled
+        tangential tractions, ``n_pairs - n_contacts``).
     kinematics : {"small", "finite"}
         The model's kinematics (finite: the nonlinear form, :attr:`affine` False).
 
@@ -129,6 +137,7 @@ class ComplementarityProblem:
     fb_beta: float
     contact_law: str = "signorini"
     kinematics: str = "small"
+    block: int = 1
 
     @property
     def affine(self) -> bool:
@@ -145,6 +154,26 @@ class ComplementarityProblem:
     @property
     def n_pairs(self) -> int:
         return self.gap_map.rows
+
+    @property
+    def n_contacts(self) -> int:
+        """Contacts: pairs over the components per contact (:attr:`block`)."""
+        return self.gap_map.rows // self.block
+
+    @property
+    def frictional(self) -> bool:
+        """Whether each contact carries tangential components (Coulomb friction)."""
+        return self.block > 1
+
+    def normal(self, v: np.ndarray) -> np.ndarray:
+        """The normal components of a vector over the pairs (the first :attr:`n_contacts`)."""
+        return np.asarray(v, float).reshape(-1)[:self.n_contacts]
+
+    def coulomb_residual(self, gap: np.ndarray, p: np.ndarray, params: np.ndarray) -> np.ndarray:
+        """``(nc, block)``: the natural-map residual of Coulomb's law per contact
+        (:func:`~ddcm_casadi.problems.coulomb.natural_map`), in scaled units."""
+        mu = self.parameters.get(np.asarray(params, float).reshape(-1), "friction")
+        return natural_map(blocks(gap, self.block), blocks(p, self.block), mu)
 
     @property
     def n_residual(self) -> int:

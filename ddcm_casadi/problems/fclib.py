@@ -42,6 +42,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.problems.coulomb import modified_slip, natural_map, project_cone
 
 
 # --------------------------------------------------------------------------------- problems
@@ -214,33 +215,15 @@ def write_fclib(path: str | os.PathLike, problem: LocalProblem | GlobalProblem) 
 
 
 # ------------------------------------------------------------------------- cones and errors
-def project_cone(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
-    """Projection of ``x`` ``(nc, 3)`` (normal first) onto the Coulomb cones ``|x_T| <= mu x_N``."""
-    x = np.asarray(x, float).reshape(-1, 3)
-    mu = np.asarray(mu, float).reshape(-1)
-    n, t = x[:, 0], np.linalg.norm(x[:, 1:], axis=1)
-    out = x.copy()
-    polar = mu * t <= -n  # in the polar cone: the apex
-    out[polar] = 0.0
-    between = ~polar & (t > mu * n)  # outside both: onto the cone's surface
-    s = (mu[between] * t[between] + n[between]) / (1.0 + mu[between] ** 2)
-    out[between, 0] = s
-    direction = x[between, 1:] / np.where(t[between] > 0, t[between], 1.0)[:, None]
-    out[between, 1:] = (mu[between] * s)[:, None] * direction
-    return out
-
-
 def modified_velocity(problem: LocalProblem, r: np.ndarray) -> np.ndarray:
     """``u_hat = W r + q + [mu |u_T|, 0, 0]`` per contact, ``(nc, 3)``."""
-    u = (problem.W @ np.asarray(r, float).ravel() + problem.q).reshape(-1, 3)
-    u[:, 0] += problem.mu * np.linalg.norm(u[:, 1:], axis=1)
-    return u
+    return modified_slip((problem.W @ np.asarray(r, float).ravel() + problem.q).reshape(-1, 3), problem.mu)
 
 
 def natural_map_error(problem: LocalProblem, r: np.ndarray) -> float:
     """``sqrt(sum_c |r_c - P_K(r_c - u_hat_c)|^2) / |q|`` (``|q| = 0``: not divided)."""
     r = np.asarray(r, float).reshape(-1, 3)
-    res = r - project_cone(r - modified_velocity(problem, r), problem.mu)
+    res = natural_map((problem.W @ r.ravel() + problem.q).reshape(-1, 3), r, problem.mu)
     scale = float(np.linalg.norm(problem.q))
     return float(np.linalg.norm(res)) / (scale if scale > 0 else 1.0)
 
@@ -278,10 +261,111 @@ def solve_projected_gauss_seidel(problem: LocalProblem, *, tol: float = 1e-8, ma
         for c in range(nc):
             sl = slice(3 * c, 3 * c + 3)
             uc = rows[c] @ r + local.q[sl]
-            uhat = uc.copy()
-            uhat[0] += local.mu[c] * np.linalg.norm(uc[1:])
+            uhat = modified_slip(uc[None, :], local.mu[c:c + 1])[0]
             r[sl] = project_cone((r[sl] - rho[c] * uhat)[None, :], local.mu[c:c + 1])[0]
         sweep += 1
         error = natural_map_error(local, r)
     return FrictionSolution(r.reshape(-1, 3), (W @ r + local.q).reshape(-1, 3), error, sweep,
                             time.perf_counter() - t0, bool(error <= tol))
+
+
+# ------------------------------------------------------------------ as the project's problems
+def _component_major(nc: int) -> np.ndarray:
+    """Indices taking FCLIB's contact-major vectors (``3 c + j``) to component-major (``j nc + c``)."""
+    return (3 * np.arange(nc)[None, :] + np.arange(3)[:, None]).ravel()
+
+
+@dataclass(frozen=True, eq=False)
+class FclibComplementarity:
+    """An FCLIB problem as the project's frictional :class:`~ddcm_casadi.problems.contract.ComplementarityProblem`
+    (``mcp``, three components per contact), built by :func:`as_complementarity_problem`.
+
+    Attributes
+    ----------
+    problem : ComplementarityProblem
+    source : LocalProblem or GlobalProblem
+    params : ndarray
+        The parameter values (``friction``, ``traction0 = 0``, and the data vector ``q`` or
+        ``f, w``).
+    velocity_ref, reaction_ref : float
+        The physical size of one scaled unit of ``x`` (``u`` or ``v``) and of ``r``.
+    """
+
+    problem: object
+    source: object
+    params: np.ndarray
+    velocity_ref: float
+    reaction_ref: float
+
+    def reactions(self, p: np.ndarray) -> np.ndarray:
+        """FCLIB's contact-major reactions ``r`` from the scaled pressures ``p``."""
+        r = np.empty(p.size)
+        r[_component_major(p.size // 3)] = self.reaction_ref * np.asarray(p, float)
+        return r
+
+    def start(self) -> tuple[np.ndarray, np.ndarray]:
+        """The cold start ``x = 0, r = 0``."""
+        return np.zeros(self.problem.n_x), np.zeros(self.problem.n_pairs)
+
+    def error(self, x: np.ndarray, p: np.ndarray, local: LocalProblem | None = None) -> float:
+        """FCLIB's natural-map error of the solution (:func:`natural_map_error`; a global problem's
+        velocities ``u = H^T v + w`` from ``v``, over the reduced ``|q|``: pass ``local`` to reuse it)."""
+        r = self.reactions(p).reshape(-1, 3)
+        if isinstance(self.source, LocalProblem):
+            return natural_map_error(self.source, r)
+        u = (sp.csr_matrix(self.source.H).T @ (self.velocity_ref * np.asarray(x, float)) + self.source.w).reshape(-1, 3)
+        local = local or self.source.local()
+        scale = float(np.linalg.norm(local.q))
+        return float(np.linalg.norm(natural_map(u, r, self.source.mu))) / (scale if scale > 0 else 1.0)
+
+
+def as_complementarity_problem(source: LocalProblem | GlobalProblem) -> FclibComplementarity:
+    r"""An FCLIB problem as a frictional complementarity problem that every formulation solves.
+
+    Local: unknowns ``x = u``, residual ``x - W r - q``, "gaps" ``x`` (so ``(g_N, s_T) = u``).
+    Global: unknowns ``x = v``, residual ``M v - H r - f``, "gaps" ``H^T v + w``. Vectors are
+    reordered component-major. Scales: velocities by ``|q|_inf`` (local; global ``|w|_inf`` or the
+    size of ``H^T M^{-1} f``), reactions so that ``W`` (or ``M``, ``H``) is O(1).
+    """
+    from ddcm_casadi.problems.contract import ComplementarityProblem
+    from ddcm_casadi.problems.maps import Affine
+    from ddcm_casadi.problems.parameters import Parameters
+
+    nc = source.n_contacts
+    order = _component_major(nc)
+    mu = np.atleast_1d(np.asarray(source.mu, float))
+    tiny = np.finfo(float).tiny
+    if isinstance(source, LocalProblem):
+        W = source.W[order][:, order].tocsr()
+        q = source.q[order]
+        u_ref = max(float(np.max(np.abs(q), initial=0.0)), tiny)
+        d = W.diagonal()
+        r_ref = u_ref / max(float(np.mean(d[d > 0])) if np.any(d > 0) else 1.0, tiny)
+        P = Parameters(friction=nc, traction0=2 * nc, q=3 * nc)
+        n = 3 * nc
+        residual = Affine(sp.hstack([sp.identity(n), -(r_ref / u_ref) * W]),
+                          sp.hstack([sp.csr_matrix((n, 3 * nc)), -sp.identity(n) / u_ref]))
+        gap = Affine(sp.hstack([sp.identity(n), sp.csr_matrix((n, n))]), sp.csr_matrix((n, P.size)))
+        params = P.pack(friction=mu, traction0=0.0, q=q)
+        unknowns, x_ref, g_ref = (("u", n),), u_ref, u_ref
+    else:
+        M, H = sp.csr_matrix(source.M, dtype=float), sp.csr_matrix(source.H, dtype=float)[:, order].tocsr()
+        f, w = np.asarray(source.f, float), np.asarray(source.w, float)[order]
+        n = M.shape[0]
+        f_ref = max(float(np.max(np.abs(f), initial=0.0)), tiny)
+        h = max(float(abs(H).max()) if H.nnz else 1.0, tiny)
+        m = max(float(np.max(np.abs(M.diagonal()), initial=0.0)), tiny)
+        g_ref = max(float(np.max(np.abs(w), initial=0.0)), f_ref * h / m, tiny)
+        x_ref, r_ref = g_ref / h, f_ref / h
+        P = Parameters(friction=nc, traction0=2 * nc, f=n, w=3 * nc)
+        residual = Affine(sp.hstack([(x_ref / f_ref) * M, -(r_ref / f_ref) * H]),
+                          sp.hstack([sp.csr_matrix((n, 3 * nc)), -sp.identity(n) / f_ref, sp.csr_matrix((n, 3 * nc))]))
+        gap = Affine(sp.hstack([(x_ref / g_ref) * H.T, sp.csr_matrix((3 * nc, 3 * nc))]),
+                     sp.hstack([sp.csr_matrix((3 * nc, 3 * nc + n)), sp.identity(3 * nc) / g_ref]))
+        params = P.pack(friction=mu, traction0=0.0, f=f, w=w)
+        unknowns = (("v", n),)
+    problem = ComplementarityProblem(
+        kind="mcp", parameters=P, unknowns=unknowns, residual_map=residual, gap_map=gap, distance=None,
+        gap_ref=g_ref, pressure_ref=r_ref, contact_stiffness=r_ref / g_ref, fb_alpha=1.0 / g_ref,
+        fb_beta=1.0 / r_ref, contact_law="coulomb", kinematics="small", block=3)
+    return FclibComplementarity(problem, source, params, x_ref, r_ref)
