@@ -255,7 +255,8 @@ class DDCMSolver:
             start, warm = best.star, warm_out
             if step.converged:
                 converged = (k, self.projection.previous, best.star, warm_out)
-                self.projection.previous = dict(u=step.u, p=step.p, strain=step.strain, stress=step.stress)
+                self.projection.previous = dict(u=step.u, p=step.p, traction=step.traction, step=k,
+                                                strain=step.strain, stress=step.stress)
         out.solve_seconds = time.perf_counter() - t_all
         return out
 
@@ -326,7 +327,8 @@ class DDCMSolver:
                           distance=distance, projection_error=run.error,
                           projection_global=run.is_global, projection_seconds=tally["t_project"],
                           search_seconds=tally["t_search"], projections=tally["projections"], runs=tally["runs"],
-                          improvements=tally["improvements"], notes="; ".join(self.notes))
+                          improvements=tally["improvements"], notes="; ".join(self.notes),
+                          traction=f.get("traction"), slip=f.get("slip"))
         self.finish(step, load=load)
         return step
 
