@@ -230,6 +230,13 @@ class CoulombSystem:
         return dict(eta=self.unknowns.get(z, "eta"), theta=self.unknowns.get(z, "theta"))
 
 
+#: Functions whose failed solves are finished on :func:`natural_map` (same roots): the SOC FB
+#: function's second derivatives grow without bound where a spectral value of ``x o x + y o y``
+#: vanishes (a contact at the cone's apex or a sticking contact with zero traction), so that the
+#: projection's saddle-point Newton often converges only with smoothing there.
+POLISHED = frozenset({"fischer_burmeister"})
+
+
 class BuiltCoulomb(BuiltFormulation):
     """A frictional problem built for one per-contact function, solved by semismooth Newton with a
     line search and, where plain Newton fails, the smoothing continuation
@@ -246,13 +253,31 @@ class BuiltCoulomb(BuiltFormulation):
         self.function = function
         self.system = CoulombSystem(problem, function, a_scale, b_scale, law_options)
         self.penalty_stiffness = penalty_stiffness
-        self._stats = dict(solves=0, smoothed=0)
+        self._stats = dict(solves=0, smoothed=0, polished=0)
+        self._scales = (a_scale, b_scale)
+        self._polish: CoulombSystem | None = None
 
     def newton_system(self):
         return self.system.newton_system()
 
     def newton_point(self, params, x, p, state=None):
         return self.system.start(x, p, state), self.system.parameters.pack(params, smoothing=0.0)
+
+    def _polished(self, res, params, kw):
+        """Newton on the natural map's system from the last (smoothed) iterate: the same roots,
+        without the SOC function's unbounded second derivatives (:data:`POLISHED`). Returns the
+        better of the two results and the smoothing to report (0 if polished)."""
+        if self._polish is None:
+            self._polish = CoulombSystem(self.problem, "natural_map", *self._scales)
+        built = self._polish._built
+        kw = dict(kw, jacobian=built.jacobian)
+        trial = newton_solve(built.rj, built.r, res.z, self._polish.parameters.pack(params, smoothing=0.0), **kw)
+        if not trial.converged:
+            return res, 0.0
+        self._stats["polished"] += 1
+        trial.iterations += res.iterations
+        trial.message = f"{trial.message} (finished on the natural map)"
+        return trial, 0.0
 
     @property
     def stats(self) -> dict:
@@ -266,10 +291,14 @@ class BuiltCoulomb(BuiltFormulation):
         z0 = system.start(x0, p0, state)
         res = newton_solve(built.rj, built.r, z0, P.pack(params, smoothing=0.0), **kw)
         s_used, stages = 0.0, 0
+        if not res.converged and self.function in POLISHED:
+            res, _ = self._polished(res, params, kw)
         if not res.converged:
             self._stats["smoothed"] += 1
             res, s_used, stages = smoothed_newton_solve(built.rj, built.r, z0, lambda v: P.pack(params, smoothing=v),
                                                         smoothing=FRICTION_SMOOTHING, try_plain=False, **kw)
+            if not res.converged and self.function in POLISHED:
+                res, s_used = self._polished(res, params, kw)
         self._stats["solves"] += 1
         z = res.z
         x, p = system.unknowns.get(z, "x"), system.unknowns.get(z, "p")
