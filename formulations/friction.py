@@ -3,7 +3,7 @@ r"""Coulomb friction in every formulation: the per-contact functions and their N
 A frictional problem (:attr:`~ddcm_casadi.problems.contract.ComplementarityProblem.block`
 ``b = 1 + (d - 1)``) carries per contact ``c`` the scaled normal gap and tangential slip
 ``u_c = (g_N, s_T)`` and the scaled pressure and tangential traction ``r_c = (p_N, r_T)``
-(:mod:`ddcm_casadi.problems.coulomb`). Coulomb's law is not a potential: a classical frictional
+(:mod:`ddcm_casadi.models.coulomb`). Coulomb's law is not a potential: a classical frictional
 step is a root of a nonsmooth system, not the minimum of an energy, and a data-driven step is
 a stationary point (a KKT point) of the distance to the data over the frictional admissible set.
 Each formulation writes the law as ``b`` equations per contact, ``Psi(a, b_) = 0`` with
@@ -52,7 +52,6 @@ import scipy.sparse as sp
 
 from ddcm_casadi.loops.newton import JacobianFactors, newton_solve, plus, smoothed_newton_solve
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.problems import coulomb
 from ddcm_casadi.problems.maps import Affine
 from ddcm_casadi.problems.parameters import Parameters
 
@@ -230,38 +229,51 @@ class CoulombSystem:
         return dict(eta=self.unknowns.get(z, "eta"), theta=self.unknowns.get(z, "theta"))
 
 
+#: The pieces of a 2-D contact (:class:`CoulombPieces`), each a parameter per contact (``sign``:
+#: the slip direction of a slip piece or of a stick-slip corner).
+PIECES = ("open", "stick", "sign", "corner", "edge")
+
+
 class CoulombPieces:
     r"""The active-set predictor of 2-D Coulomb friction: the law is piecewise linear there.
 
-    Per contact one piece, each two linear equations in ``(a, b)`` (scaled gap and slip,
-    pressure and traction):
+    Per contact one piece, each linear equations in ``(a, b)`` (scaled gap and slip, pressure and
+    traction):
 
     - open: ``b_N = 0, b_T = 0``;
     - stick: ``a_N = 0, a_T = 0``;
     - slip (direction ``s = +-1``): ``a_N = 0, b_T + s mu b_N = 0`` (the traction on the cone,
       opposing the slip);
-    - corner (projections only): ``a_N = 0, b_N = 0, b_T = 0``, the third equation with its own
-      multiplier ``nu`` (``nu = 0`` on the other pieces).
+    - projections only, the two kinds of corner, a third equation with its own multiplier ``nu``
+      (``nu = 0`` on the other pieces): the *corner* ``a_N = 0, b_T = 0, b_N = 0`` (closed with no
+      pressure) and the *edge* ``a_N = 0, a_T = 0, b_T + s mu b_N = 0`` (sticking on the cone's
+      surface, between stick and slip along ``s``).
 
-    The pieces are parameters (``open``, ``stick``, ``sign``, ``corner`` per contact), so one
-    system is built; for a linear model its Jacobian depends only on the pieces and the friction
-    coefficients, and a factorisation is kept per active set
-    (:class:`~ddcm_casadi.loops.newton.JacobianFactors`). The pieces are chosen by
-    Alart--Curnier's rule at the current point (open where ``b_N - a_N <= 0``; stick where
-    ``|b_T - a_T| <= mu (b_N - a_N)``; else slip opposite to ``b_T - a_T``) and updated from each
-    piece solution until they repeat: a primal-dual active-set iteration, i.e. semismooth Newton on
-    Alart--Curnier's function. A piece solution whose pieces repeat satisfies the law exactly (each
-    piece's signs are those of its rule). Classical: ``[F; pieces] = 0``; projection: the KKT
-    system of the distance on the pieces (multipliers ``theta``), whose pieces are locally the
-    admissible set wherever the signs hold strictly.
+    The pieces are parameters (:data:`PIECES` per contact), so one system is built; for a linear
+    model its Jacobian depends only on the pieces and the friction coefficients, and a
+    factorisation is kept per active set (:class:`~ddcm_casadi.loops.newton.JacobianFactors`).
+    The pieces are chosen by Alart--Curnier's rule at the current point (open where
+    ``b_N - a_N <= 0``; stick where ``|b_T - a_T| <= mu (b_N - a_N)``; else slip opposite to
+    ``b_T - a_T``) and updated from each piece solution until they repeat: a primal-dual
+    active-set iteration, i.e. semismooth Newton on Alart--Curnier's function. A piece solution
+    whose pieces repeat satisfies the law exactly (each piece's signs are those of its rule).
+    Classical: ``[F; pieces] = 0``; projection: the KKT system of the distance on the pieces
+    (multipliers ``theta``), whose pieces are locally the admissible set wherever the signs hold
+    strictly.
 
-    Corners. A projection often lands where ``a_N = b_N = 0`` (the data's zero-stress datum):
-    there the rule flips the contact between open and closed forever, and the law's function has
-    no multiplier. A contact that flips twice is put on the corner piece, kept there while the
-    point is B-stationary (with ``L = f + eta.h + theta_N a_N + theta_T b_T + nu b_N``: opening it,
-    ``a_N > 0``, does not lower ``f`` if ``theta_N <= 0``; pressing it into slip along ``s``,
-    ``b_N > 0`` with ``b_T = -s mu b_N``, does not if ``nu - s mu theta_T <= 0``), else moved to the
-    piece that lowers ``f``.
+    Corners of a projection. A projection often lands on the boundary between two pieces: closed
+    with no pressure (the data's zero-stress datum), or sticking with the traction on the cone.
+    There the rule flips the contact between the two pieces forever, and the law's function has
+    no multiplier. A contact that flips twice is put on the corner (open/closed) or the edge
+    (stick/slip) and kept there while the point is B-stationary, with
+    ``L = f + eta.h + theta_N rowN + theta_T rowT + nu rowC``:
+
+    - corner: opening it (``a_N > 0``) does not lower ``f`` if ``theta_N <= 0``; pressing it into
+      slip along ``s`` (``b_N > 0``, ``b_T = -s mu b_N``) does not if ``nu - s mu theta_T <= 0``;
+    - edge: moving into stick (``s b_T + mu b_N > 0``) does not lower ``f`` if ``s nu <= 0``;
+      slipping along ``s`` (``s a_T > 0``) does not if ``s theta_T <= 0``;
+
+    else it moves to the piece that lowers ``f``.
 
     In 3-D the slip piece ``r_T = -mu p_N s_T/|s_T|`` is not linear in the unknowns (its direction
     is one), so there is no finite set of linear pieces: Newton runs there without a predictor.
@@ -272,7 +284,7 @@ class CoulombPieces:
         nc = problem.n_contacts
         self.problem, self.scales, self.gap = problem, (a_scale, b_scale), gap or problem.gap_map
         self.projection = problem.kind == "mpcc"
-        self.parameters = problem.parameters.extend(open=nc, stick=nc, sign=nc, corner=nc)
+        self.parameters = problem.parameters.extend(**{k: nc for k in PIECES})
         if not self.projection:
             self.unknowns = Parameters(x=problem.n_x, p=problem.n_pairs)
         else:
@@ -282,17 +294,20 @@ class CoulombPieces:
         (aN, aT), (bN, bT) = ([S.affine(f"{name}{j}", scale * m) for j, m in enumerate(components(M, 2))]
                               for name, scale, M in (("a", a_scale, self.gap),
                                                      ("b", b_scale, problem.pressure_map)))
-        mu, is_open, stick, sign, corner = (S.parameter(k) for k in ("friction", "open", "stick", "sign", "corner"))
+        mu = S.parameter("friction")
+        is_open, stick, sign, corner, edge = (S.parameter(k) for k in PIECES)
+        cone = bT + sign * mu * bN
         rows = [is_open * bN + (1 - is_open) * aN,
-                (is_open + corner) * bT + stick * aT + sign**2 * (bT + sign * mu * bN)]
+                (is_open + corner) * bT + (stick + edge) * aT + sign**2 * (1 - edge) * cone]
         if not self.projection:
             self._built = S.mcp("coulomb_pieces", *rows)
         else:
             start = self.unknowns.slice("theta").start
             theta = [S.unknowns(f"theta{j}", start + j * nc) for j in range(2)]
             nu = S.unknowns("nu", self.unknowns.slice("nu").start)
-            self._built = S.saddle("coulomb_pieces", rows=rows + [corner * bN + (1 - corner) * nu],
-                                   lagrangian=theta[0] * rows[0] + theta[1] * rows[1] + nu * corner * bN)
+            third = corner * bN + edge * cone
+            self._built = S.saddle("coulomb_pieces", rows=rows + [third + (1 - corner - edge) * nu],
+                                   lagrangian=theta[0] * rows[0] + theta[1] * rows[1] + nu * third)
         self.factors = JacobianFactors()
 
     def start(self, x0, p0, state) -> np.ndarray:
@@ -309,59 +324,80 @@ class CoulombPieces:
         b = b_scale * xp[problem.n_x:]
         return a[:nc], a[nc:], b[:nc], b[nc:]
 
-    def pieces(self, z: np.ndarray, params: np.ndarray) -> tuple[np.ndarray, ...]:
-        """``(open, stick, sign, corner)`` per contact by Alart--Curnier's rule at ``z`` (no corners)."""
+    def pieces(self, z: np.ndarray, params: np.ndarray) -> dict[str, np.ndarray]:
+        """:data:`PIECES` per contact by Alart--Curnier's rule at ``z`` (no corners)."""
         aN, aT, bN, bT = self._ab(z, params)
         mu = self.problem.parameters.get(params, "friction")
         pressure, trial = bN - aN, bT - aT
         is_open = pressure <= 0
         stick = ~is_open & (np.abs(trial) <= mu * pressure)
         sign = np.where(is_open | stick, 0.0, -np.sign(trial))
-        return is_open.astype(float), stick.astype(float), sign, np.zeros_like(sign)
+        zero = np.zeros_like(sign)
+        return dict(open=is_open.astype(float), stick=stick.astype(float), sign=sign, corner=zero, edge=zero.copy())
 
-    def _corner_moves(self, z: np.ndarray, params: np.ndarray, corner: np.ndarray):
-        """For the corner contacts: ``(to_open, to_slip, direction)`` where B-stationarity fails."""
+    def _corner_moves(self, z: np.ndarray, params: np.ndarray, pieces: dict) -> dict[str, np.ndarray]:
+        """Where a corner or an edge is not B-stationary, the piece that lowers the distance
+        (see the class): ``to_open``, ``to_stick``, ``to_slip`` and the slip ``direction``."""
         nc = self.problem.n_contacts
         theta, nu = self.unknowns.get(z, "theta"), self.unknowns.get(z, "nu")
         tN, tT = theta[:nc], theta[nc:]
         _, aT, _, _ = self._ab(z, params)
         mu = self.problem.parameters.get(params, "friction")
         tol = 1e-8 * max(1.0, float(np.max(np.abs(np.concatenate([theta, nu])), initial=0.0)))
-        s = np.where(aT != 0, np.sign(aT), 1.0)
-        press = np.where(aT != 0, nu - s * mu * tT, nu + mu * np.abs(tT))
+        corner, edge, s_edge = pieces["corner"] > 0, pieces["edge"] > 0, pieces["sign"]
+        s = np.where(aT != 0, np.sign(aT), np.where(tT != 0, -np.sign(tT), 1.0))
+        press = nu - s * mu * tT
         to_open = corner & (tN > tol) & (tN >= press)
-        to_slip = corner & ~to_open & (press > tol)
-        return to_open, to_slip, np.where(aT != 0, s, -np.sign(tT) if np.any(tT) else 1.0)
+        corner_slip = corner & ~to_open & (press > tol)
+        to_stick = edge & (s_edge * nu > tol) & (s_edge * nu >= s_edge * tT)
+        edge_slip = edge & ~to_stick & (s_edge * tT > tol)
+        return dict(to_open=to_open, to_stick=to_stick, to_slip=corner_slip | edge_slip,
+                    direction=np.where(edge, s_edge, s))
 
     def solve(self, z: np.ndarray, params: np.ndarray, newton: dict, max_rounds: int = 40):
         """The active-set iteration from ``z``: ``(z, rounds)`` once the pieces repeat, or ``None``."""
         built = self._built
         pieces = self.pieces(z, params)
-        flips = np.zeros(self.problem.n_contacts, int)
+        nc = self.problem.n_contacts
+        flips = dict(corner=np.zeros(nc, int), edge=np.zeros(nc, int))
         for rounds in range(1, max_rounds + 1):
-            P = self.parameters.pack(params, **dict(zip(("open", "stick", "sign", "corner"), pieces)))
-            res = newton_solve(built.rj, built.r, z, P, jacobian=built.jacobian, factors=self.factors,
-                               **dict(newton, max_iter=4))
+            res = newton_solve(built.rj, built.r, z, self.parameters.pack(params, **pieces), jacobian=built.jacobian,
+                               factors=self.factors, **dict(newton, max_iter=4))
             if not res.converged:
                 return None
             z = res.z
-            new = list(self.pieces(z, params))
+            new = self.pieces(z, params)
             if self.projection:
-                corner = pieces[3] > 0
-                to_open, to_slip, direction = self._corner_moves(z, params, corner)
-                keep = corner & ~to_open & ~to_slip
-                flips += (new[0] != pieces[0]) & ~corner
-                make = (flips >= 2) & ~corner
-                stay = keep | make
-                new[0] = np.where(stay, 0.0, np.where(to_open, 1.0, new[0]))
-                new[1] = np.where(stay | to_slip | to_open, 0.0, new[1])
-                new[2] = np.where(stay | to_open, 0.0, np.where(to_slip, direction, new[2]))
-                new[3] = stay.astype(float)
-                flips[make | to_open | to_slip] = 0
-            if all(np.array_equal(u, v) for u, v in zip(new, pieces)):
+                new = self._with_corners(z, params, pieces, new, flips)
+            if all(np.array_equal(new[k], pieces[k]) for k in PIECES):
                 return z, rounds
-            pieces = tuple(new)
+            pieces = new
         return None
+
+    def _with_corners(self, z, params, pieces: dict, new: dict, flips: dict) -> dict:
+        """The next pieces of a projection: the rule's, with corners and edges entered after two
+        flips and left where B-stationarity fails (see the class)."""
+        held = (pieces["corner"] > 0) | (pieces["edge"] > 0)
+        moves = self._corner_moves(z, params, pieces)
+        was_slip = (pieces["sign"] != 0) & ~held
+        flips["corner"] += ((new["open"] != pieces["open"]) & ~held)
+        flips["edge"] += (((new["stick"] > 0) & was_slip) | ((new["sign"] != 0) & (pieces["stick"] > 0))) & ~held
+        enter_corner = (flips["corner"] >= 2) & ~held
+        enter_edge = (flips["edge"] >= 2) & ~held & ~enter_corner
+        leave = moves["to_open"] | moves["to_stick"] | moves["to_slip"]
+        keep = held & ~leave
+        corner = (keep & (pieces["corner"] > 0)) | enter_corner
+        edge = (keep & (pieces["edge"] > 0)) | enter_edge
+        edge_sign = np.where(enter_edge, np.where(pieces["sign"] != 0, pieces["sign"], new["sign"]), pieces["sign"])
+        out = dict(open=np.where(corner | edge, 0.0, np.where(moves["to_open"], 1.0, new["open"])),
+                   stick=np.where(corner | edge | moves["to_open"] | moves["to_slip"], 0.0,
+                                  np.where(moves["to_stick"], 1.0, new["stick"])),
+                   sign=np.where(edge, edge_sign, np.where(corner | moves["to_open"] | moves["to_stick"], 0.0,
+                                                           np.where(moves["to_slip"], moves["direction"], new["sign"]))),
+                   corner=corner.astype(float), edge=edge.astype(float))
+        for kind in ("corner", "edge"):
+            flips[kind][enter_corner | enter_edge | leave] = 0
+        return out
 
 
 #: Functions whose failed solves are finished on :func:`natural_map` (same roots): the SOC FB
@@ -407,11 +443,8 @@ class BuiltCoulomb(BuiltFormulation):
         gaps (the solution's ``complementarity``), or on the penalty's compliant ones."""
         if self.gap is None:
             return sol.complementarity
-        problem = self.problem
         gap = self.gap.value(np.concatenate([sol.x, sol.p]), params)
-        mu = problem.parameters.get(params, "friction")
-        residual = coulomb.natural_map(coulomb.blocks(gap, problem.block), coulomb.blocks(sol.p, problem.block), mu)
-        return float(np.max(np.abs(residual), initial=0.0))
+        return float(np.max(np.abs(self.problem.coulomb_residual(gap, sol.p, params)), initial=0.0))
 
     def _polished(self, res, params, kw):
         """Newton on the natural map's system from the last (smoothed) iterate: the same roots,

@@ -243,11 +243,14 @@ class DDCMSolver:
         t_all = time.perf_counter()
         for k in range(model.n_steps):
             t0 = time.perf_counter()
-            if start is None or not self.options.warm:
+            warm_start = start is not None and self.options.warm
+            if not warm_start:
                 start = self.scheme.states(self.initial_assignment(k))
             step, best, warm_out = self.solve_step(k, start, warm)
             if not accepted(step, best.sol.x, best.sol.p) and bisection_enabled(self.min_substep):
                 step, best, warm_out = self._bisect(k, step, best, warm_out, converged)
+            if not accepted(step, best.sol.x, best.sol.p) and warm_start:
+                step, best, warm_out = self._from_initial(k, step, best, warm_out, warm)
             step.seconds = time.perf_counter() - t0
             out.steps.append(step)
             if progress is not None:
@@ -260,6 +263,21 @@ class DDCMSolver:
                                                 strain=step.strain, stress=step.stress)
         out.solve_seconds = time.perf_counter() - t_all
         return out
+
+    def _from_initial(self, k: int, failed: StepResult, best: Run, warm_out: tuple,
+                      warm: tuple) -> tuple[StepResult, Run, tuple]:
+        """Step ``k`` once more from its initial assignment (:meth:`initial_assignment`) after the
+        run from the previous step's assignment failed even in sub-steps: an alternation can cycle
+        from one start and settle from another (measured with Coulomb friction at the stick-slip
+        transition, whose admissible set is a union of pieces). Returns the new run if it
+        settles (its record counts both runs' work), else the failed one."""
+        step, retry, retry_warm = self.solve_step(k, self.scheme.states(self.initial_assignment(k)), warm)
+        if not accepted(step, retry.sol.x, retry.sol.p):
+            return failed, best, warm_out
+        for name in ("iterations", "projections", "runs"):
+            setattr(step, name, getattr(step, name) + getattr(failed, name))
+        step.message += f"; from the initial assignment (the previous step's cycled: {failed.message})"
+        return step, retry, retry_warm
 
     def _bisect(self, k: int, full: StepResult, full_best: Run, full_warm: tuple,
                 converged: tuple | None) -> tuple[StepResult, Run, tuple]:

@@ -27,7 +27,7 @@ class StepResult:
     seconds: float
     message: str = ""
     #: With Coulomb friction: the tangential tractions (Pa, component-major) and the slips of the step
-    #: (m) per contact and tangent (:mod:`ddcm_casadi.problems.coulomb`).
+    #: (m) per contact and tangent (:mod:`ddcm_casadi.models.coulomb`).
     traction: np.ndarray | None = None
     slip: np.ndarray | None = None
     # DDCM only

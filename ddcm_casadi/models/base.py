@@ -26,6 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.models.contact_laws import get_contact_law
+from ddcm_casadi.models import coulomb
 from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import to_casadi
@@ -36,6 +37,8 @@ from ddcm_casadi.models.scales import LARGE_STRAIN, load_path_warnings, referenc
 #: Kinematics a model may declare: ``small`` (linear strains and gaps: the problems are affine) or
 #: ``finite`` (a nonlinear strain measure; the problems are nonlinear).
 KINEMATICS = ("small", "finite")
+#: The status of a frictional contact, by code (:meth:`ContactModel.contact_status`).
+CONTACT_STATUS = ("open", "stick", "slip")
 
 # LARGE_STRAIN (the imposed strain beyond which path_warnings warns) lives with the scales; kept
 # importable from here.
@@ -182,7 +185,7 @@ class ContactModel:
     tangent_operator : sparse (nc (d - 1), n), optional
         ``T``: Coulomb friction (the contact law ``"coulomb"``). Row ``j nc + c`` is the
         displacement of contact ``c`` along its ``j``-th unit tangent (component-major,
-        :mod:`ddcm_casadi.problems.coulomb`); the slip of a step is ``s = T (u - u_prev) - (tau -
+        :mod:`ddcm_casadi.models.coulomb`); the slip of a step is ``s = T (u - u_prev) - (tau -
         tau_prev)`` with ``tau`` the obstacle's displacement along the same tangent.
     friction : (nc,), optional
         Coulomb coefficients ``mu >= 0`` per contact (with ``tangent_operator``; 0 is frictionless).
@@ -611,15 +614,40 @@ class ContactModel:
         """One unknown, one material point, at most one pair: tables hold ``u`` and ``p`` themselves."""
         return self.n_dofs == 1 and self.n_contacts <= 1 and self.n_points == 1
 
-    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None, step: int = 0) -> dict:
+    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None, step: int = 0,
+                     traction: np.ndarray | None = None) -> dict:
         """The per-step columns of ``results.csv`` that describe the solution ``(u, p)`` of load step
         ``step`` (and the material points' ``stress``, for model kinds that measure with it).
         ``total_contact_force`` is ``sum a p``: the sum of the pairs' nodal contact forces as
-        magnitudes, of the modelled part, resolved along no direction."""
+        magnitudes, of the modelled part, resolved along no direction; with friction
+        ``total_tangential_force`` likewise ``sum a |r_T|`` (``traction``: the step's tangential
+        tractions)."""
         if self.scalar:
             return dict(u=float(u[-1]), p=float(p[0]) if p.size else float("nan"))
-        return dict(max_abs_u=float(np.max(np.abs(u))), total_contact_force=float(np.sum(self.contact_area * p)),
-                    active_contacts=int(np.sum(self.active_contacts(p))))
+        out = dict(max_abs_u=float(np.max(np.abs(u))), total_contact_force=float(np.sum(self.contact_area * p)),
+                   active_contacts=int(np.sum(self.active_contacts(p))))
+        if self.frictional and traction is not None:
+            r = coulomb.blocks(traction, self.contact_block - 1)
+            out["total_tangential_force"] = float(self.contact_area @ np.linalg.norm(r, axis=1))
+        return out
+
+    def contact_status(self, p: np.ndarray, traction: np.ndarray, slip: np.ndarray) -> np.ndarray:
+        """Per contact (stacked over steps if the arguments are) the status code of
+        :data:`CONTACT_STATUS` (0 open, 1 stick, 2 slip): open where ``p`` is not above 1e-8 of
+        the stress scale, slip where the traction is on the cone within that and the slip exceeds
+        1e-8 of the displacement scale (:func:`~ddcm_casadi.models.coulomb.contact_status`)."""
+        p = np.atleast_2d(np.asarray(p, float))
+        t, s = (np.atleast_2d(np.asarray(v, float)) for v in (traction, slip))
+        scales, b = self.scales, self.contact_block
+        out = np.zeros(p.shape, dtype=np.int8)
+        for k in range(p.shape[0]):
+            status = coulomb.contact_status(np.column_stack([np.zeros(p.shape[1]), coulomb.blocks(s[k], b - 1)]),
+                                            np.column_stack([p[k], coulomb.blocks(t[k], b - 1)]), self.friction,
+                                            1e-8 * scales["stress"])
+            moving = np.linalg.norm(coulomb.blocks(s[k], b - 1), axis=1) > 1e-8 * scales["displacement"]
+            status = np.where((status == "slip") & ~moving, "stick", status)
+            out[k] = [CONTACT_STATUS.index(v) for v in status]
+        return out
 
     def extra_fields(self, u: np.ndarray, stress: np.ndarray) -> dict:
         """Model-specific per-step fields (stacked over steps: ``u`` is ``(n_steps, n_dofs)``),

@@ -101,7 +101,7 @@ class ProblemPair:
 def _common(model: ContactModel, s: dict, fb_beta: float, n_z: int, P: Parameters) -> dict:
     """The gaps ``(G u + gap0) / s_d`` with ``u = s_d u_hat`` (``gap0`` the first parameter) and the
     scales; with friction the slips ``(T u + slip_offset + slip0) / s_d`` below them
-    (component-major, :mod:`ddcm_casadi.problems.coulomb`)."""
+    (component-major, :mod:`ddcm_casadi.models.coulomb`)."""
     nc = model.n_contacts
     C = model.contact_operator
     Q = sp.hstack([sp.identity(nc) / s["displacement"], sp.csr_matrix((nc, P.size - nc))]).tocsr()

@@ -72,7 +72,7 @@ class BodyForce:
 class Contact:
     """A rigid ``obstacle`` that the dofs of the boundary ``where`` may touch; with ``friction``
     (Coulomb's ``mu >= 0``; ``None``: frictionless, the Signorini law) the contacts carry
-    tangential tractions (:mod:`ddcm_casadi.problems.coulomb`)."""
+    tangential tractions (:mod:`ddcm_casadi.models.coulomb`)."""
 
     obstacle: Obstacle
     where: Where
