@@ -70,11 +70,11 @@ def natural_map(u: np.ndarray, r: np.ndarray, mu: np.ndarray) -> np.ndarray:
     return r - project_cone(r - modified_slip(u, mu), mu)
 
 
-def contact_status(u: np.ndarray, r: np.ndarray, mu: np.ndarray, tol: float) -> np.ndarray:
+def contact_status(u: np.ndarray, r: np.ndarray, mu: np.ndarray, tol: float, slip_tol: float) -> np.ndarray:
     """Per contact ``"open"``, ``"stick"`` or ``"slip"``: open where ``p_N <= tol``, slip where
     the traction is on the cone's surface (``|r_T| >= mu p_N - tol``) and the slip exceeds
-    ``tol``, stick otherwise."""
+    ``slip_tol``, stick otherwise."""
     u, r = np.asarray(u, float), np.asarray(r, float)
     mu = np.asarray(mu, float).reshape(-1)
     p, t, s = r[:, 0], np.linalg.norm(r[:, 1:], axis=1), np.linalg.norm(u[:, 1:], axis=1)
-    return np.where(p <= tol, "open", np.where((t >= mu * p - tol) & (s > tol), "slip", "stick"))
+    return np.where(p <= tol, "open", np.where((t >= mu * p - tol) & (s > slip_tol), "slip", "stick"))
