@@ -465,8 +465,17 @@ FORMULATION_METHODS: dict[str, tuple[str, dict]] = {
     "augmented_lagrangian": ("augmented_lagrangian", {}),
     "penalty": ("penalty", {}),
 }
-#: Every method of :func:`solve_fclib`.
-METHODS = ("default", "pgs", *FORMULATION_METHODS)
+
+
+def frictional_methods() -> tuple[str, ...]:
+    """Every method of :func:`solve_fclib`: ``default``, ``pgs``, :data:`FORMULATION_METHODS`, then
+    any other registered formulation that supports the ``coulomb`` contact law."""
+    from ddcm_casadi import formulations
+
+    others = [name for name in formulations.available() if name not in FORMULATION_METHODS
+              and "coulomb" in formulations.get(name).supported_contact_laws]
+    return ("default", "pgs", *FORMULATION_METHODS, *others)
+
 #: The default method's projected Gauss-Seidel target before Newton (the FCLIB benchmarks' loose level).
 PGS_TOL = 1e-4
 #: The proximal ``eta`` is ``PROXIMAL_FACTOR min(1, e / PGS_TOL)`` times the mean diagonal of ``W``,
@@ -485,7 +494,7 @@ NEWTON_TOL = 1e-12
 def _formulation(method: str, options: dict):
     from ddcm_casadi import formulations
 
-    name, base = FORMULATION_METHODS[method]
+    name, base = FORMULATION_METHODS.get(method, (method, {}))
     return formulations.get(name, **{**base, **options})
 
 
@@ -521,7 +530,7 @@ def solve_fclib(source: LocalProblem | GlobalProblem | str | os.PathLike, method
         ``"default"`` (below); ``"pgs"`` (:func:`solve_projected_gauss_seidel`, ``max_sweeps``);
         or a formulation of :data:`FORMULATION_METHODS` (``fischer_burmeister``: the SOC
         Fischer--Burmeister function, ``natural_map``, ``augmented_lagrangian``: Alart--Curnier,
-        ``penalty``), built on :func:`as_complementarity_problem` and solved once by its semismooth
+        ``penalty``; :func:`frictional_methods` lists them all), built on :func:`as_complementarity_problem` and solved once by its semismooth
         Newton from ``r0`` (default: the cold start ``r = 0``).
     tol : float
         The natural-map error to reach, in ``[1e-15, 1)``.
@@ -560,10 +569,11 @@ def solve_fclib(source: LocalProblem | GlobalProblem | str | os.PathLike, method
     The best point met is returned. Nothing guarantees convergence (Coulomb friction is not a
     potential); ``converged`` says (``docs/maths.md``, section 15).
     """
-    if method not in METHODS:
-        raise InputError(f"unknown FCLIB method {method!r}; known: {', '.join(METHODS)}")
-    if newton not in FORMULATION_METHODS:
-        raise InputError(f"unknown Newton formulation {newton!r}; known: {', '.join(FORMULATION_METHODS)}")
+    methods = frictional_methods()
+    if method not in methods:
+        raise InputError(f"unknown FCLIB method {method!r}; known: {', '.join(methods)}")
+    if newton not in methods[2:]:
+        raise InputError(f"unknown Newton formulation {newton!r}; known: {', '.join(methods[2:])}")
     if not (isinstance(tol, (int, float)) and 1e-15 <= tol < 1):
         raise InputError(f"tol must be in [1e-15, 1), got {tol!r}")
     max_sweeps, max_rounds, max_proximal = (_positive_int(k, v) for k, v in (
