@@ -232,9 +232,10 @@ def hyperstatic(seed: int, nc: int = 6, n: int = 6) -> GlobalProblem:
 def test_default_method_solves_a_hyperstatic_problem(seed):
     """Its local problem (``W = H^T H``, singular): plain semismooth Newton stalls on the
     singular stick pieces; the default method's proximal steps (``W + eta I``) reach ``TOL``
-    (at one of the many solutions: some contacts may open or slip)."""
+    (at one of the many solutions: some contacts may open or slip). PGS, which solves these
+    well-conditioned examples alone, is held to one sweep per stage."""
     local = hyperstatic(seed).local()
-    s = solve_fclib(local, "default", tol=TOL)
+    s = solve_fclib(local, "default", tol=TOL, max_sweeps=1)
     assert s.converged and natural_map_error(local, s.r) == s.error <= TOL, s.log
     assert "proximal" in [stage["stage"] for stage in s.log]
 

@@ -481,6 +481,10 @@ PGS_TOL = 1e-4
 #: The proximal ``eta`` is ``PROXIMAL_FACTOR min(1, e / PGS_TOL)`` times the mean diagonal of ``W``,
 #: rounded down to a power of ten (one build per power), never increasing, at least ``10^PROXIMAL_MIN_LEVEL``.
 PROXIMAL_FACTOR = 0.1
+#: Sweeps (at least) past PGS_TOL that measure projected Gauss-Seidel's rate: the default method
+#: goes on with it if that rate reaches ``tol`` in at most PGS_PATIENCE times the sweeps so far.
+PGS_PROBE = 5
+PGS_PATIENCE = 2.0
 PROXIMAL_MIN_LEVEL = -12
 #: Proximal steps without a 0.1 % decrease of the best error before the default method goes back to
 #: projected Gauss-Seidel.
@@ -554,7 +558,9 @@ def solve_fclib(source: LocalProblem | GlobalProblem | str | os.PathLike, method
     -----
     The default method is a hybrid in the spirit of Siconos' nonsmooth-Newton hybrids:
 
-    1. projected Gauss-Seidel to :data:`PGS_TOL` (the active set, roughly);
+    1. projected Gauss-Seidel to :data:`PGS_TOL` (the active set, roughly), then on to ``tol``
+       if its rate over :data:`PGS_PROBE` or more sweeps says that takes at most
+       :data:`PGS_PATIENCE` times the sweeps so far;
     2. semismooth Newton of the ``newton`` formulation from the best point;
     3. if Newton stalls: proximal-point steps ``r_{k+1}`` = the solution of the problem with
        ``u = W r + q + eta_k (r - r_k)`` (:func:`as_complementarity_problem` with ``proximal``),
@@ -616,6 +622,18 @@ def _solve_default(problem, local: LocalProblem, tol: float, r0, max_sweeps: int
 
     pgs = solve_projected_gauss_seidel(local, tol=max(tol, PGS_TOL), max_sweeps=max_sweeps, r0=r0)
     stage("pgs", 0, pgs.error, pgs.iterations)
+    if tol < pgs.error <= PGS_TOL and pgs.iterations:
+        # PGS on, if its rate over a few more sweeps reaches tol in at most PGS_PATIENCE times the sweeps so far
+        more = solve_projected_gauss_seidel(local, tol=tol, max_sweeps=max(PGS_PROBE, pgs.iterations // 5), r0=pgs.r)
+        stage("pgs", 0, more.error, more.iterations)
+        rate = (more.error / pgs.error) ** (1.0 / max(more.iterations, 1)) if pgs.error > 0 else 0.0
+        needed = math.log(tol / more.error) / math.log(rate) if 0 < rate < 1 and more.error > tol else 0.0
+        pgs = more
+        if more.error > tol and 0 < rate < 1 and needed <= PGS_PATIENCE * counts["sweeps"]:
+            pgs = solve_projected_gauss_seidel(local, tol=tol, max_sweeps=int(2 * needed) + PGS_PROBE, r0=more.r)
+            stage("pgs", 0, pgs.error, pgs.iterations)
+            if pgs.error > more.error:
+                pgs = more
     best_r, best_e = pgs.r.ravel(), pgs.error
     d = local.W.diagonal()
     scale = float(np.mean(d[d > 0])) if np.any(d > 0) else 1.0
