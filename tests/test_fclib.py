@@ -111,9 +111,9 @@ from ddcm_casadi.problems.fclib import (FORMULATION_METHODS, as_complementarity_
 TOL = 1e-8
 
 
-def random_global(seed: int, n: int = 12, nc: int = 8, mu=(0.1, 0.8)) -> GlobalProblem:
-    """``M = A A^T + n I`` (SPD), random ``H`` (``n x 3 nc``: ``W = H^T M^-1 H`` is singular when
-    ``3 nc > n``), random ``f`` and ``w`` with ``w_N <= 0`` (approaching contacts), ``mu`` uniform."""
+def random_global(seed: int, n: int = 30, nc: int = 8, mu=(0.1, 0.8)) -> GlobalProblem:
+    """``M = A A^T + n I`` (SPD), random ``H`` (``n x 3 nc``: ``W = H^T M^-1 H`` is SPD when
+    ``n >= 3 nc``, singular when ``3 nc > n``), random ``f`` and ``w`` with ``w_N <= 0`` (approaching contacts), ``mu`` uniform."""
     rng = np.random.default_rng(seed)
     A = rng.normal(size=(n, n))
     w = rng.normal(size=3 * nc)
@@ -144,14 +144,15 @@ def penalty_bound(problem, r: np.ndarray) -> float:
     return (1 + float(np.max(local.mu))) * float(np.linalg.norm(r)) / (gamma * float(np.linalg.norm(local.q)))
 
 
-@pytest.mark.parametrize("kind", ["local", "global"])
+@pytest.mark.parametrize("kind", ["local", "global", "global, singular W"])
 @pytest.mark.parametrize("method", ["default", "pgs", *FORMULATION_METHODS])
 def test_generated_problems_are_solved_by_every_method(tmp_path, kind, method):
     """Written in the FCLIB format, read back and solved: the natural-map error at ``TOL`` (the
     penalty: at its own bound, :func:`penalty_bound`)."""
     for seed in range(2):
-        problem = random_local(seed) if kind == "local" else random_global(seed)
-        back = read_fclib(write_fclib(tmp_path / f"{kind}{seed}.hdf5", problem))
+        problem = (random_local(seed) if kind == "local" else
+                   random_global(seed) if kind == "global" else random_global(seed, n=12))
+        back = read_fclib(write_fclib(tmp_path / f"{kind[:6]}{seed}.hdf5", problem))
         s = solve_fclib(back, method, tol=TOL, max_sweeps=20_000)
         assert s.r.shape == s.u.shape == (problem.n_contacts, 3) and s.method == method
         assert np.allclose(s.u.ravel(), problem.local().W @ s.r.ravel() + problem.local().q, atol=1e-10)
@@ -276,3 +277,43 @@ def test_bad_proximal_and_missing_file(tmp_path):
     with pytest.raises(InputError, match="not a readable HDF5") as err:
         solve_fclib(tmp_path / "missing.hdf5")
     assert "\n" not in str(err.value)
+
+
+def benchmark_module():
+    """``benchmarks/fclib.py`` (a script, not a package)."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("fclib_benchmark",
+                                                  Path(__file__).resolve().parent.parent / "benchmarks" / "fclib.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_performance_profiles():
+    """Dolan-More: times ``[[1, 2], [inf, 3]]`` give ratios ``[[1, 2], [inf, 1]]``: at ``tau = 1``
+    each method is fastest on one problem of two; from ``tau = 2`` the second solves both."""
+    tau, rho = benchmark_module().profiles(np.array([[1.0, 2.0], [np.inf, 3.0]]))
+    assert tau[0] == 1.0 and np.array_equal(rho[0], [0.5, 0.5])
+    assert np.array_equal(rho[tau >= 2.0][0], [0.5, 1.0]) and np.array_equal(rho[-1], [0.5, 1.0])
+
+
+def test_benchmark_writes_table_and_profiles(tmp_path):
+    """The benchmark on two generated files: one row per problem and method, both levels, the
+    figure and the summary."""
+    import json
+
+    pytest.importorskip("matplotlib")
+    data = tmp_path / "data"
+    data.mkdir()
+    write_fclib(data / "a.hdf5", random_local(0))
+    write_fclib(data / "b.hdf5", random_global(1))
+    out = tmp_path / "out"
+    assert benchmark_module().main(["--data", str(data), "--out", str(out), "--methods", "default,pgs,natural_map"]) == 0
+    table = json.loads((out / "fclib.json").read_text())
+    assert [(r["problem"], r["method"]) for r in table["rows"]] == [
+        (p, m) for p in ("a.hdf5", "b.hdf5") for m in ("default", "pgs", "natural_map")]
+    assert all(r["solved_1e-08"] and r["solved_0.0001"] for r in table["rows"])
+    assert table["profiles"]["1e-08"]["default"]["solved"] == 1.0
+    assert (out / "fclib_profiles.png").stat().st_size > 0 and (out / "fclib.md").exists()
