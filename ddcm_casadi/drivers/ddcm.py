@@ -103,14 +103,15 @@ class DDCMSolver:
         self._check_initial(model)
         if self.options.variant == "lcdd" and model.strain_components != 1:
             raise InputError("ddcm variant 'lcdd' is implemented for one-component points (bars, trusses)")
-        # The data's range and the exact enumeration, once per problem (not timed with the steps):
+        # The data's range and the exact enumeration (of Signorini pairs' branches; a frictional
+        # law's cone has no finite set of pieces), once per problem (not timed with the steps):
         # the solvers of the formulations of one model share them.
         self.coverage = problems.projection.shared(
             ("data_coverage",), lambda: DataCoverage(model.dataset, model.n_points))
         self.affine = bool(problems.projection.affine)
         self.exact = (problems.projection.shared(
             ("exact_enumerator", enumerate_pairs), lambda: ExactEnumerator(problems.projection, max_pairs=enumerate_pairs))
-            if self.affine and model.n_contacts <= enumerate_pairs else None)
+            if self.affine and not model.frictional and model.n_contacts <= enumerate_pairs else None)
         # N^m assignments, in logarithms: it overflows a float for a continuum's thousands of points.
         log_assign = float(np.sum(np.log(point_ranges(model)[1].astype(float))))
         self.global_search = (global_search and self.exact is not None
@@ -255,7 +256,8 @@ class DDCMSolver:
             start, warm = best.star, warm_out
             if step.converged:
                 converged = (k, self.projection.previous, best.star, warm_out)
-                self.projection.previous = dict(u=step.u, p=step.p, strain=step.strain, stress=step.stress)
+                self.projection.previous = dict(u=step.u, p=step.p, traction=step.traction, step=k,
+                                                strain=step.strain, stress=step.stress)
         out.solve_seconds = time.perf_counter() - t_all
         return out
 
@@ -326,7 +328,8 @@ class DDCMSolver:
                           distance=distance, projection_error=run.error,
                           projection_global=run.is_global, projection_seconds=tally["t_project"],
                           search_seconds=tally["t_search"], projections=tally["projections"], runs=tally["runs"],
-                          improvements=tally["improvements"], notes="; ".join(self.notes))
+                          improvements=tally["improvements"], notes="; ".join(self.notes),
+                          traction=f.get("traction"), slip=f.get("slip"))
         self.finish(step, load=load)
         return step
 

@@ -179,6 +179,16 @@ class ContactModel:
         Prescribed displacements (a hard device): dofs that are not unknowns but move by given
         values per step (:mod:`ddcm_casadi.models.prescribed`). ``None``: every dof that is not
         an unknown is fixed at zero.
+    tangent_operator : sparse (nc (d - 1), n), optional
+        ``T``: Coulomb friction (the contact law ``"coulomb"``). Row ``j nc + c`` is the
+        displacement of contact ``c`` along its ``j``-th unit tangent (component-major,
+        :mod:`ddcm_casadi.problems.coulomb`); the slip of a step is ``s = T (u - u_prev) - (tau -
+        tau_prev)`` with ``tau`` the obstacle's displacement along the same tangent.
+    friction : (nc,), optional
+        Coulomb coefficients ``mu >= 0`` per contact (with ``tangent_operator``; 0 is frictionless).
+    slip_offsets : (n_steps, nc (d - 1)), optional
+        ``-tau`` per step: minus the obstacle's displacement along each contact's tangents
+        (default 0: the obstacles do not move tangentially).
     """
 
     strain_operator: sp.csr_matrix
@@ -197,6 +207,9 @@ class ContactModel:
     kinematics: str = "small"
     contact_law: str = "signorini"
     prescribed: Prescribed | None = None
+    tangent_operator: sp.csr_matrix | None = None
+    friction: np.ndarray | None = None
+    slip_offsets: np.ndarray | None = None
     _cache: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -245,13 +258,59 @@ class ContactModel:
                                  f"the model's material points have {k}")
         if self.prescribed is not None:
             _check_prescribed(self.prescribed, m * k, G, g0, float(self.length_scale))
+        self._check_friction(nc, n, n_steps)
         for k, v in dict(strain_operator=B, gap_operator=G, volumes=w, contact_area=a,
                          gap_offsets=g0, loads=f, load_parameter=lp, youngs_modulus=E,
                          length_scale=L).items():
             object.__setattr__(self, k, v)
         object.__setattr__(self, "_cache", {})
 
+    def _check_friction(self, nc: int, n: int, n_steps: int) -> None:
+        """Check and normalise the frictional fields; set the contact law they imply."""
+        if self.tangent_operator is None:
+            if self.contact_law == "coulomb":
+                raise InputError("Coulomb friction needs a tangent operator (the contacts' tangential displacements)")
+            if self.friction is not None or self.slip_offsets is not None:
+                raise InputError("friction coefficients or tangential obstacle motion need a tangent operator")
+            return
+        if self.kinematics != "small":
+            raise InputError("Coulomb friction needs small kinematics for now (kinematics = \"small\")")
+        T = sp.csr_matrix(self.tangent_operator, dtype=float)
+        if nc == 0 or T.shape[1] != n or T.shape[0] % nc or T.shape[0] == 0:
+            raise InputError(f"tangent operator has shape {T.shape}: expected (a multiple of {nc} contacts, {n})")
+        mu = _finite("friction", np.broadcast_to(0.0 if self.friction is None else self.friction, (nc,)).copy())
+        if np.any(mu < 0):
+            raise InputError(f"friction coefficients must be >= 0, got {float(mu.min()):g}")
+        nt = T.shape[0]
+        offsets = np.zeros((n_steps, nt)) if self.slip_offsets is None else self.slip_offsets
+        offsets = _finite("tangential obstacle motion", np.broadcast_to(offsets, (n_steps, nt)).copy())
+        if self.prescribed is not None and self.prescribed.gap_operator.nnz:
+            raise InputError("Coulomb friction at nodes whose displacements are prescribed is not supported")
+        for key, value in dict(tangent_operator=T, friction=mu, slip_offsets=offsets, contact_law="coulomb").items():
+            object.__setattr__(self, key, value)
+
     # ------------------------------------------------------------------ sizes
+    @property
+    def frictional(self) -> bool:
+        """Whether the contacts carry Coulomb friction (:attr:`tangent_operator`)."""
+        return self.tangent_operator is not None
+
+    @property
+    def contact_block(self) -> int:
+        """Components per contact: 1, or ``1 + (d - 1)`` with friction."""
+        return 1 + (self.tangent_operator.shape[0] // self.n_contacts if self.frictional else 0)
+
+    @property
+    def contact_operator(self) -> sp.csr_matrix:
+        """``[G; T]``: the normal gaps' and (with friction) the tangential displacements' operator,
+        component-major (cached)."""
+        if not self.frictional:
+            return self.gap_operator
+        C = self._cache.get("contact_operator")
+        if C is None:
+            C = self._cache["contact_operator"] = sp.vstack([self.gap_operator, self.tangent_operator]).tocsr()
+        return C
+
     @property
     def n_dofs(self) -> int:
         return self.strain_operator.shape[1]
@@ -373,16 +432,27 @@ class ContactModel:
     # -------------------------------------------------------------- load steps and their history
     def history_sizes(self) -> dict[str, int]:
         """Names and sizes of the parameters a step takes from the previous converged step, after
-        ``gap0`` and ``f`` (none here; a frictional law adds the previous tangential
-        displacements, a follower load the previous configuration)."""
-        return {}
+        ``gap0`` and ``f``: none without friction; with friction ``slip0 = -(T u_prev - tau_prev)``
+        (so that the slip is ``T u + slip_offset + slip0``) and the tangential tractions
+        ``traction0`` (Pa) of the last converged step."""
+        if not self.frictional:
+            return {}
+        nt = self.tangent_operator.shape[0]
+        return dict(slip0=nt, traction0=nt)
+
+    def friction_sizes(self) -> dict[str, int]:
+        """``{friction: nc, slip_offset: nc (d - 1)}`` with friction, else empty."""
+        if not self.frictional:
+            return {}
+        return dict(friction=self.n_contacts, slip_offset=self.tangent_operator.shape[0])
 
     def step_sizes(self) -> dict[str, int]:
         """Names and sizes of a load step's parameters, in order: ``gap0`` and ``f``, with a hard
         device ``u_prescribed`` (:data:`~ddcm_casadi.models.prescribed.PARAMETER`), those a
         model kind adds (:meth:`load_names`: e.g. an obstacle's travel per pair for gaps at the
         current configuration), then :meth:`history_sizes`."""
-        return dict(gap0=self.n_contacts, f=self.n_dofs, **self.prescribed_sizes(), **self.history_sizes())
+        return dict(gap0=self.n_contacts, f=self.n_dofs, **self.prescribed_sizes(), **self.friction_sizes(),
+                    **self.history_sizes())
 
     def prescribed_sizes(self) -> dict[str, int]:
         """``{u_prescribed: nD}`` with a hard device, else empty (the default problems are
@@ -393,7 +463,7 @@ class ContactModel:
         """The step parameters that grow with the load (linear in the load parameter between two
         steps, so that a sub-step interpolates them): ``gap0`` and ``f``, and with a hard device
         the prescribed displacements ``u_prescribed``."""
-        return ("gap0", "f") + tuple(self.prescribed_sizes())
+        return ("gap0", "f") + tuple(self.prescribed_sizes()) + (("slip_offset",) if self.frictional else ())
 
     def gap_expression(self, u, values):
         """The gaps (physical, ``nc``) for a CasADi symbol ``u`` (free displacements) with the
@@ -418,12 +488,21 @@ class ContactModel:
 
     def step_values(self, step: int, previous: dict | None = None) -> dict[str, np.ndarray]:
         """The parameter values of load step ``step`` by name: ``gap0``, ``f`` and those of
-        :meth:`history_sizes`. ``previous``: the physical fields (``u``, ``p``; for DDCM also
-        ``strain`` and ``stress``) of the last converged step, ``None`` before the first. The
-        drivers pass it; a model kind whose steps depend on their history overrides this."""
+        :meth:`history_sizes`. ``previous``: the physical fields (``u``, ``p``, ``traction``; for
+        DDCM also ``strain`` and ``stress``) and the index ``step`` of the last converged step,
+        ``None`` before the first. The drivers pass it; a model kind whose steps depend on their
+        history overrides this."""
         out = dict(gap0=self.gap_offsets[step], f=self.loads[step])
         if self.prescribed is not None:
             out[PRESCRIBED] = self.prescribed.values[step]
+        if self.frictional:
+            nt = self.tangent_operator.shape[0]
+            out.update(friction=self.friction, slip_offset=self.slip_offsets[step], slip0=np.zeros(nt),
+                       traction0=np.zeros(nt))
+            if previous is not None:  # the slip and the stick spring start at the last converged step
+                out["slip0"] = -(self.tangent_operator @ np.asarray(previous["u"], float)
+                                 + self.slip_offsets[previous["step"]])
+                out["traction0"] = np.asarray(previous["traction"], float)
         return out
 
     def gap(self, u: np.ndarray, step: int) -> np.ndarray:

@@ -41,7 +41,8 @@ from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import block_diagonal, isotropic_elasticity
 from ddcm_casadi.models.base import ContactModel, FigureSpec, LocalKinematics, drawn_formulation
 from ddcm_casadi.models.continuum import fem, finite
-from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, isotropic_law,
+from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, friction_fields,
+                                                   isotropic_law,
                                                    point_data, reference_loads, step_count)
 from ddcm_casadi.models.continuum.inputs import BodyContact, BodyForce, Contact, Material, Support, Traction
 from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
@@ -484,11 +485,14 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
                          "configuration; finite kinematics needs rigid obstacles for now")
     G_all, area_all, gap0, obstacles, contact = contact_pairs(disc, contacts, free, n_steps, size)
     G = G_all[:, free].tocsr()
+    friction = friction_fields(disc, contacts, contact, obstacles, free, n_steps)
     loads = factors[:, None] * f_ref[free][None, :]
     travelling = [ob for ob in obstacles if ob.direction is not None]
     by_travel = bool(travelling) and load_factors is None
     load_parameter = travelling[0].travels(n_steps) if by_travel else factors
     lp_name = "obstacle travel (m)" if by_travel else "load factor"
+    if by_travel and getattr(travelling[0], "motion", None) is not None:
+        lp_name = "obstacle path length (m)"
     prescribed = continuum_prescribed(disc, supports, B_all, G_all, n_steps, load_factors, f_ref)
     if prescribed is not None and load_factors is None and not (by_travel and np.ptp(load_parameter) > 0):
         load_parameter, lp_name = np.arange(n_steps, dtype=float), "load step"  # a path set by the device
@@ -501,7 +505,7 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
         region_names=tuple(m.region or "(rest)" for m in materials), obstacles=tuple(obstacles),
         reference=reference, laws=tuple(m.law for m in materials), kinematics=kinematics, prescribed=prescribed,
         symmetry_factor=(getattr(reference, "force_factor", 1.0) if symmetry_factor is None else symmetry_factor),
-        **contact)
+        **contact, **friction)
     _check_held(model)
     return model
 
