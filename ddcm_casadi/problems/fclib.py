@@ -351,10 +351,9 @@ class FclibComplementarity:
         """The cold start ``x = 0, r = 0``."""
         return np.zeros(self.problem.n_x), np.zeros(self.problem.n_pairs)
 
-    def point(self, r: np.ndarray, local: LocalProblem | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def point(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The scaled ``(x, p)`` of the contact-major reactions ``r``: ``x`` the velocities
-        ``u = W r + q`` (local; ``local`` unused) or ``v = M^-1 (H r + f)`` (global; one sparse LU
-        of ``M``), so a warm start satisfies the linear equations and only Coulomb's law is off
+        ``u = W r + q`` (local) or ``v = M^-1 (H r + f)`` (global; one sparse solve with ``M``), so a warm start satisfies the linear equations and only Coulomb's law is off
         (at the centre, the proximal term vanishes)."""
         r = np.asarray(r, float).ravel()
         order = _component_major(r.size // 3)
@@ -374,23 +373,13 @@ class FclibComplementarity:
             self.source.n_contacts)]
         return params
 
-    def velocities(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """FCLIB's velocities ``(nc, 3)`` of the solution: ``W r + q`` (local) or ``H^T v + w`` (global)."""
-        if isinstance(self.source, LocalProblem):
-            return (self.source.W @ self.reactions(p) + self.source.q).reshape(-1, 3)
-        v = self.velocity_ref * np.asarray(x, float)
-        return (sp.csr_matrix(self.source.H).T @ v + np.asarray(self.source.w, float)).reshape(-1, 3)
-
     def error(self, x: np.ndarray, p: np.ndarray, local: LocalProblem | None = None) -> float:
-        """FCLIB's natural-map error of the solution of the problem itself (without a proximal
-        term; :func:`natural_map_error`; a global problem's velocities ``u = H^T v + w``, over
-        the reduced ``|q|``: pass ``local`` to reuse it)."""
-        r = self.reactions(p).reshape(-1, 3)
-        if isinstance(self.source, LocalProblem):
-            return natural_map_error(self.source, r)
-        local = local or self.source.local()
-        scale = float(np.linalg.norm(local.q))
-        return float(np.linalg.norm(natural_map(self.velocities(x, p), r, self.source.mu))) / (scale if scale > 0 else 1.0)
+        """FCLIB's natural-map error of the reactions (:func:`natural_map_error`) in the problem
+        itself (without a proximal term). A global problem's velocities are those at equilibrium
+        with the reactions, ``u = H^T M^-1 (H r + f) + w = W r + q`` (its local reduction; pass
+        ``local`` to reuse it), not ``H^T v + w`` of the iterate's ``v``: an iterate off
+        equilibrium is not credited. ``x`` is not needed (kept for the solution's pair)."""
+        return natural_map_error(self.source.local() if local is None else local, self.reactions(p).reshape(-1, 3))
 
 
 def as_complementarity_problem(source: LocalProblem | GlobalProblem, *, proximal: float = 0.0) -> FclibComplementarity:
@@ -603,7 +592,8 @@ def solve_fclib(source: LocalProblem | GlobalProblem | str | os.PathLike, method
     sol = built.solve(fc.params, *(fc.start() if r0 is None else fc.point(r0)))
     error = fc.error(sol.x, sol.p, local)
     seconds = time.perf_counter() - t0
-    return FrictionSolution(fc.reactions(sol.p).reshape(-1, 3), fc.velocities(sol.x, sol.p), error, sol.iterations,
+    r = fc.reactions(sol.p)
+    return FrictionSolution(r.reshape(-1, 3), (local.W @ r + local.q).reshape(-1, 3), error, sol.iterations,
                             seconds, bool(error <= tol), method, 0,
                             (dict(stage=method, iterations=sol.iterations, error=error, seconds=seconds),), sol.message)
 
