@@ -485,6 +485,7 @@ NEWTON_TOL = 1e-12
 
 
 def _formulation(method: str, options: dict):
+    """The formulation of ``method`` (:data:`FORMULATION_METHODS` or a registered name) with ``options``."""
     from ddcm_casadi import formulations
 
     name, base = FORMULATION_METHODS.get(method, (method, {}))
@@ -598,7 +599,7 @@ def solve_fclib(source: LocalProblem | GlobalProblem | str | os.PathLike, method
                             (dict(stage=method, iterations=sol.iterations, error=error, seconds=seconds),), sol.message)
 
 
-def _solve_default(problem, local: LocalProblem, tol: float, r0, max_sweeps: int, max_rounds: int,
+def _solve_default(problem: LocalProblem | GlobalProblem, local: LocalProblem, tol: float, r0, max_sweeps: int, max_rounds: int,
                    max_proximal: int, formulation, t0: float) -> FrictionSolution:
     """The default method of :func:`solve_fclib` (see there)."""
     log: list[dict] = []
