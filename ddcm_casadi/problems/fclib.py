@@ -266,7 +266,7 @@ class FrictionSolution:
 
 
 def _project_one(rn: float, r1: float, r2: float, mu: float) -> tuple[float, float, float]:
-    """:func:`~ddcm_casadi.problems.coulomb.project_cone` of one 3-vector, in scalars (the sweep's
+    """:func:`~ddcm_casadi.models.coulomb.project_cone` of one 3-vector, in scalars (the sweep's
     inner loop: numpy's per-call cost on 3-vectors is most of a sweep)."""
     t = math.hypot(r1, r2)
     if t <= mu * rn:
