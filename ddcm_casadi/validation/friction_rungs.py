@@ -222,7 +222,7 @@ def rung_inclined_patch() -> list[Check]:
     return out
 
 
-def rung_ddcm_rate(points=(9, 17, 33)) -> list[Check]:
+def rung_ddcm_rate(points=(33, 65, 129)) -> list[Check]:
     """DDCM on Hookean data of ``points`` per axis (spacing halved each time) against the classical
     frictional solution of the block pushed into partial slip (Alart--Curnier, the same
     formulation): the displacement error falls at the fitted rate ~1 of the data spacing."""

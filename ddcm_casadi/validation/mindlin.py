@@ -45,8 +45,8 @@ from ddcm_casadi.validation.verification import Check, fitted_rate
 
 #: SI units: the cylinder's radius (m), the block's modulus (Pa), Poisson's ratio, Coulomb's mu,
 #: the block's half-width and depth (m), the press (m) and the sideways moves (m, one step each).
-MINDLIN = dict(radius=0.05, youngs_modulus=200e9, poisson_ratio=0.49, friction=0.3, half_width=0.02,
-               depth=0.02, press=4e-5, shear=(5e-6, 1e-5))
+MINDLIN = dict(radius=0.05, youngs_modulus=200e9, poisson_ratio=0.49, friction=0.3, half_width=0.04,
+               depth=0.04, press=4e-5, shear=(5e-6, 1e-5))
 
 
 def mindlin_model(level: int = 2, *, formulation_data=None, **overrides) -> ContinuumModel:
@@ -55,7 +55,7 @@ def mindlin_model(level: int = 2, *, formulation_data=None, **overrides) -> Cont
     per level); pressed in two steps, then moved sideways by :data:`MINDLIN` ``shear``."""
     c = dict(MINDLIN, **overrides)
     W, H = c["half_width"], c["depth"]
-    mesh = meshes.rectangle(2 * W, H, nx=20, ny=10, origin=(-W, -H))
+    mesh = meshes.rectangle(2 * W, H, nx=20, ny=10, origin=(-W, -H))  # 4 mm elements, level 0
     # a disc of 1.5 a (Hertz's a = 1.1 mm at the press) uniformly fine, graded outside it
     mesh = refine_near(mesh, (0.0, 0.0), 0.0017, levels=int(level), shrink=1.0, buffer=3)
     motion = [[0.0, -c["press"] / 2], [0.0, -c["press"]]] + [[float(s), -c["press"]] for s in c["shear"]]
@@ -134,11 +134,13 @@ def mindlin_sequence(levels, formulation: str = "augmented_lagrangian", *, progr
     return rows
 
 
-def rung_mindlin(levels=(1, 2, 3)) -> list[Check]:
+def rung_mindlin(levels=(3, 4, 5, 6)) -> list[Check]:
     """Cattaneo--Mindlin on meshes refined ``levels`` times at the contact (Alart--Curnier,
     classical): the force distribution's error falls with the element size at a fitted rate
     ~1 (nodal forces standing for their tributary lengths: O(h)), and on the finest mesh it is
-    below 5 % of ``Q`` and the stick zone's edge within two elements of ``c``."""
+    below 5 % of ``Q`` and the stick zone's edge within two elements of ``c``. The error levels
+    off at the finite block's share, measured: 6 % with a block of 18 ``a`` (half-width), 2.5 %
+    with 36 ``a`` (the model's) at the same mesh; the tolerance is twice the latter."""
     rows = mindlin_sequence(levels)
     last_step = max(r["step"] for r in rows)
     final = [r for r in rows if r["step"] == last_step]
