@@ -49,7 +49,7 @@ MINDLIN = dict(radius=0.05, youngs_modulus=200e9, poisson_ratio=0.49, friction=0
                depth=0.04, press=4e-5, shear=(5e-6, 1e-5))
 
 
-def mindlin_model(level: int = 2, *, formulation_data=None, **overrides) -> ContinuumModel:
+def mindlin_model(level: int = 2, **overrides) -> ContinuumModel:
     """The cylinder on the block (full width: the tangential load is not symmetric), P2, graded
     towards the first point of contact by ``level`` rounds (the contact zone's element size halves
     per level); pressed in two steps, then moved sideways by :data:`MINDLIN` ``shear``."""
