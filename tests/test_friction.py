@@ -149,3 +149,43 @@ def test_motion_length_must_match_the_path():
     with pytest.raises(InputError, match="motion has 2 displacements"):
         plane.displacements(3)
     assert isinstance(Contact(plane, "ymin", friction=0.2), Contact)
+
+
+# ------------------------------------------------------------------ trusses
+def _triangle(friction, supports_extra=(), obstacle=True, load=(0.3, -1.0)):
+    from ddcm_casadi.models.truss import Obstacle, truss_model
+
+    # node 1 also hangs on a thin vertical member to node 3 (a truss held only by contact is
+    # refused as a mechanism)
+    nodes = [[0.0, 0.0], [1.0, 0.0], [0.5, 1.0], [1.0, -1.0]]
+    loads = np.zeros((4, 2))
+    loads[2] = load
+    obstacles = [Obstacle(normal=[0.0, 1.0], offset=0.0, nodes=[1], friction=friction)] if obstacle else []
+    return truss_model(nodes=nodes, members=[[0, 1], [0, 2], [1, 2], [1, 3]], area=[1e-4, 1e-4, 1e-4, 1e-7],
+                       youngs_modulus=200e9, supports=[(0, "xy"), (3, "xy"), *supports_extra], loads=loads,
+                       obstacles=obstacles, load_factors=[0.5, 1.0])
+
+
+@pytest.mark.parametrize("name", FRICTIONAL)
+def test_truss_node_sticks_like_a_pin_and_slides_like_a_roller(name):
+    """A triangle pinned at node 0, node 1 on a plane: with ample friction node 1 sticks and the
+    truss deforms as if node 1 were pinned; with mu = 0 as on a roller; in between, node 1 slips
+    with its traction on the cone. The load (0.3, -1) N on the apex presses node 1: the horizontal
+    member carries 0.15 N where the plane carries 0.5 N, so mu = 5 sticks, mu = 0.1 slips."""
+    exact = type(formulations.get(name)).exact
+    tol = 1e-8 if exact else 1e-3  # Newton's tolerance; penalty: O(1/gamma) relative
+    pinned = compare(_triangle(None, [(1, "xy")], obstacle=False), ["fischer_burmeister"], variants=("classical",))
+    roller = compare(_triangle(None, [(1, "y")], obstacle=False), ["fischer_burmeister"], variants=("classical",))
+    for mu, ref in ((5.0, pinned), (0.0, roller)):
+        model = _triangle(mu)
+        run = compare(model, [name], variants=("classical",))["classical", name]
+        expected = ref["classical", "fischer_burmeister"]
+        for s, e in zip(run.steps, expected.steps):
+            assert s.converged
+            full = model.nodal_displacements(s.u, s.step)
+            reference = ref.model.nodal_displacements(e.u, e.step)
+            assert np.max(np.abs(full - reference)) <= tol * np.max(np.abs(reference))
+    model = _triangle(0.1)
+    last = compare(model, [name], variants=("classical",))["classical", name].steps[-1]
+    assert last.converged and abs(abs(last.traction[0]) - 0.1 * last.p[0]) <= tol * last.p[0]
+    assert model.contact_status(last.p, last.traction, last.slip)[0][0] == 2

@@ -27,12 +27,11 @@ from ddcm_casadi import formulations
 from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.data.metric import Metric, isotropic_elasticity
 from ddcm_casadi.models.continuum import mesh as meshes
-from ddcm_casadi.models.continuum.assembly import tangent_basis
 from ddcm_casadi.models.continuum.inputs import Contact, Material, Support, Traction
 from ddcm_casadi.models.continuum.model import ContinuumModel, continuum_model
 from ddcm_casadi.models.continuum.obstacles import Plane, moving
 from ddcm_casadi.models.base import CONTACT_STATUS
-from ddcm_casadi.models.coulomb import blocks
+from ddcm_casadi.models.coulomb import blocks, tangent_basis
 from ddcm_casadi.validation.verification import Check, fitted_rate
 
 #: The block's modulus (Pa), size (m) and the press (m): a strain of 1e-3.

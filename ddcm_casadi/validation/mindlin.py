@@ -39,8 +39,7 @@ from ddcm_casadi.models.continuum.inputs import Contact, Material, Support
 from ddcm_casadi.models.continuum.mesh_refinement import refine_near
 from ddcm_casadi.models.continuum.model import ContinuumModel, continuum_model
 from ddcm_casadi.models.continuum.obstacles import Ball, moving
-from ddcm_casadi.models.continuum.assembly import tangent_basis
-from ddcm_casadi.models.coulomb import blocks
+from ddcm_casadi.models.coulomb import blocks, tangent_basis
 from ddcm_casadi.validation.verification import Check, fitted_rate
 
 #: SI units: the cylinder's radius (m), the block's modulus (Pa), Poisson's ratio, Coulomb's mu,
