@@ -162,11 +162,16 @@ def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
     strain = data.strain.reshape(len(data), k)
     stress = data.stress.reshape(len(data), k)
     n, n_c = len(points), candidates.shape[1]
-    c = np.zeros((2 * n * k, n * n_c))
-    for a, i in enumerate(points):
-        cols = slice(a * n_c, (a + 1) * n_c)
-        c[a * k:(a + 1) * k, cols] = (strain[candidates[a]] - cur_e[i]).T
-        c[n * k + a * k:n * k + (a + 1) * k, cols] = (stress[candidates[a]] - cur_s[i]).T
+    points = np.asarray(points)
+    # One move per column, 2 k nonzeros each (sparse: the closed forms cost O(k) per move).
+    d_e = strain[candidates] - cur_e[points][:, None, :]  # (n, n_c, k)
+    d_s = stress[candidates] - cur_s[points][:, None, :]
+    rows = np.arange(k)[None, None, :] + k * np.arange(n)[:, None, None]  # (n, 1, k)
+    rows = np.broadcast_to(rows, d_e.shape)
+    cols = np.broadcast_to(np.arange(n * n_c).reshape(n, n_c, 1), d_e.shape)
+    c = sp.csc_matrix((np.concatenate([d_e.ravel(), d_s.ravel()]),
+                       (np.concatenate([rows.ravel(), n * k + rows.ravel()]), np.concatenate([cols.ravel()] * 2))),
+                      shape=(2 * n * k, n * n_c))
     mine = float(family.best(np.zeros((2 * n * k, 1)))[0])
     return family.best(c).reshape(n, n_c), mine
 
