@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ddcm_casadi.problems.exact import ExactEnumerator
+from ddcm_casadi.problems.exact import BorderedFamily, ExactEnumerator, move_terms
 from ddcm_casadi.linalg import SingularMatrix, factorize
 from ddcm_casadi.data.metric import block_diagonal
 
@@ -143,37 +143,57 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     comps = (pts[:, None] * k + np.arange(k)).ravel()
     cols = np.concatenate([comps, m * k + comps])  # their strains, then their stresses
     zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
-    D = np.empty((base.size, cols.size))
-    for a, i in enumerate(cols):
-        unit = np.zeros(2 * m * k)
-        unit[i] = 1.0
-        D[:, a] = problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero
+    unit = np.zeros((2 * m * k, cols.size))
+    unit[cols, np.arange(cols.size)] = 1.0
+    D = problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero[:, None]  # one column each
     return exact.affine_family(base, D), cur_e, cur_s
 
 
+def descent_threshold(mine: float) -> float:
+    """The objective a move must beat to descend from ``mine`` (past roundoff)."""
+    return mine - 1e-12 - 1e-9 * abs(mine)
+
+
+#: A move is left out by its lower bound only when the bound exceeds the descent threshold by this
+#: share of the terms that make it (far above the roundoff of the closed forms).
+PRUNE_MARGIN = 1e-6
+
+
 def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray,
-                 candidates: np.ndarray) -> tuple[np.ndarray, float]:
-    """The exact projection's objective (scaled) of every assignment that differs from ``index``
+                 candidates: np.ndarray, *, prune: bool = False) -> tuple[np.ndarray, float]:
+    r"""The exact projection's objective (scaled) of every assignment that differs from ``index``
     at one point: ``points[a]`` moved to datum ``candidates[a, b]``; returns ``(objectives,
     objective of index)`` with ``objectives`` shaped like ``candidates``. Only the moving points
-    enter the closed forms (``2 n k`` directions for ``n`` points, not ``2 m k``)."""
+    enter the closed forms (``2 n k`` directions for ``n`` points, not ``2 m k``), and each move's
+    ``c`` has ``2 k`` nonzeros.
+
+    ``prune``: a move whose lower bound, the projection without contact constraints
+    (:meth:`~ddcm_casadi.problems.exact.BorderedFamily.relaxed`, one quadratic in the move's ``2 k``
+    numbers), is above :func:`descent_threshold` is reported as ``inf`` without its branches:
+    it cannot descend. The moves that can are exactly those of the full screen.
+    """
     family, cur_e, cur_s = assignment_family(problems, exact, step, index, points)
     data, k = problems.model.dataset, problems.model.strain_components
     strain = data.strain.reshape(len(data), k)
     stress = data.stress.reshape(len(data), k)
     n, n_c = len(points), candidates.shape[1]
     points = np.asarray(points)
-    # One move per column, 2 k nonzeros each (sparse: the closed forms cost O(k) per move).
-    d_e = strain[candidates] - cur_e[points][:, None, :]  # (n, n_c, k)
-    d_s = stress[candidates] - cur_s[points][:, None, :]
-    rows = np.arange(k)[None, None, :] + k * np.arange(n)[:, None, None]  # (n, 1, k)
-    rows = np.broadcast_to(rows, d_e.shape)
-    cols = np.broadcast_to(np.arange(n * n_c).reshape(n, n_c, 1), d_e.shape)
-    c = sp.csc_matrix((np.concatenate([d_e.ravel(), d_s.ravel()]),
-                       (np.concatenate([rows.ravel(), n * k + rows.ravel()]), np.concatenate([cols.ravel()] * 2))),
-                      shape=(2 * n * k, n * n_c))
+    d = np.concatenate([strain[candidates] - cur_e[points][:, None, :],
+                        stress[candidates] - cur_s[points][:, None, :]], axis=2)  # (n, n_c, 2 k)
+    rows = np.concatenate([np.arange(k) + k * np.arange(n)[:, None], n * k + np.arange(k) + k * np.arange(n)[:, None]],
+                          axis=1)  # (n, 2 k): each point's strain, then stress, directions
     mine = float(family.best(np.zeros((2 * n * k, 1)))[0])
-    return family.best(c).reshape(n, n_c), mine
+    relaxed = family.relaxed() if prune and isinstance(family, BorderedFamily) else None
+    if relaxed is None:
+        return family.best_moves(rows, d), mine
+    linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, d)
+    limit = descent_threshold(mine)
+    # The bound's roundoff is far below this share of its terms.
+    a, b = np.nonzero(relaxed[0] + linear + quadratic
+                      <= limit + PRUNE_MARGIN * (abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic) + abs(limit)))
+    obj = np.full((n, n_c), np.inf)
+    obj[a, b] = family.best_moves(rows[a], d[a, b][:, None, :])[:, 0]
+    return obj, mine
 
 
 def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,

@@ -82,6 +82,27 @@ def _quadratic(c, a0: float, a1: np.ndarray, A2: np.ndarray) -> np.ndarray:
     return a0 + a1 @ c + 0.5 * np.einsum("ik,ik->k", c, A2 @ c)
 
 
+def move_terms(a1: np.ndarray, A2: np.ndarray, rows: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The linear and quadratic terms ``a1^T c`` and ``c^T A2 c / 2`` of the columns ``c`` whose
+    only nonzeros are ``d[g, i]`` at the rows ``rows[g]`` (``rows``: ``(G, j)``, one row set per
+    group; ``d``: ``(G, N, j)``): two ``(G, N)`` arrays."""
+    a1g, A2g = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
+    j = rows.shape[1]
+    if j > 4:  # many nonzeros per move: batched products
+        return np.matmul(d, a1g[:, :, None])[..., 0], 0.5 * np.sum(d * np.matmul(d, A2g), axis=2)
+    # Few (one-component points: 2): j^2 vector operations beat batched products of tiny matrices.
+    linear = sum(d[..., i] * a1g[:, i, None] for i in range(j))
+    quadratic = sum(d[..., i] * sum(d[..., m] * A2g[:, i, m, None] for m in range(j)) for i in range(j))
+    return linear, 0.5 * quadratic
+
+
+def _moves_matrix(rows: np.ndarray, d: np.ndarray, r: int) -> sp.csc_matrix:
+    """The columns of :func:`move_terms` as a sparse ``(r, G N)`` matrix (group-major)."""
+    G, N, j = d.shape
+    return sp.csc_matrix((d.ravel(), (np.repeat(rows, N, axis=0).ravel(), np.repeat(np.arange(G * N), j))),
+                         shape=(r, G * N))
+
+
 @dataclass
 class AffineFamily:
     """The exact projections of ``P0 + D c`` for any ``c`` (see :meth:`ExactEnumerator.affine_family`),
@@ -108,6 +129,12 @@ class AffineFamily:
                 best[better] = obj[better]
         return out
 
+    def best_moves(self, rows: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """:meth:`best` of the columns with the nonzeros ``d[g, i]`` at ``rows[g]`` (:func:`move_terms`): ``(G, N)``."""
+        if not self.branches:
+            return np.full(d.shape[:2], np.inf)
+        return self.best(_moves_matrix(rows, d, self.branches[0].a1.size)).reshape(d.shape[:2])
+
 
 @dataclass
 class BorderedFamily:
@@ -126,6 +153,18 @@ class BorderedFamily:
     P: np.ndarray        # (branches, 2 nc, 2 nc)
     solvable: np.ndarray  # (branches,) bool
     sign_tol: float
+    relaxed_P: np.ndarray | None = None  # M^-1: every constraint dropped (None: that problem is singular)
+
+    def relaxed(self) -> tuple[float, np.ndarray, np.ndarray] | None:
+        r"""``(a0, a1, A2)`` of the projection without any contact constraint (``R z = r`` only),
+        ``a0 + a1^T c + c^T A2 c / 2``, or None where that problem is singular. Every branch adds
+        constraints to it, so it is a lower bound of :meth:`best` (a convex QP: ``H`` is positive
+        semidefinite and ``K_R`` nonsingular, so its stationary point is its minimum)."""
+        if self.relaxed_P is None:
+            return None
+        Pw0, PW = self.relaxed_P @ self.w0, self.relaxed_P @ self.W
+        A2 = self.A2 + self.W.T @ PW
+        return self.a0 + 0.5 * float(self.w0 @ Pw0), self.a1 + self.W.T @ Pw0, 0.5 * (A2 + A2.T)
 
     def best(self, c, *, chunk: int = 1 << 20) -> np.ndarray:
         """As :meth:`AffineFamily.best`."""
@@ -138,11 +177,31 @@ class BorderedFamily:
                                             self.sign_tol)[0]
         return out
 
+    def best_moves(self, rows: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """:meth:`best` of the columns with the nonzeros ``d[g, i]`` at ``rows[g]`` (:func:`move_terms`),
+        without forming them: ``(G, N)``."""
+        linear, quadratic = move_terms(self.a1, self.A2, rows, d)
+        w = self.w0[:, None, None] + np.einsum("mgj,gij->mgi", self.W[:, rows], d)  # (2 nc, G, N)
+        G, N = linear.shape
+        return _best_branch((self.a0 + linear + quadratic).ravel(), w.reshape(-1, G * N), self.P, self.solvable,
+                            self.sign_tol)[0].reshape(G, N)
+
+
+#: Branches x columns up to which :func:`_best_branch` treats every branch at once.
+ALL_BRANCHES_AT_ONCE = 1 << 16
+
 
 def _best_branch(base: np.ndarray, w: np.ndarray, P: np.ndarray, solvable: np.ndarray, sign_tol: float):
     """``(objective, branch)`` per column of the bordered form: the smallest ``base + w^T P_s w / 2``
     over the solvable branches ``s`` whose freed constraints ``-P_s w`` are ``>= -sign_tol`` (the
     first such branch on ties, as the enumeration in order); ``inf`` and ``-1`` where none is."""
+    if P.shape[0] * w.shape[1] <= ALL_BRANCHES_AT_ONCE:  # few columns: one product for every branch
+        Pw = (P.reshape(-1, P.shape[2]) @ w).reshape(P.shape[0], P.shape[1], -1)
+        obj = np.where(np.all(Pw <= sign_tol, axis=1) & solvable[:, None],
+                       base + 0.5 * np.sum(w * Pw, axis=1), np.inf)
+        which = np.argmin(obj, axis=0)  # the first on ties
+        best = obj[which, np.arange(w.shape[1])]
+        return best, np.where(np.isfinite(best), which, -1)
     best = np.full(w.shape[1], np.inf)
     which = np.full(w.shape[1], -1)
     for s in np.flatnonzero(solvable):
@@ -168,6 +227,7 @@ class _Bordered:
     M: np.ndarray        # (2 nc, 2 nc): their multipliers
     P: np.ndarray        # (branches, 2 nc, 2 nc): M_DD^-1 embedded at each branch's dropped rows
     solvable: np.ndarray  # (branches,) bool
+    relaxed_P: np.ndarray | None  # M^-1 (every constraint dropped), None if singular
 
 
 class ExactEnumerator:
@@ -254,7 +314,8 @@ class ExactEnumerator:
                 solvable[s] = False
                 continue
             P[s][np.ix_(dropped, dropped)] = np.linalg.inv(MDD)
-        return _Bordered(lu=lu, Zc=Y[:nz], M=M, P=P, solvable=solvable)
+        relaxed = np.linalg.inv(M) if nc and np.linalg.cond(M) <= SINGULAR_CONDITION else None
+        return _Bordered(lu=lu, Zc=Y[:nz], M=M, P=P, solvable=solvable, relaxed_P=relaxed)
 
     def _imposed(self, params: np.ndarray, b: _Bordered) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The projection with every constraint imposed, per column of ``params``: ``(z0, d, mu)``,
@@ -384,7 +445,7 @@ class ExactEnumerator:
             A2 = d[:, 1:].T @ Wd[:, 1:]
             return BorderedFamily(a0=0.5 * float(d[:, 0] @ Wd[:, 0]), a1=d[:, 1:].T @ Wd[:, 0],
                                   A2=0.5 * (A2 + A2.T), w0=w[:, 0], W=w[:, 1:], P=b.P, solvable=b.solvable,
-                                  sign_tol=self.sign_tol)
+                                  sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
         R0, g0, q0, f0 = self._affine_parts(base)
         # The linear parts of R, g, grad f in the directions.
         RD, gD, qD = self._R_P @ D, self._g_P @ D, self._q_P @ D
