@@ -117,6 +117,11 @@ def start_assignment(model, start: str, step: int, rng: np.random.Generator) -> 
     return random_assignment(model, rng)
 
 
+#: The solved directions of :func:`assignment_family` are remembered per problem and step where
+#: they take at most this many floats (8 MB).
+DIRECTION_CACHE_VALUES = 1_000_000
+
+
 def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
                       points: np.ndarray | None = None):
     r"""The exact projections of every assignment near ``index``, as closed forms.
@@ -138,15 +143,42 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     m, k = model.n_points, model.strain_components
     cur_e = data.strain[index].reshape(m, k)
     cur_s = data.stress[index].reshape(m, k)
-    base = problems.projection_params(step, cur_e.ravel(), cur_s.ravel())
     pts = np.arange(m) if points is None else np.asarray(points)
     comps = (pts[:, None] * k + np.arange(k)).ravel()
     cols = np.concatenate([comps, m * k + comps])  # their strains, then their stresses
-    zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
-    unit = np.zeros((2 * m * k, cols.size))
-    unit[cols, np.arange(cols.size)] = 1.0
-    D = problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero[:, None]  # one column each
-    return exact.affine_family(base, D), cur_e, cur_s
+
+    def directions(columns) -> np.ndarray:
+        zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
+        unit = np.zeros((2 * m * k, len(columns)))
+        unit[columns, np.arange(len(columns))] = 1.0
+        return problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero[:, None]  # one column each
+
+    solved = _all_directions(problems, exact, step, directions) if exact.bordered else None
+    if solved is None:
+        return exact.affine_family(problems.projection_params(step, cur_e.ravel(), cur_s.ravel()), directions(cols)), \
+            cur_e, cur_s
+    # P(index) = P(0) + D c(index): the imposed solutions of index and of the directions by linearity.
+    dz, wz, E, W = solved
+    c = np.concatenate([cur_e.ravel(), cur_s.ravel()])
+    return exact.family(dz + E @ c, wz + W @ c, E[:, cols], W[:, cols]), cur_e, cur_s
+
+
+def _all_directions(problems, exact: ExactEnumerator, step: int, directions):
+    """``(d, mu)`` of the projection with every constraint imposed (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.imposed`)
+    for the zero assignment and for every direction of :func:`assignment_family` at ``step``,
+    solved once per problem and step (the greedy search screens sweep after sweep), or None
+    where they would exceed :data:`DIRECTION_CACHE_VALUES` floats."""
+    model = problems.model
+    n = 2 * model.n_points * model.strain_components
+    if n * (n + 2 * exact.nc + 2) > DIRECTION_CACHE_VALUES:  # d has 2 m k rows
+        return None
+
+    def solve():
+        d, w = exact.imposed(np.column_stack([problems.projection_params(step, np.zeros(n // 2), np.zeros(n // 2)),
+                                              directions(np.arange(n))]))
+        return d[:, 0], w[:, 0], d[:, 1:], w[:, 1:]
+
+    return problems.projection.shared(("assignment_directions", step), solve)
 
 
 def descent_threshold(mine: float) -> float:

@@ -326,6 +326,27 @@ class ExactEnumerator:
         z0 = y[:self.nz]
         return z0, self._d.z @ z0 + self._d.params @ params, y[self.nz + self.Rz.shape[0]:]
 
+    @property
+    def bordered(self) -> bool:
+        """Whether the projection has the bordered form (``K`` nonsingular; built on first use)."""
+        return self._bordered is not None
+
+    def imposed(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The distance ``d`` and the multipliers ``mu`` of the ``2 nc`` constraints of the projection
+        with every constraint imposed, per column of ``params`` (linear in them: the maps have no
+        constant terms). Needs the bordered form (:attr:`bordered`)."""
+        _, d, w = self._imposed(np.asarray(params, float), self._bordered)
+        return d, w
+
+    def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray) -> BorderedFamily:
+        """The :class:`BorderedFamily` of the projections of ``P0 + D c`` from :meth:`imposed` of
+        ``P0`` (``d0``, ``w0``) and of the columns of ``D`` (``E``, ``W``)."""
+        b = self._bordered
+        Wd0, WE = self._weight @ d0, self._weight @ E
+        A2 = E.T @ WE
+        return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=0.5 * (A2 + A2.T), w0=w0, W=W, P=b.P,
+                              solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
+
     def _solve_bordered(self, params: np.ndarray, b: _Bordered) -> ExactSolution:
         z0, d, w = self._imposed(params, b)
         obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, self._weight @ d), w, b.P, b.solvable,
@@ -438,14 +459,9 @@ class ExactEnumerator:
             raise InputError("an affine family of projections needs a projection (mpcc) problem")
         base = np.asarray(base, float).reshape(-1, 1)
         D = np.asarray(directions, float)
-        b = self._bordered if bordered else None
-        if b is not None:
-            _, d, w = self._imposed(np.hstack([base, D]), b)
-            Wd = self._weight @ d
-            A2 = d[:, 1:].T @ Wd[:, 1:]
-            return BorderedFamily(a0=0.5 * float(d[:, 0] @ Wd[:, 0]), a1=d[:, 1:].T @ Wd[:, 0],
-                                  A2=0.5 * (A2 + A2.T), w0=w[:, 0], W=w[:, 1:], P=b.P, solvable=b.solvable,
-                                  sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
+        if bordered and self.bordered:
+            d, w = self.imposed(np.hstack([base, D]))
+            return self.family(d[:, 0], w[:, 0], d[:, 1:], w[:, 1:])
         R0, g0, q0, f0 = self._affine_parts(base)
         # The linear parts of R, g, grad f in the directions.
         RD, gD, qD = self._R_P @ D, self._g_P @ D, self._q_P @ D
