@@ -214,7 +214,7 @@ def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
                         stress[candidates] - cur_s[points][:, None, :]], axis=2)  # (n, n_c, 2 k)
     rows = np.concatenate([np.arange(k) + k * np.arange(n)[:, None], n * k + np.arange(k) + k * np.arange(n)[:, None]],
                           axis=1)  # (n, 2 k): each point's strain, then stress, directions
-    mine = float(family.best(np.zeros((2 * n * k, 1)))[0])
+    mine = family.base()
     relaxed = family.relaxed() if prune and isinstance(family, BorderedFamily) else None
     if relaxed is None:
         return family.best_moves(rows, d), mine
@@ -237,7 +237,7 @@ def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarra
     data = model.dataset
     m, k = model.n_points, model.strain_components
     family, cur_e, cur_s = assignment_family(problems, exact, step, index)
-    mine = float(family.best(np.zeros((2 * m * k, 1)))[0])
+    mine = family.base()
     offset, size = point_ranges(model)
     total = int(np.prod(size.astype(float)))
     best = np.inf

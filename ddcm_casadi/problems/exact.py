@@ -129,6 +129,10 @@ class AffineFamily:
                 best[better] = obj[better]
         return out
 
+    def base(self) -> float:
+        """:meth:`best` at ``c = 0``: the exact projection's objective of ``P0``."""
+        return float(self.best(np.zeros((self.branches[0].a1.size if self.branches else 0, 1)))[0])
+
     def best_moves(self, rows: np.ndarray, d: np.ndarray) -> np.ndarray:
         """:meth:`best` of the columns with the nonzeros ``d[g, i]`` at ``rows[g]`` (:func:`move_terms`): ``(G, N)``."""
         if not self.branches:
@@ -176,6 +180,10 @@ class BorderedFamily:
             out[a:a + chunk] = _best_branch(_quadratic(cc, self.a0, self.a1, self.A2), w, self.P, self.solvable,
                                             self.sign_tol)[0]
         return out
+
+    def base(self) -> float:
+        """:meth:`best` at ``c = 0``: the exact projection's objective of ``P0``."""
+        return float(_best_branch(np.array([self.a0]), self.w0[:, None], self.P, self.solvable, self.sign_tol)[0][0])
 
     def best_moves(self, rows: np.ndarray, d: np.ndarray) -> np.ndarray:
         """:meth:`best` of the columns with the nonzeros ``d[g, i]`` at ``rows[g]`` (:func:`move_terms`),
