@@ -75,7 +75,9 @@ class DDCMSolver:
     search : str, optional
         Replaces ``options.search``: a backend of :data:`ddcm_casadi.data.search.SEARCHES`.
     enumerate_pairs : int
-        Affine problems with at most this many contact pairs consult the exact branch enumeration.
+        Affine problems with at most this many contact pairs consult the exact branch enumeration
+        (:attr:`exact`, built on first use: every projection is checked against it where there is
+        at least one pair; without pairs a projection is one linear solve, nothing to enumerate).
     global_search : bool
         Report the global optimum where it can be enumerated.
     min_substep : float

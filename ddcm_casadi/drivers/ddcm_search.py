@@ -129,13 +129,15 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     The projection's parameters are affine in the assigned data, ``P = P(index) + D c`` with
     ``c`` the data's strain and stress minus those of ``index`` at the material points ``points``
     (default: all; ``2 n k`` numbers for ``n`` points, point-major strains then stresses), so
-    every branch of ``Z_E`` is solved once for ``2 n k + 1`` right-hand sides
-    (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.affine_family`) and the objective of any
+    ``Z_E`` is solved once for ``2 n k + 1`` right-hand sides
+    (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.affine_family`; in the bordered form, for a
+    small model, once per step for every direction, :func:`_all_directions`) and the objective of any
     assignment that differs from ``index`` only at ``points`` is a closed-form quadratic in
     ``c``. Centring ``c`` on ``index`` keeps the terms small near the assignment found, where
     comparisons matter.
 
-    Returns ``(family, strain, stress)``: the :class:`~ddcm_casadi.problems.exact.AffineFamily` and the
+    Returns ``(family, strain, stress)``: the :class:`~ddcm_casadi.problems.exact.BorderedFamily`
+    (:class:`~ddcm_casadi.problems.exact.AffineFamily` where the bordered form is singular) and the
     assigned data of ``index`` as ``(m, k)`` arrays.
     """
     model = problems.model

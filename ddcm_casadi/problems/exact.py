@@ -5,8 +5,12 @@ projection is a union of convex QPs, one per branch. Every pair is either *free*
 *in contact* (``g = 0``) or *grazing* (both). For a convex QP, the optimum on a branch solves the
 equality-constrained QP of its active constraints, so the global projection is the best
 *sign-feasible* solution of these equality-constrained problems over all ``3^nc`` partitions
-(``2^nc`` for the classical problem). Each partition's KKT matrix is factorised once (sparse LU)
-and reused for any number of right-hand sides (load steps, data points).
+(``2^nc`` for the classical problem). A projection is solved in the bordered form (see
+:class:`ExactEnumerator`): one factorisation with every constraint imposed serves every branch,
+each branch then costing a ``2 nc x 2 nc`` block; branch by branch (the classical problem, the
+reference, a singular bordered matrix) each partition's KKT matrix is factorised once (sparse LU).
+Either is reused for any number of right-hand sides (load steps, data points). The linear parts are
+the problem's own sparse maps, and nothing is factorised before the first solve.
 
 This is independent of the formulations (no complementarity function, no IPOPT) and serves as the
 reference the tests and the DDCM driver check against. Its cost grows as ``3^nc``: it is meant for
@@ -16,9 +20,11 @@ Many projections at once (the DDCM global optimum). When only a few parameters c
 the projections, ``P = P0 + D c`` with ``D`` (n_params x r) and one ``c`` (r) per projection (the
 data assigned to the points), every branch's solution is affine in ``c``, ``z = z0 + Z c``, and its
 objective is the quadratic ``a0 + a1 . c + c^T A2 c / 2``: :meth:`ExactEnumerator.affine_family`
-solves each branch for ``r + 1`` right-hand sides only, and :meth:`AffineFamily.best` evaluates
-signs and objectives for millions of ``c`` with a few vector operations per branch (no solve
-per projection).
+solves ``r + 1`` right-hand sides only (once, or per branch), and :meth:`BorderedFamily.best`
+(:meth:`AffineFamily.best`) evaluates signs and objectives for millions of ``c`` with one
+quadratic and a ``2 nc``-vector per branch (a quadratic per branch): no solve per projection.
+:meth:`BorderedFamily.relaxed` is the projection without contact constraints, a lower bound of
+every branch (the greedy screen leaves out the moves it shows cannot descend).
 """
 
 from __future__ import annotations
