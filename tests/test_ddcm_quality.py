@@ -20,7 +20,6 @@ from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.validation.quality_rungs import noisy_dataset, noisy_paper_bar
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.drivers import ddcm as ddcm_driver
-from ddcm_casadi.drivers.ddcm_improve import ranked
 from ddcm_casadi.drivers.ddcm_search import descent_threshold, elastic_state, random_assignment, single_moves
 from ddcm_casadi.validation import ladder
 from ddcm_casadi.drivers.path import DDCMSolver
@@ -289,12 +288,6 @@ def _elastic_fields(model, problems, step):
 
     r = solve_classical(problems, formulations.get(FB).build(problems.classical), FB)
     return r.steps[step].strain, r.steps[step].stress
-
-
-def test_ties_are_ordered_by_their_keys():
-    values = np.array([1 / 3, 1 / 7, 1 / 3 + 1e-14, 1 / 3 - 1e-14, 2 / 3])  # away from the quanta's edges
-    assert ranked(values, 1.0, np.array([4, 0, 2, 3, 1])).tolist() == [1, 2, 3, 0, 4]
-    assert ranked(values, 1.0, np.array([0, 0, 1, 2, 0])).tolist() == [1, 0, 2, 3, 4]
 
 
 def test_no_enumeration_for_problems_without_pairs(monkeypatch):

@@ -16,16 +16,6 @@ from ddcm_casadi.drivers.records import Run, count
 
 #: Single-point moves screened per sweep of the greedy search (points x candidates).
 SCREEN_SIZE = 1_000_000
-#: Values within this share of their scale are ties for :func:`ranked`.
-TIE = 1e-9
-
-
-def ranked(values: np.ndarray, scale: float, *ties: np.ndarray) -> np.ndarray:
-    """The indices that sort ``values`` ascending, values within ``TIE * scale`` of each other
-    (a symmetric structure's equal members and moves, equal up to roundoff) ordered by the keys
-    ``ties`` instead (the first key first), so that roundoff does not pick among them."""
-    step = TIE * scale if scale > 0 else 1.0
-    return np.lexsort((*reversed(ties), np.floor(np.asarray(values) / step)))
 
 
 def restart_assignment(solver, k: int, r: int, best: Run) -> np.ndarray:
@@ -84,11 +74,11 @@ def _screened_moves(solver, k: int, best: Run, order: np.ndarray) -> list[np.nda
         pts = f["strain"].reshape(model.n_points, -1)[order], f["stress"].reshape(model.n_points, -1)[order]
         cand = data.k_nearest(pts[0].ravel(), pts[1].ravel(), max(2, per_point))
     obj, mine = single_moves(solver.problems, solver.exact, k, best.index, order, cand, prune=True)
+    # Row-major, so the stable sort keeps the order of a stable sort of every move.
     descending = np.flatnonzero(obj < descent_threshold(mine))
-    i, b = np.divmod(descending, cand.shape[1])
     moves = []
-    for a in ranked(obj.ravel()[descending], abs(mine), order[i], cand[i, b]):
-        i, b = divmod(int(descending[a]), cand.shape[1])
+    for a in descending[np.argsort(obj.ravel()[descending], kind="stable")]:
+        i, b = divmod(int(a), cand.shape[1])
         trial = best.index.copy()
         trial[order[i]] = cand[i, b]
         moves.append(trial)
@@ -105,7 +95,7 @@ def greedy_moves(solver, k: int, best: Run) -> list[np.ndarray]:
     opts, model = solver.options, solver.problems.model
     f = best.fields
     local = model.volumes * model.dataset.distance2(f["strain"], f["stress"], best.index)
-    order = ranked(-local, float(np.max(local, initial=0.0)), np.arange(local.size))[:opts.greedy_points or model.n_points]
+    order = np.argsort(-local, kind="stable")[:opts.greedy_points or model.n_points]
     if solver.exact is None or not opts.greedy_screen:
         return _next_nearest_moves(solver, best, order)
     return _screened_moves(solver, k, best, order)
