@@ -30,7 +30,7 @@ and 16 % the exact check of each by the bordered branch enumeration,
 imposed, then a 6 x 6 block per branch), 32 % in the greedy screen (0.9 ms per sweep: 8 points x
 2001 data bounded by the projection without contact constraints, the few that may descend solved
 in closed form, :func:`~ddcm_casadi.drivers.ddcm_search.single_moves`), 10 % in the data search
-and fields, 4 % in the step checks; at 2.8x plain's projections it costs 3.5-3.9x plain's time
+and fields, 4 % in the step checks; at 2.8x plain's projections it costs 3.4-4.9x plain's time
 (11-14x before: the enumeration factorised each of the 27 branches' KKT matrices and the screen
 evaluated every branch's quadratic for all 16 008 moves). A threaded BLAS made the screen 2-10x
 slower on a loaded 2-core machine, hence one thread by default (below).
