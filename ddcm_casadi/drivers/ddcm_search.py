@@ -212,22 +212,48 @@ def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
     stress = data.stress.reshape(len(data), k)
     n, n_c = len(points), candidates.shape[1]
     points = np.asarray(points)
-    d = np.concatenate([strain[candidates] - cur_e[points][:, None, :],
-                        stress[candidates] - cur_s[points][:, None, :]], axis=2)  # (n, n_c, 2 k)
+
+    def pairs(indices):  # the data's strains and stresses, side by side
+        return np.concatenate([strain[indices], stress[indices]], axis=-1)
+
+    cur = np.concatenate([cur_e[points], cur_s[points]], axis=1)  # (n, 2 k)
     rows = np.concatenate([np.arange(k) + k * np.arange(n)[:, None], n * k + np.arange(k) + k * np.arange(n)[:, None]],
                           axis=1)  # (n, 2 k): each point's strain, then stress, directions
     mine = family.base()
     relaxed = family.relaxed() if prune and isinstance(family, BorderedFamily) else None
     if relaxed is None:
-        return family.best_moves(rows, d), mine
-    linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, d)
+        return family.best_moves(rows, pairs(candidates) - cur[:, None, :]), mine
+    if np.all(candidates == candidates[:1]):  # one data set for every point
+        bound, size = _shared_bound(*relaxed, rows, pairs(candidates[0]), cur)
+    else:
+        linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, pairs(candidates) - cur[:, None, :])
+        bound, size = relaxed[0] + linear + quadratic, abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic)
     limit = descent_threshold(mine)
-    # The bound's roundoff is far below this share of its terms.
-    a, b = np.nonzero(relaxed[0] + linear + quadratic
-                      <= limit + PRUNE_MARGIN * (abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic) + abs(limit)))
+    a, b = np.nonzero(bound <= limit + PRUNE_MARGIN * (size + abs(limit)))  # far above the bound's roundoff
     obj = np.full((n, n_c), np.inf)
-    obj[a, b] = family.best_moves(rows[a], d[a, b][:, None, :])[:, 0]
+    obj[a, b] = family.best_moves(rows[a], (pairs(candidates[a, b]) - cur[a])[:, None, :])[:, 0]
     return obj, mine
+
+
+def _shared_bound(a0: float, a1: np.ndarray, A2: np.ndarray, rows: np.ndarray, x: np.ndarray,
+                  cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""The quadratic ``a0 + a1^T c + c^T A2 c / 2`` of every move of point ``g`` (rows ``rows[g]``)
+    from ``cur[g]`` to a datum ``x[i]`` of one shared set ``x`` (``(N, j)``), and the size of its
+    terms: two ``(G, N)`` arrays. About a centre ``x0`` (``x = x0 + y``,
+    ``c = y + delta_g``, ``delta_g = x0 - cur[g]``) it is ``k_g + l_g^T y + y^T A_g y / 2``: two
+    products with the data's monomials instead of per-move arithmetic (``x0``: the mean of the
+    current data, inside the data's range)."""
+    g, A = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
+    centre = np.mean(cur, axis=0)
+    y, delta = x - centre, centre - cur
+    Ad = np.einsum("gpq,gq->gp", A, delta)
+    const = a0 + np.einsum("gp,gp->g", g + 0.5 * Ad, delta)
+    lin = g + Ad
+    M = (y[:, :, None] * y[:, None, :]).reshape(len(y), -1)  # (N, j^2)
+    Ag = A.reshape(len(A), -1)
+    bound = const[:, None] + lin @ y.T + 0.5 * (Ag @ M.T)
+    size = np.abs(const)[:, None] + np.abs(lin) @ np.abs(y).T + 0.5 * (np.abs(Ag) @ np.abs(M).T)
+    return bound, size
 
 
 def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,
