@@ -122,3 +122,30 @@ class ReferenceFactor:
         for j, i in enumerate(rows):
             W[:, j] = self._column(int(i))
         return UpdatedFactor(self.factor, W, D[rows])
+
+
+class UpdatingFactors:
+    """Factors of a sequence of matrices that differ in a few rows (piece systems as contacts
+    switch piece): a low-rank update of the last full factorisation where it is cheaper
+    (:meth:`ReferenceFactor.update`), else a factorisation of its own, which becomes the
+    reference. Its :meth:`factor` serves :func:`~ddcm_casadi.loops.newton.newton_solve`'s
+    ``factors``; ``stats`` counts ``updates`` and ``factorizations``."""
+
+    def __init__(self) -> None:
+        self.reference: ReferenceFactor | None = None
+        self.stats = dict(updates=0, factorizations=0)
+
+    def reset(self) -> None:
+        self.reference = None
+
+    def factor(self, A: sp.spmatrix, *, update: bool = True):
+        """A factor of ``A``: updated from the reference if ``update`` and it can be, else new."""
+        if update and self.reference is not None:
+            lu = self.reference.update(A)
+            if lu is not None:
+                self.stats["updates"] += 1
+                return lu
+        self.reference = None  # its factor and kept columns may go before the new one is made
+        self.reference = ReferenceFactor(A, iterated=True)
+        self.stats["factorizations"] += 1
+        return self.reference

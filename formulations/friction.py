@@ -50,7 +50,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ddcm_casadi.loops.newton import JacobianFactors, newton_solve, plus, smoothed_newton_solve
+from ddcm_casadi.factor_updates import UpdatingFactors
+from ddcm_casadi.loops.newton import newton_solve, plus, smoothed_newton_solve
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine
 from ddcm_casadi.problems.parameters import Parameters
@@ -250,13 +251,18 @@ class CoulombPieces:
       surface, between stick and slip along ``s``).
 
     The pieces are parameters (:data:`PIECES` per contact), so one system is built; for a linear
-    model its Jacobian depends only on the pieces and the friction coefficients, and a
-    factorisation is kept per active set (:class:`~ddcm_casadi.loops.newton.JacobianFactors`).
+    model its Jacobian depends only on the pieces and the friction coefficients, and where a few
+    contacts switch piece its few changed rows are solved by a low-rank update of the last
+    factorisation (:class:`~ddcm_casadi.factor_updates.UpdatingFactors`).
     The pieces are chosen by Alart--Curnier's rule at the current point (open where
     ``b_N - a_N <= 0``; stick where ``|b_T - a_T| <= mu (b_N - a_N)``; else slip opposite to
     ``b_T - a_T``) and updated from each piece solution until they repeat: a primal-dual
     active-set iteration, i.e. semismooth Newton on Alart--Curnier's function. A piece solution
     whose pieces repeat satisfies the law exactly (each piece's signs are those of its rule).
+    In a classical step a frictional contact whose slip reverses between two piece solutions is
+    tried on stick next (its slip is about zero; the rule alone can flip it back and forth for
+    ever: measured on the Cattaneo-Mindlin cylinder's sideways steps). Projections have their
+    edge piece for this instead.
     Classical: ``[F; pieces] = 0``; projection: the KKT system of the distance on the pieces
     (multipliers ``theta``), whose pieces are locally the admissible set wherever the signs hold
     strictly.
@@ -308,7 +314,7 @@ class CoulombPieces:
             third = corner * bN + edge * cone
             self._built = S.saddle("coulomb_pieces", rows=rows + [third + (1 - corner - edge) * nu],
                                    lagrangian=theta[0] * rows[0] + theta[1] * rows[1] + nu * third)
-        self.factors = JacobianFactors()
+        self.factors = UpdatingFactors()
 
     def start(self, x0, p0, state) -> np.ndarray:
         if not self.projection:
@@ -367,6 +373,12 @@ class CoulombPieces:
                 return None
             z = res.z
             new = self.pieces(z, params)
+            # a slip that reverses between two piece solutions is about zero: try stick (the rule
+            # alone can flip such contacts back and forth for ever)
+            mu = self.problem.parameters.get(params, "friction")
+            reversed_ = (new["sign"] * pieces["sign"] < 0) & (pieces["edge"] == 0) & (mu > 0) & (not self.projection)
+            new["stick"] = np.where(reversed_, 1.0, new["stick"])
+            new["sign"] = np.where(reversed_, 0.0, new["sign"])
             if self.projection:
                 new = self._with_corners(z, params, pieces, new, flips)
             if all(np.array_equal(new[k], pieces[k]) for k in PIECES):

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ddcm_casadi.problems.complementarity import CONTACT, b_stationarity, free_sign, identify
-from ddcm_casadi.factor_updates import ReferenceFactor, UpdatedFactor
+from ddcm_casadi.factor_updates import ReferenceFactor, UpdatedFactor, UpdatingFactors
 from ddcm_casadi.linalg import SingularMatrix
 from ddcm_casadi.loops.newton import NewtonResult, newton_solve, smoothed_newton_solve
 
@@ -113,14 +113,14 @@ class ActiveSetSolver:
         self.predictor = bool(predictor)
         self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
         self._pieces = PieceFactorCache(self.LU_CACHE, self.FACTORS_KEPT)
-        self._reference: ReferenceFactor | None = None  # the last piece matrix factorised itself
+        self._factors = UpdatingFactors()  # the last piece matrix factorised itself, and its updates
         if self.predictor:
             system.branch_system()  # part of the build, not of the first solve
 
     def reset(self) -> None:
         """Forget the cached factorisations and the counters (for cold-start measurements)."""
         self._pieces.clear()
-        self._reference = None
+        self._factors.reset()
         self.stats = {"predicted": 0, "newton": 0, "factorizations": 0, "updates": 0}
 
     def solve(self, z0, base, opts, *, corner_tol: float = 1e-3):
@@ -233,17 +233,11 @@ class ActiveSetSolver:
 
     def _factorize(self, A, *, update: bool = True):
         """A factor of the piece matrix ``A``: a low-rank update of the last full factorisation
-        when few rows differ (a few pairs switched piece; :class:`~ddcm_casadi.factor_updates.ReferenceFactor`),
-        else a factorisation of its own, which becomes the reference."""
-        if update and self._reference is not None:
-            lu = self._reference.update(A)
-            if lu is not None:
-                self.stats["updates"] += 1
-                return lu
-        self._reference = None  # its factor and kept columns may go before the new one is made
-        self._reference = ReferenceFactor(A, iterated=True)  # _refine corrects its solves
-        self.stats["factorizations"] += 1
-        return self._reference
+        when few rows differ (a few pairs switched piece; :class:`~ddcm_casadi.factor_updates.UpdatingFactors`),
+        else a factorisation of its own, which becomes the reference (``_refine`` corrects its solves)."""
+        lu = self._factors.factor(A, update=update)
+        self.stats["updates" if isinstance(lu, UpdatedFactor) else "factorizations"] += 1
+        return lu
 
     def _signs(self, z, P, branch):
         """The sign each piece leaves free: ``b_i`` where ``a_i = 0`` is imposed, else ``a_i``."""
