@@ -33,11 +33,13 @@ import numpy as np
 
 from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, identify, imposes_gap, imposes_pressure, signs_hold
 from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.coulomb import blocks, flat
 from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.homotopy import scholtes_homotopy
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .friction import cone_traction, coulomb_constraints, slip_rule
 from .registry import register
 
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
@@ -49,6 +51,7 @@ class MPCC(Formulation):
 
     name = "mpcc"
     title = "MPCC (IPOPT)"
+    supported_contact_laws = frozenset({"signorini", "coulomb"})
 
     @dataclass(frozen=True)
     class Options:
@@ -103,8 +106,58 @@ class MPCC(Formulation):
         if self.options.ipopt:
             check_ipopt_options(f"formulation {self.name!r}", self.options.ipopt)
 
-    def _build(self, problem: ComplementarityProblem) -> "_BuiltMPCC":
+    def _build(self, problem: ComplementarityProblem) -> BuiltFormulation:
+        if problem.frictional:
+            return _BuiltCoulombMPCC(problem, self.options)
         return _BuiltMPCC(problem, self.options)
+
+
+def _ipopt_options(problem: ComplementarityProblem, opts: "MPCC.Options") -> dict:
+    """IPOPT's options for ``problem`` (the user's ``ipopt`` last)."""
+    ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
+             "acceptable_tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500,
+             "mu_strategy": "adaptive"}
+    if problem.affine:
+        # IPOPT ignores the homotopy's warm multipliers without this (a deep relaxed solve then
+        # took 150-450 iterations on the Hertz example's projections). Not with finite
+        # kinematics: on the von Mises truss the step after the snap then fails.
+        ipopt["warm_start_init_point"] = "yes"
+    if problem.kind == "mcp":
+        # The classical NLP is a feasibility problem: its KKT matrix has a zero Hessian block.
+        # MUMPS's automatic ordering (as SCOTCH or PORD) then gives steps on which IPOPT needs
+        # 257 iterations of 0.2 s for one relaxed solve of the Hertz example, AMD 14 of 0.01 s
+        # (docs/performance.md, 2026-11-26). With the distance objective (DDCM) the automatic
+        # ordering is the faster one (38 ms against 117 ms an iteration).
+        ipopt["mumps_pivot_order"] = 0
+    ipopt.update(dict(opts.ipopt))
+    return ipopt
+
+
+#: CasADi's options of every NLP solver built here.
+_NLPSOL = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}
+
+
+def _run(solver, args: dict) -> tuple[str, np.ndarray, tuple | None, int]:
+    """One IPOPT solve: ``(status, w, warm, iterations)``, ``status`` ``""`` on success (then
+    ``warm`` the multipliers ``(lam_x, lam_g)``), else IPOPT's reason and ``w`` the start."""
+    sol = solver(**args)
+    stats = ipopt_stats(solver)
+    its = iteration_count(stats)
+    if stats["return_status"] not in _OK:
+        return f"IPOPT: {stats['return_status']}", np.asarray(args["x0"], float), None, its
+    return ("", np.asarray(sol["x"], float).ravel(),
+            (np.asarray(sol["lam_x"], float).ravel(), np.asarray(sol["lam_g"], float).ravel()), its)
+
+
+def _relaxed(solver, parameters, values, bounds: dict):
+    """``relaxed(w, tau, warm)`` of :func:`~ddcm_casadi.loops.homotopy.scholtes_homotopy` for the
+    relaxed NLP ``solver`` (parameters ``values`` and ``tau``; ``bounds``: ``lbx``, ``lbg``, ...)."""
+    def relaxed(w, tau, warm):
+        args = dict(x0=w, p=parameters.pack(values, tau=tau), **bounds)
+        if warm is not None:
+            args.update(lam_x0=warm[0], lam_g0=warm[1])
+        return _run(solver, args)
+    return relaxed
 
 
 class _BuiltMPCC(BuiltFormulation):
@@ -120,22 +173,7 @@ class _BuiltMPCC(BuiltFormulation):
         base = problem.parameters.extend(anchor=nx) if self._anchored else problem.parameters
         self._base = base
         self.parameters = base.extend(tau=1)
-        ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
-                 "acceptable_tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500,
-                 "mu_strategy": "adaptive"}
-        if problem.affine:
-            # IPOPT ignores the homotopy's warm multipliers without this (a deep relaxed solve then
-            # took 150-450 iterations on the Hertz example's projections). Not with finite
-            # kinematics: on the von Mises truss the step after the snap then fails.
-            ipopt["warm_start_init_point"] = "yes"
-        if problem.kind == "mcp":
-            # The classical NLP is a feasibility problem: its KKT matrix has a zero Hessian block.
-            # MUMPS's automatic ordering (as SCOTCH or PORD) then gives steps on which IPOPT needs
-            # 257 iterations of 0.2 s for one relaxed solve of the Hertz example, AMD 14 of 0.01 s
-            # (docs/performance.md, 2026-11-26). With the distance objective (DDCM) the automatic
-            # ordering is the faster one (38 ms against 117 ms an iteration).
-            ipopt["mumps_pivot_order"] = 0
-        ipopt.update(dict(opts.ipopt))
+        ipopt = _ipopt_options(problem, opts)
         # SX throughout, local terms (finite strain) written out element by element: IPOPT's
         # Hessians of MX maps cost more than the expansion (measured on the 822-dof indentation:
         # 12 s to build and 302 s to solve in MX, 52 s and 17 s in SX).
@@ -148,13 +186,11 @@ class _BuiltMPCC(BuiltFormulation):
             return {"x": z, "p": P, "f": objective, "g": ca.vertcat(residual, gap, rows(p, gap, P))}
 
         self._solver = ca.nlpsol("mpcc", "ipopt", nlp(self.parameters, lambda p, gap, P: gap * p - P[self.parameters.slice("tau")]),
-                                 {"ipopt": ipopt, "print_time": False, "error_on_fail": False,
-                                  "show_eval_warnings": False})
+                                 {"ipopt": ipopt, **_NLPSOL})
         # Branch NLP: [residual; g; p] with equality bounds chosen per solve.
         # (an inverted element's terms are NaN at finite strain: IPOPT backs off, quietly)
         self._bnlp = ca.nlpsol("bnlp", "ipopt", nlp(base, lambda p, gap, P: p),
-                               {"ipopt": ipopt, "print_time": False, "error_on_fail": False,
-                                "show_eval_warnings": False})
+                               {"ipopt": ipopt, **_NLPSOL})
         w = ca.vertcat(problem.x, problem.p)
         self._ne = ne = problem.n_residual
         self._lbg = np.concatenate([np.zeros(ne), np.zeros(nc), np.full(nc, -np.inf)])
@@ -180,17 +216,7 @@ class _BuiltMPCC(BuiltFormulation):
                                     outer=1, message="converged (branch NLP from the start's branch)",
                                     state=self._next_state(True, polished, params))
 
-        def relaxed(w, tau, warm):
-            args = dict(x0=w, p=self.parameters.pack(values, tau=tau), lbx=self._lbx, lbg=self._lbg, ubg=self._ubg)
-            if warm is not None:
-                args.update(lam_x0=warm[0], lam_g0=warm[1])
-            sol = self._solver(**args)
-            stats = ipopt_stats(self._solver)
-            its = iteration_count(stats)
-            if stats["return_status"] not in _OK:
-                return f"IPOPT: {stats['return_status']}", w, None, its
-            return ("", np.asarray(sol["x"], float).ravel(),
-                    (np.asarray(sol["lam_x"], float).ravel(), np.asarray(sol["lam_g"], float).ravel()), its)
+        relaxed = _relaxed(self._solver, self.parameters, values, dict(lbx=self._lbx, lbg=self._lbg, ubg=self._ubg))
 
         def measure(w):
             residual, comp, _, _ = self.metrics(w[:nx], w[nx:], params)
@@ -257,13 +283,11 @@ class _BuiltMPCC(BuiltFormulation):
             inf = np.full(nc, np.inf)
             lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
             ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
-            sol = self._bnlp(x0=w, p=values, lbg=lbg, ubg=ubg)
-            stats = ipopt_stats(self._bnlp)
-            iters += iteration_count(stats)
-            if stats["return_status"] not in _OK:
+            status, w_new, warm, its = _run(self._bnlp, dict(x0=w, p=values, lbg=lbg, ubg=ubg))
+            iters += its
+            if status:
                 continue
-            w_new = np.asarray(sol["x"], float).ravel()
-            lam = np.asarray(sol["lam_g"], float).ravel()
+            lam = warm[1]
             # CasADi's lam_g is the multiplier of f + lam^T g: the convention of b_stationarity.
             wrong_gap, wrong_p = b_stationarity(lam[ne:ne + nc], lam[ne + nc:], fix_gap & fix_p)
             residual, comp, pen, _ = self.metrics(w_new[:nx], w_new[nx:], params)
@@ -275,3 +299,167 @@ class _BuiltMPCC(BuiltFormulation):
             if not both.any():
                 break
         return w, iters, False
+
+
+#: Per-contact statuses of a frictional branch.
+OPEN, STICK, SLIP = 0, 1, 2
+#: IPOPT's iteration limit in a frictional branch NLP: the right branch from a relaxed solution
+#: takes 1-4 iterations on the generated FCLIB problems, a wrong one (a slip rule at ``s_T = 0``,
+#: an infeasible branch) ran to 500 or into restoration.
+BRANCH_MAX_ITER = 50
+
+
+class _BuiltCoulombMPCC(BuiltFormulation):
+    """A frictional problem as an NLP for IPOPT (see the module): the relaxed NLP in
+    ``w = [x; p_N; rho]`` (:func:`~.friction.coulomb_constraints`) along the Scholtes
+    homotopy, and the branch NLP in ``[x; p]`` of per-contact statuses (open, stick, slip). Both
+    are built once; the friction coefficients, the load and ``tau`` are parameters."""
+
+    def __init__(self, problem: ComplementarityProblem, opts: MPCC.Options) -> None:
+        super().__init__(problem)
+        self.opts = opts
+        nx, nc, b = problem.n_x, problem.n_contacts, problem.block
+        self._nx, self._nc, self._b = nx, nc, b
+        base = problem.parameters
+        self.parameters = base.extend(tau=1)
+        P = ca.SX.sym("P", self.parameters.size)
+        own, tau = P[:base.size], P[self.parameters.slice("tau")]
+        mu = own[base.slice("friction")]
+
+        def split(v, start, count):
+            return [v[start + j * nc:start + (j + 1) * nc] for j in range(count)]
+
+        def objective(z):
+            return problem.distance.render(z, own) if problem.kind == "mpcc" else ca.SX.zeros(1, 1)
+
+        # Relaxed NLP: the traction r = (p_N, mu p_N rho) is in the cone by construction.
+        w = ca.SX.sym("w", nx + b * nc)
+        pn, direction = w[nx:nx + nc], split(w, nx + nc, b - 1)
+        z = ca.vertcat(w[:nx], *cone_traction(pn, direction, mu))
+        a = split(problem.gap_map.render(z, own), 0, b)
+        rows = coulomb_constraints(a, cone_traction(pn, direction, mu), direction, mu, tau)
+        self._solver = ca.nlpsol("mpcc_coulomb", "ipopt", {
+            "x": w, "p": P, "f": objective(z), "g": ca.vertcat(problem.residual_map.render(z, own), *rows)},
+            {"ipopt": _ipopt_options(problem, opts), **_NLPSOL})
+        ne = problem.n_residual
+        self._bounds = dict(lbx=np.concatenate([np.full(nx, -np.inf), np.zeros(nc), np.full((b - 1) * nc, -np.inf)]),
+                            lbg=np.zeros(ne + 3 * nc), ubg=np.concatenate([np.zeros(ne), np.full(3 * nc, np.inf)]))
+        # Branch NLP in z = [x; p]: rows [residual; g_N; s_T; p_N; r_T; slip rule], those of each
+        # contact's status held at zero (open: p = 0; stick: u = 0; slip: g_N = 0, slip rule).
+        zb = ca.SX.sym("z", nx + b * nc)
+        Pb = ca.SX.sym("P", base.size)
+        ab, rb = split(problem.gap_map.render(zb, Pb), 0, b), split(zb, nx, b)
+        self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
+            "x": zb, "p": Pb, "f": problem.distance.render(zb, Pb) if problem.kind == "mpcc" else ca.SX.zeros(1, 1),
+            "g": ca.vertcat(problem.residual_map.render(zb, Pb), *ab, *rb, *slip_rule(ab, rb, Pb[base.slice("friction")]))},
+            {"ipopt": {**_ipopt_options(problem, opts), "max_iter": BRANCH_MAX_ITER}, **_NLPSOL})
+        self._ne = ne
+
+    # ------------------------------------------------------------------ variables
+    def _blocks(self, x, p, params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(u, r, mu)``: the scaled gaps and tractions ``(nc, b)`` at ``(x, p)`` and the friction."""
+        z = np.concatenate([x, p])
+        gap = self.problem.gap_map.value(z, params)
+        return blocks(gap, self._b), blocks(p, self._b), self.problem.parameters.get(params, "friction")
+
+    def _to_nlp(self, x, p, params) -> np.ndarray:
+        """``w = [x; p_N; rho]`` of ``(x, p)``: ``rho = r_T / (mu p_N)`` (0 where ``mu p_N = 0``),
+        shrunk into the unit disc."""
+        _, r, mu = self._blocks(x, p, params)
+        pn = np.maximum(r[:, 0], 0.0)
+        bound = mu * pn
+        rho = r[:, 1:] / np.where(bound > 0, bound, 1.0)[:, None] * (bound > 0)[:, None]
+        rho /= np.maximum(1.0, np.linalg.norm(rho, axis=1))[:, None]
+        return np.concatenate([x, pn, flat(rho)])
+
+    def _from_nlp(self, w, params) -> tuple[np.ndarray, np.ndarray]:
+        """``(x, p)`` of ``w`` (the traction of :func:`~.friction.cone_traction`)."""
+        nx, nc, b = self._nx, self._nc, self._b
+        mu = self.problem.parameters.get(params, "friction")
+        pn = w[nx:nx + nc]
+        rho = w[nx + nc:nx + b * nc].reshape(b - 1, nc)
+        return w[:nx], np.concatenate([pn, (mu * pn * rho).ravel()])
+
+    def _status(self, x, p, params) -> tuple[np.ndarray, np.ndarray]:
+        """Per contact the status identified at ``(x, p)`` (closed where ``g_N <= p_N``; then
+        stick where ``|s_T| < mu p_N - |r_T|``, the slip smaller than the traction's distance to
+        the cone's surface, else slip) and the margin of that choice: the larger of the two
+        quantities a comparison weighed, the smaller over the comparisons made (both small: a
+        corner, where either side may be the solution's)."""
+        u, r, mu = self._blocks(x, p, params)
+        slip, room = np.linalg.norm(u[:, 1:], axis=1), mu * r[:, 0] - np.linalg.norm(r[:, 1:], axis=1)
+        closed = u[:, 0] <= r[:, 0]
+        status = np.where(~closed, OPEN, np.where(slip < room, STICK, SLIP))
+        margin = np.maximum(np.abs(u[:, 0]), np.abs(r[:, 0]))
+        return status, np.where(closed, np.minimum(margin, np.maximum(slip, np.abs(room))), margin)
+
+    # ------------------------------------------------------------------ solves
+    def solve(self, params, x0, p0, state=None) -> LocalSolution:
+        o = self.opts
+        params = np.asarray(params, float)
+        x0, p0 = np.asarray(x0, float), np.asarray(p0, float)
+        state = state or {}
+        if "status" in state and np.array_equal(state["status"], self._status(x0, p0, params)[0]):
+            # The start's statuses are the last solution's: its branch NLP first (one IPOPT solve).
+            (x, p), iters, ok = self._branch_nlp(x0, p0, params, 0.0)
+            if ok:
+                return self._done(x, p, params, True, iters, 1, "converged (branch NLP from the start's branch)")
+
+        def measure(w):
+            residual, comp, _, _ = self.metrics(*self._from_nlp(w, params), params)
+            return residual, comp
+
+        def branch_nlp(w, tau):
+            (x, p), iters, ok = self._branch_nlp(*self._from_nlp(w, params), params, tau)
+            return (self._to_nlp(x, p, params) if ok else w), iters, ok
+
+        out = scholtes_homotopy(_relaxed(self._solver, self.parameters, params, self._bounds), measure=measure,
+                                branch_nlp=branch_nlp, near_corner=lambda w, tau: False,
+                                w0=self._to_nlp(x0, p0, params), tau0=o.tau0, tau_factor=o.tau_factor,
+                                tau_min=o.tau_min, comp_tol=o.comp_tol, residual_tol=o.residual_tol,
+                                max_homotopy=o.max_homotopy, early_branch=o.early_branch)
+        x, p = self._from_nlp(out.w, params)
+        return self._done(x, p, params, out.converged, out.iterations, out.steps, out.message)
+
+    def _done(self, x, p, params, converged, iterations, outer, message) -> LocalSolution:
+        state = {"status": self._status(x, p, params)[0]} if converged and self.opts.warm_branch else {}
+        return self._finish(x, p, params, converged=converged, iterations=iterations, outer=outer, state=state,
+                            message=message)
+
+    def _branch_nlp(self, x, p, params, tau) -> tuple[tuple[np.ndarray, np.ndarray], int, bool]:
+        """The branch NLP of the statuses identified at ``(x, p)``: returns ``((x, p), iterations,
+        accepted)``. Contacts whose identification has a margin below ``10 sqrt(tau) + 100 c``
+        (``c`` the largest natural-map residual) are ambiguous: if the identified branch fails,
+        they are tried as the other status of their comparison (stick for slip and back; closed
+        for open and back, as stick). A solution is accepted if Coulomb's natural-map residual is
+        at most ``comp_tol`` and the residual at most ``residual_tol``: it then satisfies the law,
+        all its signs included."""
+        nx, nc, b, ne = self._nx, self._nc, self._b, self._ne
+        status, margin = self._status(x, p, params)
+        _, comp, _, _ = self.metrics(x, p, params)
+        ambiguous = margin <= 10.0 * np.sqrt(tau) + 100.0 * comp
+        swapped = np.where(status == OPEN, STICK, np.where(status == STICK, SLIP, STICK))
+        closed = np.where(status == OPEN, STICK, OPEN)
+        candidates = [status, np.where(ambiguous, swapped, status), np.where(ambiguous & (status != SLIP), closed, status)]
+        z0, iters, tried = np.concatenate([x, p]), 0, set()
+        for st in candidates:
+            if st.tobytes() in tried:
+                continue
+            tried.add(st.tobytes())
+            held = np.concatenate([
+                st != OPEN,                                             # g_N
+                np.tile(st == STICK, b - 1),                            # s_T
+                np.tile(st == OPEN, b),                                 # p_N, r_T
+                np.tile(st == SLIP, b - 1)])                            # slip rule
+            bound = np.where(held, 0.0, np.inf)
+            run, z, _, its = _run(self._bnlp, dict(x0=z0, p=params, lbg=np.concatenate([np.zeros(ne), -bound]),
+                                                   ubg=np.concatenate([np.zeros(ne), bound])))
+            iters += its
+            if run:
+                continue
+            residual, comp, _, _ = self.metrics(z[:nx], z[nx:], params)
+            if comp <= self.opts.comp_tol and residual <= self.opts.residual_tol:
+                return (z[:nx], z[nx:]), iters, True
+            if not ambiguous.any():
+                break
+        return (x, p), iters, False
