@@ -39,7 +39,7 @@ from ddcm_casadi.loops.homotopy import scholtes_homotopy
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
-from .friction import cone_traction, coulomb_constraints, slip_rule
+from .friction import cone_traction, coulomb_branch, coulomb_constraints
 from .registry import register
 
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
@@ -306,7 +306,7 @@ OPEN, STICK, SLIP = 0, 1, 2
 #: IPOPT's iteration limit in a frictional branch NLP: the right branch from a relaxed solution
 #: takes 1-4 iterations on the generated FCLIB problems, a wrong one (a slip rule at ``s_T = 0``,
 #: an infeasible branch) ran to 500 or into restoration.
-BRANCH_MAX_ITER = 50
+BRANCH_MAX_ITER = 30
 
 
 class _BuiltCoulombMPCC(BuiltFormulation):
@@ -344,14 +344,17 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         ne = problem.n_residual
         self._bounds = dict(lbx=np.concatenate([np.full(nx, -np.inf), np.zeros(nc), np.full((b - 1) * nc, -np.inf)]),
                             lbg=np.zeros(ne + 3 * nc), ubg=np.concatenate([np.zeros(ne), np.full(3 * nc, np.inf)]))
-        # Branch NLP in z = [x; p]: rows [residual; g_N; s_T; p_N; r_T; slip rule], those of each
-        # contact's status held at zero (open: p = 0; stick: u = 0; slip: g_N = 0, slip rule).
+        # Branch NLP in z = [x; p]: the residual and b equations per contact, the statuses
+        # parameters (a square system for the classical problem).
         zb = ca.SX.sym("z", nx + b * nc)
-        Pb = ca.SX.sym("P", base.size)
-        ab, rb = split(problem.gap_map.render(zb, Pb), 0, b), split(zb, nx, b)
+        Pb = ca.SX.sym("P", base.size + 2 * nc)
+        own = Pb[:base.size]
+        ab, rb = split(problem.gap_map.render(zb, own), 0, b), split(zb, nx, b)
         self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
-            "x": zb, "p": Pb, "f": problem.distance.render(zb, Pb) if problem.kind == "mpcc" else ca.SX.zeros(1, 1),
-            "g": ca.vertcat(problem.residual_map.render(zb, Pb), *ab, *rb, *slip_rule(ab, rb, Pb[base.slice("friction")]))},
+            "x": zb, "p": Pb, "f": problem.distance.render(zb, own) if problem.kind == "mpcc" else ca.SX.zeros(1, 1),
+            "g": ca.vertcat(problem.residual_map.render(zb, own),
+                            *coulomb_branch(ab, rb, own[base.slice("friction")], Pb[base.size:base.size + nc],
+                                            Pb[base.size + nc:]))},
             {"ipopt": {**_ipopt_options(problem, opts), "max_iter": BRANCH_MAX_ITER}, **_NLPSOL})
         self._ne = ne
 
@@ -446,14 +449,9 @@ class _BuiltCoulombMPCC(BuiltFormulation):
             if st.tobytes() in tried:
                 continue
             tried.add(st.tobytes())
-            held = np.concatenate([
-                st != OPEN,                                             # g_N
-                np.tile(st == STICK, b - 1),                            # s_T
-                np.tile(st == OPEN, b),                                 # p_N, r_T
-                np.tile(st == SLIP, b - 1)])                            # slip rule
-            bound = np.where(held, 0.0, np.inf)
-            run, z, _, its = _run(self._bnlp, dict(x0=z0, p=params, lbg=np.concatenate([np.zeros(ne), -bound]),
-                                                   ubg=np.concatenate([np.zeros(ne), bound])))
+            g0 = np.zeros(ne + b * nc)
+            run, z, _, its = _run(self._bnlp, dict(x0=z0, p=np.concatenate([params, st == OPEN, st == STICK]),
+                                                   lbg=g0, ubg=g0))
             iters += its
             if run:
                 continue
