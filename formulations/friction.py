@@ -163,8 +163,8 @@ def coulomb_constraints(a: list, r: list, direction: list, mu, tau) -> list:
     does has ``0 <= r . u_hat <= tau (1 + mu p_N)``, and ``tau -> 0`` gives exactly the law, as
     ``g p <= tau`` does for the normal pairs. Every function is smooth for ``tau > 0`` (no
     ``|s_T|`` at stick), and ``r = (p_N, mu p_N rho)`` keeps an interior at ``mu = 0`` (then
-    ``r_T = 0``; the cone ``mu^2 p_N^2 - |r_T|^2 >= 0`` has none there). Measured against two other
-    forms in :mod:`ddcm_casadi.formulations.mpcc`.
+    ``r_T = 0``). Measured against the viscous form ``r_T sqrt(|s_T|^2 + tau^2) + mu p_N s_T = 0``
+    and a lifted ``|s_T|`` in :mod:`ddcm_casadi.formulations.mpcc`.
     """
     slip = ca.sqrt(sum(v**2 for v in a[1:]) + tau**2) - tau
     dissipation = r[0] * (a[0] + mu * slip) + sum(rt * at for rt, at in zip(r[1:], a[1:]))
