@@ -61,8 +61,7 @@ ends the solve) took 301 in this form, 622 in the viscous form
 ``mu^2 p_N^2 >= |r_T|^2``), 1720 with 4 failures with ``|s_T|`` lifted to a variable
 ``sigma^2 >= |s_T|^2`` (exact, but degenerate at stick); a plain homotopy down to ``tau = 1e-12``
 (no branch NLP) failed 4, 5 and 10 times. With the branch NLP (and ``friction_tau0 = 1e-3``) this
-form solves all 12 in 10-34 iterations (the lifted form took 26-1739 and failed 2;
-``benchmarks/mpcc_friction.py``).
+form solves all 12 in 10-34 iterations (``benchmarks/mpcc_friction.py``).
 """
 
 from __future__ import annotations
