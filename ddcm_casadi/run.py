@@ -127,8 +127,9 @@ def check_memory(model, runs: int = 1) -> None:
 
 
 # ----------------------------------------------------------------------------------- selection
-def select_formulations(names: Sequence[str] | None) -> list[str]:
-    """The formulations to run: ``names`` (checked), or every registered one.
+def select_formulations(names: Sequence[str] | None, contact_law: str = "signorini") -> list[str]:
+    """The formulations to run: ``names`` (checked), or every registered one that enforces the
+    case's ``contact_law`` (a named one that does not is refused by the formulation itself).
 
     Raises
     ------
@@ -137,7 +138,7 @@ def select_formulations(names: Sequence[str] | None) -> list[str]:
     """
     available = registry.available()
     if names is None:
-        return available
+        return [n for n in available if contact_law in type(registry.get(n)).supported_contact_laws]
     for name in names:
         if name not in available:
             raise InputError(f"unknown formulation {name!r}; available: {', '.join(available)}")
@@ -361,7 +362,7 @@ def run_case(case: Case, out_dir: str | Path | None = None, *, formulations: Seq
         Bad selection, a meaningless load path, a case too big for the machine's memory
         (:func:`check_memory`), a folder in use or that cannot be written (one line).
     """
-    names = select_formulations(formulations)
+    names = select_formulations(formulations, case.model.contact_law)
     chosen = select_variants(variants, case)
     jobs = resolve_jobs(jobs, len(names) * len(chosen))
     case.model.path_warnings()  # refuses a meaningless path before the folder is touched

@@ -145,7 +145,7 @@ class AugmentedLagrangian(Formulation):
         if problem.frictional:  # Alart-Curnier: the multiplier update's fixed point, by semismooth Newton
             o = self.options
             return BuiltCoulomb(problem, "alart_curnier", gamma, 1.0, tol=o.newton_tol, residual_tol=o.residual_tol,
-                                max_iter=o.max_iter, comp_tol=max(o.tol, 1e-9))
+                                max_iter=o.max_iter, comp_tol=max(o.tol, 1e-9), predictor=o.predictor)
         return _BuiltAL(problem, self.options, gamma)
 
 

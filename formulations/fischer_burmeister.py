@@ -108,7 +108,8 @@ class FischerBurmeister(Formulation):
         if problem.frictional:
             return BuiltCoulomb(problem, o.coulomb_function, (o.alpha or problem.fb_alpha) * problem.gap_ref,
                                 (o.beta or problem.fb_beta) * problem.pressure_ref, tol=o.tol,
-                                residual_tol=o.residual_tol, max_iter=o.max_iter, comp_tol=o.comp_tol)
+                                residual_tol=o.residual_tol, max_iter=o.max_iter, comp_tol=o.comp_tol,
+                                predictor=o.active_set_predictor)
         return _BuiltFB(problem, o)
 
 

@@ -3,7 +3,7 @@ r"""Coulomb friction in every formulation: the per-contact functions and their N
 A frictional problem (:attr:`~ddcm_casadi.problems.contract.ComplementarityProblem.block`
 ``b = 1 + (d - 1)``) carries per contact ``c`` the scaled normal gap and tangential slip
 ``u_c = (g_N, s_T)`` and the scaled pressure and tangential traction ``r_c = (p_N, r_T)``
-(:mod:`ddcm_casadi.problems.coulomb`). Coulomb's law is not a potential: a classical frictional
+(:mod:`ddcm_casadi.models.coulomb`). Coulomb's law is not a potential: a classical frictional
 step is a root of a nonsmooth system, not the minimum of an energy, and a data-driven step is
 a stationary point (a KKT point) of the distance to the data over the frictional admissible set.
 Each formulation writes the law as ``b`` equations per contact, ``Psi(a, b_) = 0`` with
@@ -24,10 +24,13 @@ Fischer--Burmeister on the second-order cone (:func:`fischer_burmeister_cone`)
     ``l_{1,2} = w_N -+ |w_T|``. It vanishes exactly when ``x in L, y in L, x . y = 0`` (Fukushima,
     Luo and Tseng, 2002). At ``mu = 0`` the maps degenerate; there the contact is frictionless and
     the equations are the scalar FB function of ``(a_N, b_N)`` and ``b_T = 0``.
-penalty (:func:`penalty_law`)
-    ``b_N = k [-a_N]_+`` and the return map ``b_T = P_{B(mu b_N)}(b_T^0 - k_T a_T)`` from the last
+penalty (:func:`compliant_gaps`)
+    ``b_N = k [-a_N]_+`` and the return map ``b_T = P_{B(mu b_N)}(b_T^0 - k a_T)`` from the last
     converged step's traction ``b_T^0`` (the stick spring's elastic predictor, then the return
-    onto the cone).
+    onto the cone). This is exactly Coulomb's law on the *compliant* gap and slip
+    ``a_N + b_N / k`` and ``a_T + (b_T - b_T^0) / k`` (stick: the spring's slip is the whole
+    slip; slip: the traction on the cone opposes the compliant slip), so the penalty is solved
+    as Alart--Curnier's function of those, with the same predictor.
 
 The classical system is ``[F(x, p); Psi] = 0`` in ``(x, p)``; the DDCM projection's is the
 stationarity of ``f + eta^T h + theta^T Psi`` with ``Psi = 0`` (a saddle point, as for the
@@ -47,7 +50,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ddcm_casadi.loops.newton import newton_solve, plus, smoothed_newton_solve
+from ddcm_casadi.loops.newton import JacobianFactors, newton_solve, plus, smoothed_newton_solve
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine
 from ddcm_casadi.problems.parameters import Parameters
@@ -125,18 +128,21 @@ def fischer_burmeister_cone(a: list, b: list, mu, s=0.0, **_) -> list:
     return [ca.if_else(mu > 0, c, f) for c, f in zip(cone, frictionless)]
 
 
-def penalty_law(a: list, b: list, mu, s=0.0, *, stiffness=1.0, tangential_stiffness=1.0, traction0=()) -> list:
-    """``b_N - k [-a_N]_+`` and ``b_T - P_{B(mu b_N)}(b_T^0 - k_T a_T)`` (see the module)."""
-    pressure = stiffness * plus(-a[0], s)
-    trial = [t0 - tangential_stiffness * at for t0, at in zip(traction0, a[1:])]
-    tangential = project_disc(trial, mu * pressure, s)
-    return [b[0] - pressure] + [bt - pt for bt, pt in zip(b[1:], tangential)]
+def compliant_gaps(problem: ComplementarityProblem, stiffness: float) -> Affine:
+    """The penalty's compliant gaps and slips ``g + p / k`` and ``s + (r_T - r_T^0) / k``
+    (scaled; ``k`` the scaled penalty stiffness, ``r_T^0`` the parameter ``traction0`` in Pa)."""
+    nc, npairs = problem.n_contacts, problem.n_pairs
+    P = problem.parameters
+    t0 = sp.csr_matrix((np.full(npairs - nc, -1.0 / (stiffness * problem.pressure_ref)),
+                        (np.arange(nc, npairs), P.slice("traction0").start + np.arange(npairs - nc))),
+                       shape=(npairs, P.size))
+    return problem.gap_map + problem.pressure_map / stiffness + Affine(sp.csr_matrix((npairs, problem.n_x + npairs)), t0)
 
 
 #: The per-contact functions by name (the ``coulomb_function`` options choose among them).
 FUNCTIONS: dict[str, Callable] = {
     "alart_curnier": alart_curnier, "natural_map": natural_map,
-    "fischer_burmeister": fischer_burmeister_cone, "penalty": penalty_law,
+    "fischer_burmeister": fischer_burmeister_cone,
 }
 
 
@@ -203,16 +209,16 @@ class CoulombSystem:
         A key of :data:`FUNCTIONS`.
     a_scale, b_scale : float
         ``a = a_scale u``, ``b = b_scale r`` (scaled units).
-    law_options : dict
-        Keyword arguments of the function other than the traction history (the penalty's
-        stiffnesses, in ``b``-units per ``a``-unit).
+    gap : Affine, optional
+        The gaps and slips the law holds for (default the problem's; the penalty's compliant ones,
+        :func:`compliant_gaps`).
 
     Parameters of the system (by name): the problem's, then the smoothing ``smoothing``.
     Unknowns: ``x, p`` (classical); ``x, p, eta, theta`` (projection).
     """
 
     def __init__(self, problem: ComplementarityProblem, function: str, a_scale: float, b_scale: float,
-                 law_options: dict | None = None) -> None:
+                 gap: Affine | None = None) -> None:
         self.problem = problem
         nx, npairs, ne, b = problem.n_x, problem.n_pairs, problem.n_residual, problem.block
         self.parameters = problem.parameters.extend(smoothing=1)
@@ -221,17 +227,10 @@ class CoulombSystem:
         else:
             self.unknowns = Parameters(x=nx, p=npairs, eta=ne, theta=npairs)
         S = pair_system(problem, self.unknowns.size, self.parameters)
-        a = [S.affine(f"a{j}", a_scale * m) for j, m in enumerate(components(problem.gap_map, b))]
+        a = [S.affine(f"a{j}", a_scale * m) for j, m in enumerate(components(gap or problem.gap_map, b))]
         r = [S.affine(f"b{j}", b_scale * m) for j, m in enumerate(components(problem.pressure_map, b))]
         mu, s = S.parameter("friction"), S.parameter("smoothing")
-        options = dict(law_options or {})
-        if function == "penalty":
-            nc, P0 = problem.n_contacts, problem.parameters
-            start = P0.slice("traction0").start
-            options["traction0"] = [S.local(f"t0_{j}", None, sp.csr_matrix(
-                (np.full(nc, b_scale), (np.arange(nc), start + j * nc + np.arange(nc))), shape=(nc, P0.size)))
-                for j in range(b - 1)]
-        psi = FUNCTIONS[function](a, r, mu, s, **options)
+        psi = FUNCTIONS[function](a, r, mu, s)
         if problem.kind == "mcp":
             built = S.mcp(f"coulomb_{function}", *psi)
         else:
@@ -256,6 +255,184 @@ class CoulombSystem:
         return dict(eta=self.unknowns.get(z, "eta"), theta=self.unknowns.get(z, "theta"))
 
 
+#: The pieces of a 2-D contact (:class:`CoulombPieces`), each a parameter per contact (``sign``:
+#: the slip direction of a slip piece or of a stick-slip corner).
+PIECES = ("open", "stick", "sign", "corner", "edge")
+
+
+class CoulombPieces:
+    r"""The active-set predictor of 2-D Coulomb friction: the law is piecewise linear there.
+
+    Per contact one piece, each linear equations in ``(a, b)`` (scaled gap and slip, pressure and
+    traction):
+
+    - open: ``b_N = 0, b_T = 0``;
+    - stick: ``a_N = 0, a_T = 0``;
+    - slip (direction ``s = +-1``): ``a_N = 0, b_T + s mu b_N = 0`` (the traction on the cone,
+      opposing the slip);
+    - projections only, the two kinds of corner, a third equation with its own multiplier ``nu``
+      (``nu = 0`` on the other pieces): the *corner* ``a_N = 0, b_T = 0, b_N = 0`` (closed with no
+      pressure) and the *edge* ``a_N = 0, a_T = 0, b_T + s mu b_N = 0`` (sticking on the cone's
+      surface, between stick and slip along ``s``).
+
+    The pieces are parameters (:data:`PIECES` per contact), so one system is built; for a linear
+    model its Jacobian depends only on the pieces and the friction coefficients, and a
+    factorisation is kept per active set (:class:`~ddcm_casadi.loops.newton.JacobianFactors`).
+    The pieces are chosen by Alart--Curnier's rule at the current point (open where
+    ``b_N - a_N <= 0``; stick where ``|b_T - a_T| <= mu (b_N - a_N)``; else slip opposite to
+    ``b_T - a_T``) and updated from each piece solution until they repeat: a primal-dual
+    active-set iteration, i.e. semismooth Newton on Alart--Curnier's function. A piece solution
+    whose pieces repeat satisfies the law exactly (each piece's signs are those of its rule).
+    Classical: ``[F; pieces] = 0``; projection: the KKT system of the distance on the pieces
+    (multipliers ``theta``), whose pieces are locally the admissible set wherever the signs hold
+    strictly.
+
+    Corners of a projection. A projection often lands on the boundary between two pieces: closed
+    with no pressure (the data's zero-stress datum), or sticking with the traction on the cone.
+    There the rule flips the contact between the two pieces forever, and the law's function has
+    no multiplier. A contact that flips twice is put on the corner (open/closed) or the edge
+    (stick/slip) and kept there while the point is B-stationary, with
+    ``L = f + eta.h + theta_N rowN + theta_T rowT + nu rowC``:
+
+    - corner: opening it (``a_N > 0``) does not lower ``f`` if ``theta_N <= 0``; pressing it into
+      slip along ``s`` (``b_N > 0``, ``b_T = -s mu b_N``) does not if ``nu - s mu theta_T <= 0``;
+    - edge: moving into stick (``s b_T + mu b_N > 0``) does not lower ``f`` if ``s nu <= 0``;
+      slipping along ``s`` (``s a_T > 0``) does not if ``s theta_T <= 0``;
+
+    else it moves to the piece that lowers ``f``.
+
+    In 3-D the slip piece ``r_T = -mu p_N s_T/|s_T|`` is not linear in the unknowns (its direction
+    is one), so there is no finite set of linear pieces: Newton runs there without a predictor.
+    """
+
+    def __init__(self, problem: ComplementarityProblem, a_scale: float, b_scale: float,
+                 gap: Affine | None = None) -> None:
+        nc = problem.n_contacts
+        self.problem, self.scales, self.gap = problem, (a_scale, b_scale), gap or problem.gap_map
+        self.projection = problem.kind == "mpcc"
+        self.parameters = problem.parameters.extend(**{k: nc for k in PIECES})
+        if not self.projection:
+            self.unknowns = Parameters(x=problem.n_x, p=problem.n_pairs)
+        else:
+            self.unknowns = Parameters(x=problem.n_x, p=problem.n_pairs, eta=problem.n_residual,
+                                       theta=problem.n_pairs, nu=nc)
+        S = pair_system(problem, self.unknowns.size, self.parameters)
+        (aN, aT), (bN, bT) = ([S.affine(f"{name}{j}", scale * m) for j, m in enumerate(components(M, 2))]
+                              for name, scale, M in (("a", a_scale, self.gap),
+                                                     ("b", b_scale, problem.pressure_map)))
+        mu = S.parameter("friction")
+        is_open, stick, sign, corner, edge = (S.parameter(k) for k in PIECES)
+        cone = bT + sign * mu * bN
+        rows = [is_open * bN + (1 - is_open) * aN,
+                (is_open + corner) * bT + (stick + edge) * aT + sign**2 * (1 - edge) * cone]
+        if not self.projection:
+            self._built = S.mcp("coulomb_pieces", *rows)
+        else:
+            start = self.unknowns.slice("theta").start
+            theta = [S.unknowns(f"theta{j}", start + j * nc) for j in range(2)]
+            nu = S.unknowns("nu", self.unknowns.slice("nu").start)
+            third = corner * bN + edge * cone
+            self._built = S.saddle("coulomb_pieces", rows=rows + [third + (1 - corner - edge) * nu],
+                                   lagrangian=theta[0] * rows[0] + theta[1] * rows[1] + nu * third)
+        self.factors = JacobianFactors()
+
+    def start(self, x0, p0, state) -> np.ndarray:
+        if not self.projection:
+            return self.unknowns.pack(x=x0, p=p0)
+        state = state or {}
+        return self.unknowns.pack(x=x0, p=p0, eta=state.get("eta", 0.0), theta=state.get("theta", 0.0), nu=0.0)
+
+    def _ab(self, z: np.ndarray, params: np.ndarray):
+        problem, nc = self.problem, self.problem.n_contacts
+        a_scale, b_scale = self.scales
+        xp = np.asarray(z, float)[:problem.n_x + problem.n_pairs]
+        a = a_scale * self.gap.value(xp, params)
+        b = b_scale * xp[problem.n_x:]
+        return a[:nc], a[nc:], b[:nc], b[nc:]
+
+    def pieces(self, z: np.ndarray, params: np.ndarray) -> dict[str, np.ndarray]:
+        """:data:`PIECES` per contact by Alart--Curnier's rule at ``z`` (no corners)."""
+        aN, aT, bN, bT = self._ab(z, params)
+        mu = self.problem.parameters.get(params, "friction")
+        pressure, trial = bN - aN, bT - aT
+        is_open = pressure <= 0
+        stick = ~is_open & (np.abs(trial) <= mu * pressure)
+        sign = np.where(is_open | stick, 0.0, -np.sign(trial))
+        zero = np.zeros_like(sign)
+        return dict(open=is_open.astype(float), stick=stick.astype(float), sign=sign, corner=zero, edge=zero.copy())
+
+    def _corner_moves(self, z: np.ndarray, params: np.ndarray, pieces: dict) -> dict[str, np.ndarray]:
+        """Where a corner or an edge is not B-stationary, the piece that lowers the distance
+        (see the class): ``to_open``, ``to_stick``, ``to_slip`` and the slip ``direction``."""
+        nc = self.problem.n_contacts
+        theta, nu = self.unknowns.get(z, "theta"), self.unknowns.get(z, "nu")
+        tN, tT = theta[:nc], theta[nc:]
+        _, aT, _, _ = self._ab(z, params)
+        mu = self.problem.parameters.get(params, "friction")
+        tol = 1e-8 * max(1.0, float(np.max(np.abs(np.concatenate([theta, nu])), initial=0.0)))
+        corner, edge, s_edge = pieces["corner"] > 0, pieces["edge"] > 0, pieces["sign"]
+        s = np.where(aT != 0, np.sign(aT), np.where(tT != 0, -np.sign(tT), 1.0))
+        press = nu - s * mu * tT
+        to_open = corner & (tN > tol) & (tN >= press)
+        corner_slip = corner & ~to_open & (press > tol)
+        to_stick = edge & (s_edge * nu > tol) & (s_edge * nu >= s_edge * tT)
+        edge_slip = edge & ~to_stick & (s_edge * tT > tol)
+        return dict(to_open=to_open, to_stick=to_stick, to_slip=corner_slip | edge_slip,
+                    direction=np.where(edge, s_edge, s))
+
+    def solve(self, z: np.ndarray, params: np.ndarray, newton: dict, max_rounds: int = 40):
+        """The active-set iteration from ``z``: ``(z, rounds)`` once the pieces repeat, or ``None``."""
+        built = self._built
+        pieces = self.pieces(z, params)
+        nc = self.problem.n_contacts
+        flips = dict(corner=np.zeros(nc, int), edge=np.zeros(nc, int))
+        for rounds in range(1, max_rounds + 1):
+            res = newton_solve(built.rj, built.r, z, self.parameters.pack(params, **pieces), jacobian=built.jacobian,
+                               factors=self.factors, **dict(newton, max_iter=4))
+            if not res.converged:
+                return None
+            z = res.z
+            new = self.pieces(z, params)
+            if self.projection:
+                new = self._with_corners(z, params, pieces, new, flips)
+            if all(np.array_equal(new[k], pieces[k]) for k in PIECES):
+                return z, rounds
+            pieces = new
+        return None
+
+    def _with_corners(self, z, params, pieces: dict, new: dict, flips: dict) -> dict:
+        """The next pieces of a projection: the rule's, with corners and edges entered after two
+        flips and left where B-stationarity fails (see the class)."""
+        held = (pieces["corner"] > 0) | (pieces["edge"] > 0)
+        moves = self._corner_moves(z, params, pieces)
+        was_slip = (pieces["sign"] != 0) & ~held
+        flips["corner"] += ((new["open"] != pieces["open"]) & ~held)
+        flips["edge"] += (((new["stick"] > 0) & was_slip) | ((new["sign"] != 0) & (pieces["stick"] > 0))) & ~held
+        enter_corner = (flips["corner"] >= 2) & ~held
+        enter_edge = (flips["edge"] >= 2) & ~held & ~enter_corner
+        leave = moves["to_open"] | moves["to_stick"] | moves["to_slip"]
+        keep = held & ~leave
+        corner = (keep & (pieces["corner"] > 0)) | enter_corner
+        edge = (keep & (pieces["edge"] > 0)) | enter_edge
+        edge_sign = np.where(enter_edge, np.where(pieces["sign"] != 0, pieces["sign"], new["sign"]), pieces["sign"])
+        out = dict(open=np.where(corner | edge, 0.0, np.where(moves["to_open"], 1.0, new["open"])),
+                   stick=np.where(corner | edge | moves["to_open"] | moves["to_slip"], 0.0,
+                                  np.where(moves["to_stick"], 1.0, new["stick"])),
+                   sign=np.where(edge, edge_sign, np.where(corner | moves["to_open"] | moves["to_stick"], 0.0,
+                                                           np.where(moves["to_slip"], moves["direction"], new["sign"]))),
+                   corner=corner.astype(float), edge=edge.astype(float))
+        for kind in ("corner", "edge"):
+            flips[kind][enter_corner | enter_edge | leave] = 0
+        return out
+
+
+#: Functions whose failed solves are finished on :func:`natural_map` (same roots): the SOC FB
+#: function's second derivatives grow without bound where a spectral value of ``x o x + y o y``
+#: vanishes (a contact at the cone's apex or a sticking contact with zero traction), so that the
+#: projection's saddle-point Newton often converges only with smoothing there.
+POLISHED = frozenset({"fischer_burmeister", "alart_curnier"})
+
+
 class BuiltCoulomb(BuiltFormulation):
     """A frictional problem built for one per-contact function, solved by semismooth Newton with a
     line search and, where plain Newton fails, the smoothing continuation
@@ -265,20 +442,51 @@ class BuiltCoulomb(BuiltFormulation):
 
     def __init__(self, problem: ComplementarityProblem, function: str, a_scale: float, b_scale: float, *,
                  tol: float, residual_tol: float, max_iter: int, comp_tol: float,
-                 law_options: dict | None = None, penalty_stiffness: float | None = None) -> None:
+                 compliance: float | None = None, penalty_stiffness: float | None = None,
+                 predictor: bool = False) -> None:
         super().__init__(problem)
+        self.gap = None if compliance is None else compliant_gaps(problem, compliance)
+        # the functions share their roots, and in 2-D those are piecewise linear
+        self.pieces = (CoulombPieces(problem, a_scale, b_scale, self.gap)
+                       if predictor and problem.block == 2 and problem.affine else None)
         self.newton = dict(tol=tol, residual_tol=residual_tol, max_iter=max_iter)
         self.comp_tol = comp_tol
         self.function = function
-        self.system = CoulombSystem(problem, function, a_scale, b_scale, law_options)
+        self.system = CoulombSystem(problem, function, a_scale, b_scale, self.gap)
         self.penalty_stiffness = penalty_stiffness
-        self._stats = dict(solves=0, smoothed=0)
+        self._stats = dict(solves=0, predicted=0, smoothed=0, polished=0)
+        self._scales = (a_scale, b_scale)
+        self._polish: CoulombSystem | None = None
 
     def newton_system(self):
         return self.system.newton_system()
 
     def newton_point(self, params, x, p, state=None):
         return self.system.start(x, p, state), self.system.parameters.pack(params, smoothing=0.0)
+
+    def _law_residual(self, sol: LocalSolution, params: np.ndarray) -> float:
+        """The natural-map residual of the law the formulation enforces: Coulomb's on the problem's
+        gaps (the solution's ``complementarity``), or on the penalty's compliant ones."""
+        if self.gap is None:
+            return sol.complementarity
+        gap = self.gap.value(np.concatenate([sol.x, sol.p]), params)
+        return float(np.max(np.abs(self.problem.coulomb_residual(gap, sol.p, params)), initial=0.0))
+
+    def _polished(self, res, params, kw):
+        """Newton on the natural map's system from the last (smoothed) iterate: the same roots,
+        without the SOC function's unbounded second derivatives (:data:`POLISHED`). Returns the
+        better of the two results and the smoothing to report (0 if polished)."""
+        if self._polish is None:
+            self._polish = CoulombSystem(self.problem, "natural_map", *self._scales, self.gap)
+        built = self._polish._built
+        kw = dict(kw, jacobian=built.jacobian)
+        trial = newton_solve(built.rj, built.r, res.z, self._polish.parameters.pack(params, smoothing=0.0), **kw)
+        if not trial.converged:
+            return res, 0.0
+        self._stats["polished"] += 1
+        trial.iterations += res.iterations
+        trial.message = f"{trial.message} (finished on the natural map)"
+        return trial, 0.0
 
     @property
     def stats(self) -> dict:
@@ -290,17 +498,34 @@ class BuiltCoulomb(BuiltFormulation):
         P = system.parameters
         kw = dict(jacobian=built.jacobian, **self.newton)
         z0 = system.start(x0, p0, state)
+        if self.pieces is not None:
+            pieces = self.pieces
+            predicted = pieces.solve(pieces.start(x0, p0, state), params, self.newton)
+            if predicted is not None:
+                zp, get = predicted[0], pieces.unknowns.get
+                warm = {} if self.problem.kind == "mcp" else dict(eta=get(zp, "eta"), theta=get(zp, "theta"))
+                sol = self._finish(get(zp, "x"), get(zp, "p"), params, converged=True, iterations=predicted[1],
+                                   state=warm, message="converged (active-set predictor)")
+                if self._law_residual(sol, params) <= self.comp_tol:
+                    self._stats["solves"] += 1
+                    self._stats["predicted"] += 1
+                    return sol
         res = newton_solve(built.rj, built.r, z0, P.pack(params, smoothing=0.0), **kw)
         s_used, stages = 0.0, 0
+        if not res.converged and self.function in POLISHED:
+            res, _ = self._polished(res, params, kw)
         if not res.converged:
             self._stats["smoothed"] += 1
             res, s_used, stages = smoothed_newton_solve(built.rj, built.r, z0, lambda v: P.pack(params, smoothing=v),
                                                         smoothing=FRICTION_SMOOTHING, try_plain=False, **kw)
+            if not res.converged and self.function in POLISHED:
+                res, s_used = self._polished(res, params, kw)
         self._stats["solves"] += 1
         z = res.z
         x, p = system.unknowns.get(z, "x"), system.unknowns.get(z, "p")
         sol = self._finish(x, p, params, converged=res.converged, iterations=res.iterations, outer=stages,
                            state=system.state(z), message=res.message + (f" (smoothing {s_used:g})" if s_used else ""))
-        if sol.converged and self.penalty_stiffness is None and sol.complementarity > self.comp_tol:
-            sol.converged, sol.message = False, f"Coulomb residual {sol.complementarity:.1e} > comp_tol"
+        residual = self._law_residual(sol, params)
+        if sol.converged and residual > self.comp_tol:
+            sol.converged, sol.message = False, f"Coulomb residual {residual:.1e} > comp_tol"
         return sol

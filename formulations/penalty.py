@@ -98,10 +98,9 @@ class Penalty(Formulation):
         gamma = problem.scaled_penalty(self.gamma(problem))
         if problem.frictional:  # normal and tangential springs, the return map onto the cone
             o = self.options
-            return BuiltCoulomb(problem, "penalty", 1.0, 1.0, tol=o.tol, residual_tol=o.residual_tol,
-                                max_iter=o.max_iter, comp_tol=o.comp_tol,
-                                law_options=dict(stiffness=gamma, tangential_stiffness=gamma),
-                                penalty_stiffness=self.penalty_stiffness(problem))
+            return BuiltCoulomb(problem, "alart_curnier", gamma, 1.0, tol=o.tol, residual_tol=o.residual_tol,
+                                max_iter=o.max_iter, comp_tol=o.comp_tol, compliance=gamma,
+                                penalty_stiffness=self.penalty_stiffness(problem), predictor=o.active_set_predictor)
         built = (_BuiltPenalty if problem.kind == "mcp" else _BuiltCompliantProjection)(problem, self.options, gamma)
         built.penalty_stiffness = self.penalty_stiffness(problem)  # its expected penetration is p / gamma
         return built

@@ -17,7 +17,7 @@ from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.data.metric import COMPONENTS, Metric, isotropic_elasticity
 from ddcm_casadi.models.continuum.hertz import BodyHertzReference, HertzReference
-from ddcm_casadi.models.continuum.obstacles import Ball, Cylinder, FlatPunch, Plane
+from ddcm_casadi.models.continuum.obstacles import Ball, Cylinder, FlatPunch, Plane, moving
 
 # scikit-fem and meshio are imported when a [mesh] case is parsed, not when the kind registers:
 # the paper's example does not pay for them.
@@ -75,6 +75,8 @@ Continua
                                  # punch: center (of its face), normal, half_width, edge_radius
     direction = [0.0, -1.0]      # direction of travel
     travel = [0.0, 1e-5, 2e-5]   # m, one value per step (or one number: standing still)
+    # motion = [[0.0, -1e-5], [2e-6, -1e-5]]   # or any path: the displacement per step
+    # friction = 0.3             # Coulomb friction (mu >= 0; absent: frictionless)
 
     # [[contact]]                # or two bodies: mortar pairs of the slave's nodes against the
     # slave = "cylinder/arc"     # master's facets (P1; choose as slave the surface that stays
@@ -288,7 +290,7 @@ def _obstacle(label: str, t: dict, d: int):
     for key in need:
         if key not in t:
             raise InputError(f"[{label}] a {kind} needs {key!r}")
-    allowed = set(need) | {"boundary", "obstacle", "direction", "travel", "name"} | (
+    allowed = set(need) | {"boundary", "obstacle", "direction", "travel", "name", "motion", "friction"} | (
         {"edge_radius"} if kind == "punch" else set())
     extra = sorted(set(t) - allowed)
     if extra:
@@ -308,17 +310,34 @@ def _obstacle(label: str, t: dict, d: int):
         travel = number(label, "travel", travel)
     common = dict(direction=tuple(direction), travel=travel, name=str(t.get("name", f"{kind} {label.split()[-1]}")))
     if kind == "plane":
-        return Plane(point=vector(label, "point", t["point"], d), normal=vector(label, "normal", t["normal"], d),
-                     **common)
-    if kind == "punch":
-        return FlatPunch(center=vector(label, "center", t["center"], d), normal=vector(label, "normal", t["normal"], d),
-                         half_width=positive(label, "half_width", t["half_width"]),
-                         edge_radius=number(label, "edge_radius", t.get("edge_radius", 0.0)), **common)
-    if kind == "cylinder":
-        return Cylinder(point=vector(label, "point", t["point"], 3), axis=vector(label, "axis", t["axis"], 3),
-                        radius=positive(label, "radius", t["radius"]), **common)
-    return Ball(center=vector(label, "center", t["center"], d), radius=positive(label, "radius", t["radius"]),
-                **common)
+        ob = Plane(point=vector(label, "point", t["point"], d), normal=vector(label, "normal", t["normal"], d),
+                   **common)
+    elif kind == "punch":
+        ob = FlatPunch(center=vector(label, "center", t["center"], d), normal=vector(label, "normal", t["normal"], d),
+                       half_width=positive(label, "half_width", t["half_width"]),
+                       edge_radius=number(label, "edge_radius", t.get("edge_radius", 0.0)), **common)
+    elif kind == "cylinder":
+        ob = Cylinder(point=vector(label, "point", t["point"], 3), axis=vector(label, "axis", t["axis"], 3),
+                      radius=positive(label, "radius", t["radius"]), **common)
+    else:
+        ob = Ball(center=vector(label, "center", t["center"], d), radius=positive(label, "radius", t["radius"]),
+                  **common)
+    if "motion" not in t:
+        return ob
+    if "travel" in t or "direction" in t:
+        raise InputError(f"[{label}] give either motion or direction and travel, not both")
+    motion = nonempty_list(label, "motion", t["motion"])
+    return moving(ob, [vector(label, f"motion[{i}]", v, d) for i, v in enumerate(motion)])
+
+
+def _friction(label: str, t: dict) -> float | None:
+    """A ``[[contact]]`` table's Coulomb coefficient (``None``: frictionless)."""
+    if "friction" not in t:
+        return None
+    mu = number(label, "friction", t["friction"])
+    if mu < 0:
+        raise InputError(f"[{label}] friction must be >= 0, got {mu:g}")
+    return mu
 
 
 def _body_contact(label: str, t: dict, d: int):
@@ -558,7 +577,7 @@ def parse_case(doc: dict, *, base_dir: Path, source: str, name: str) -> Case:
     for i, t in enumerate(_tables(doc, "contact")):
         label = f"contact {i}"
         contacts.append(_body_contact(label, t, d) if "slave" in t or "master" in t
-                        else Contact(_obstacle(label, t, d), _boundary(label, t, d)))
+                        else Contact(_obstacle(label, t, d), _boundary(label, t, d), friction=_friction(label, t)))
 
     symmetry = _symmetry_factor(doc)
     reference = None
@@ -598,7 +617,8 @@ register_case_kind(
     sections={"mesh": _MESH, "material": {"region", "youngs_modulus", "poisson_ratio", "data", "law"},
               "supports": {"boundary", "fix", "displacement"}, "loads": {"boundary", "traction", "body_force", "region"},
               "contact": {"boundary", "obstacle", "radius", "center", "point", "normal", "axis", "half_width",
-                          "edge_radius", "direction", "travel", "name", "slave", "master", "search_distance"},
+                          "edge_radius", "direction", "travel", "name", "slave", "master", "search_distance",
+                          "motion", "friction"},
               "loading": {"load_factors"}, "hertz": {"obstacle", "force_factor", "contact", "radius", "direction"}},
     arrays={"supports", "loads", "contact"}, tables={"material"}, parse=parse_case,
     uses="[material], [[supports]] and [[contact]]", default_name="continuum", kinematics=("small", "finite"))

@@ -202,7 +202,7 @@ def run(argv: list[str] | None = None) -> int:
             case, overrides = load_case_with_overrides(args.config, args.overrides)
         else:
             case = default_case()
-    names = select_formulations(_split(args.formulations, "--formulations"))
+    names = select_formulations(_split(args.formulations, "--formulations"), case.model.contact_law)
     variants = select_variants(_split(args.variants, "--variants"), case)
     for message in case.model.path_warnings():  # refuses a meaningless path before anything is written
         print(f"ddcm-compare: warning: {message}", file=sys.stderr)

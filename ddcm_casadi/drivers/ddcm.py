@@ -103,14 +103,15 @@ class DDCMSolver:
         self._check_initial(model)
         if self.options.variant == "lcdd" and model.strain_components != 1:
             raise InputError("ddcm variant 'lcdd' is implemented for one-component points (bars, trusses)")
-        # The data's range and the exact enumeration, once per problem (not timed with the steps):
+        # The data's range and the exact enumeration (of Signorini pairs' branches; a frictional
+        # law's cone has no finite set of pieces), once per problem (not timed with the steps):
         # the solvers of the formulations of one model share them.
         self.coverage = problems.projection.shared(
             ("data_coverage",), lambda: DataCoverage(model.dataset, model.n_points))
         self.affine = bool(problems.projection.affine)
         self.exact = (problems.projection.shared(
             ("exact_enumerator", enumerate_pairs), lambda: ExactEnumerator(problems.projection, max_pairs=enumerate_pairs))
-            if self.affine and model.n_contacts <= enumerate_pairs else None)
+            if self.affine and not model.frictional and model.n_contacts <= enumerate_pairs else None)
         # N^m assignments, in logarithms: it overflows a float for a continuum's thousands of points.
         log_assign = float(np.sum(np.log(point_ranges(model)[1].astype(float))))
         self.global_search = (global_search and self.exact is not None
@@ -242,11 +243,14 @@ class DDCMSolver:
         t_all = time.perf_counter()
         for k in range(model.n_steps):
             t0 = time.perf_counter()
-            if start is None or not self.options.warm:
+            warm_start = start is not None and self.options.warm
+            if not warm_start:
                 start = self.scheme.states(self.initial_assignment(k))
             step, best, warm_out = self.solve_step(k, start, warm)
             if not accepted(step, best.sol.x, best.sol.p) and bisection_enabled(self.min_substep):
                 step, best, warm_out = self._bisect(k, step, best, warm_out, converged)
+            if not accepted(step, best.sol.x, best.sol.p) and warm_start:
+                step, best, warm_out = self._from_initial(k, step, best, warm_out, warm)
             step.seconds = time.perf_counter() - t0
             out.steps.append(step)
             if progress is not None:
@@ -255,9 +259,25 @@ class DDCMSolver:
             start, warm = best.star, warm_out
             if step.converged:
                 converged = (k, self.projection.previous, best.star, warm_out)
-                self.projection.previous = dict(u=step.u, p=step.p, strain=step.strain, stress=step.stress)
+                self.projection.previous = dict(u=step.u, p=step.p, traction=step.traction, step=k,
+                                                strain=step.strain, stress=step.stress)
         out.solve_seconds = time.perf_counter() - t_all
         return out
+
+    def _from_initial(self, k: int, failed: StepResult, best: Run, warm_out: tuple,
+                      warm: tuple) -> tuple[StepResult, Run, tuple]:
+        """Step ``k`` once more from its initial assignment (:meth:`initial_assignment`) after the
+        run from the previous step's assignment failed even in sub-steps: an alternation can cycle
+        from one start and settle from another (measured with Coulomb friction at the stick-slip
+        transition, whose admissible set is a union of pieces). Returns the new run if it
+        settles (its record counts both runs' work), else the failed one."""
+        step, retry, retry_warm = self.solve_step(k, self.scheme.states(self.initial_assignment(k)), warm)
+        if not accepted(step, retry.sol.x, retry.sol.p):
+            return failed, best, warm_out
+        for name in ("iterations", "projections", "runs"):
+            setattr(step, name, getattr(step, name) + getattr(failed, name))
+        step.message += f"; from the initial assignment (the previous step's cycled: {failed.message})"
+        return step, retry, retry_warm
 
     def _bisect(self, k: int, full: StepResult, full_best: Run, full_warm: tuple,
                 converged: tuple | None) -> tuple[StepResult, Run, tuple]:
@@ -326,7 +346,8 @@ class DDCMSolver:
                           distance=distance, projection_error=run.error,
                           projection_global=run.is_global, projection_seconds=tally["t_project"],
                           search_seconds=tally["t_search"], projections=tally["projections"], runs=tally["runs"],
-                          improvements=tally["improvements"], notes="; ".join(self.notes))
+                          improvements=tally["improvements"], notes="; ".join(self.notes),
+                          traction=f.get("traction"), slip=f.get("slip"))
         self.finish(step, load=load)
         return step
 

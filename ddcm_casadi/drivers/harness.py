@@ -37,10 +37,12 @@ _COLUMNS = ("variant", "formulation", "step", "h", "u", "p", "max_abs_u", "total
 
 
 def resolve_formulations(formulations: Iterable[str | Formulation] | Mapping[str, Mapping] | None,
-                         ) -> list[Formulation]:
-    """Formulation instances from names, instances, or ``{name: options}`` (options are copied)."""
+                         contact_law: str = "signorini") -> list[Formulation]:
+    """Formulation instances from names, instances, or ``{name: options}`` (options are copied);
+    ``None``: every registered one that enforces ``contact_law``."""
     if formulations is None:
-        return [registry.get(name) for name in registry.available()]
+        forms = [registry.get(name) for name in registry.available()]
+        return [f for f in forms if contact_law in f.supported_contact_laws]
     if isinstance(formulations, Mapping):
         return [registry.get(name, **dict(opts or {})) for name, opts in formulations.items()]
     out = []
@@ -162,7 +164,9 @@ class Comparison:
         fields (:meth:`ContactModel.extra_fields`, for trusses ``nodal_displacement`` (n_steps,
         n_nodes, dim) and ``member_force``); with a hard device ``hard_device_force`` (n_steps,
         n_supports, dim: per prescribed support, the resultant force the device exerts on the body,
-        :meth:`ContactModel.hard_device_forces`); for DDCM the assigned ``strain_star``,
+        :meth:`ContactModel.hard_device_forces`); with Coulomb friction ``tangential_traction`` and
+        ``slip`` (n_steps, n_contacts (d - 1), component-major) and ``contact_status`` (n_steps,
+        n_contacts: 0 open, 1 stick, 2 slip); for DDCM the assigned ``strain_star``,
         ``stress_star`` and ``data_index``.
         """
         r, m = self.results[(variant, formulation)], self.model
@@ -171,6 +175,9 @@ class Comparison:
                    contact_force=m.contact_area * p, strain=r.array("strain"), stress=r.array("stress"),
                    converged=r.array("converged"))
         out.update(m.extra_fields(out["u"], out["stress"]))
+        if m.frictional:  # Coulomb friction: tangential tractions and slips (component-major), statuses
+            out.update(tangential_traction=r.array("traction"), slip=r.array("slip"))
+            out["contact_status"] = m.contact_status(p, out["tangential_traction"], out["slip"])
         if m.prescribed is not None:  # (n_steps, n_supports, d): the force of the hard device on the body
             out["hard_device_force"] = np.array([m.hard_device_forces(s.step, s.u, s.stress, s.p) for s in r.steps])
         if variant == "ddcm":
@@ -207,7 +214,7 @@ class Comparison:
             for s in r.steps:
                 row = dict(variant=variant, formulation=name, step=s.step)
                 row[m.load_parameter_name if m.load_parameter_name not in row else "load_parameter"] = s.load_parameter
-                row.update(m.step_summary(s.u, s.p, s.stress, s.step))
+                row.update(m.step_summary(s.u, s.p, s.stress, s.step, traction=s.traction))
                 row.update(m.hard_device_summary(s.step, s.u, s.stress, s.p))  # none without one
                 row.update(converged=s.converged, iterations=s.iterations, outer_iterations=s.outer_iterations,
                            residual=s.residual, complementarity=s.complementarity, penetration=s.penetration,
@@ -387,7 +394,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     ddcm = as_ddcm_options(ddcm)
     given = {k: v for k, v in dict(max_outer=ddcm_max_outer, search=ddcm_search).items() if v is not None}
     ddcm = dataclasses.replace(ddcm, **given) if given else ddcm  # checked as the options are
-    forms = resolve_formulations(formulations)
+    forms = resolve_formulations(formulations, model.contact_law)
     odd = model.path_warnings()  # refuses a meaningless path before any work
     for message in odd:
         warnings.warn(message, PhysicsWarning, stacklevel=2)

@@ -70,7 +70,7 @@ def solve_classical(problems: ProblemPair, built, formulation_name: str, *, rais
         check_convergence(step, raise_on_failure, f"classical/{formulation_name}")
         if accepted(step, sol.x):
             x, p, state = sol.x, sol.p, sol.state
-            previous = dict(u=step.u, p=step.p)
+            previous = dict(u=step.u, p=step.p, traction=step.traction, step=k)
             converged_params = params
     out.solve_seconds = time.perf_counter() - t_all
     return out
@@ -87,7 +87,8 @@ def _classical_step(problems: ProblemPair, built, k: int, params: np.ndarray, wa
                       converged=sol.converged, iterations=sol.iterations,
                       outer_iterations=sol.outer_iterations, residual=sol.residual,
                       complementarity=sol.complementarity, penetration=sol.penetration,
-                      seconds=0.0, message=sol.message, strain=f["strain"], stress=f["stress"])
+                      seconds=0.0, message=sol.message, strain=f["strain"], stress=f["stress"],
+                      traction=f.get("traction"), slip=f.get("slip"))
     finish_step(step, problem, model, penalty_stiffness=getattr(built, "penalty_stiffness", None),
                 load=problem.parameters.get(params, "f"))
     _check_stability(step, problem, sol, params)

@@ -26,6 +26,10 @@ class StepResult:
     penetration: float
     seconds: float
     message: str = ""
+    #: With Coulomb friction: the tangential tractions (Pa, component-major) and the slips of the step
+    #: (m) per contact and tangent (:mod:`ddcm_casadi.models.coulomb`).
+    traction: np.ndarray | None = None
+    slip: np.ndarray | None = None
     # DDCM only
     strain: np.ndarray | None = None
     stress: np.ndarray | None = None

@@ -26,6 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.models.contact_laws import get_contact_law
+from ddcm_casadi.models import coulomb
 from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import to_casadi
@@ -36,6 +37,8 @@ from ddcm_casadi.models.scales import LARGE_STRAIN, load_path_warnings, referenc
 #: Kinematics a model may declare: ``small`` (linear strains and gaps: the problems are affine) or
 #: ``finite`` (a nonlinear strain measure; the problems are nonlinear).
 KINEMATICS = ("small", "finite")
+#: The status of a frictional contact, by code (:meth:`ContactModel.contact_status`).
+CONTACT_STATUS = ("open", "stick", "slip")
 
 # LARGE_STRAIN (the imposed strain beyond which path_warnings warns) lives with the scales; kept
 # importable from here.
@@ -179,6 +182,16 @@ class ContactModel:
         Prescribed displacements (a hard device): dofs that are not unknowns but move by given
         values per step (:mod:`ddcm_casadi.models.prescribed`). ``None``: every dof that is not
         an unknown is fixed at zero.
+    tangent_operator : sparse (nc (d - 1), n), optional
+        ``T``: Coulomb friction (the contact law ``"coulomb"``). Row ``j nc + c`` is the
+        displacement of contact ``c`` along its ``j``-th unit tangent (component-major,
+        :mod:`ddcm_casadi.models.coulomb`); the slip of a step is ``s = T (u - u_prev) - (tau -
+        tau_prev)`` with ``tau`` the obstacle's displacement along the same tangent.
+    friction : (nc,), optional
+        Coulomb coefficients ``mu >= 0`` per contact (with ``tangent_operator``; 0 is frictionless).
+    slip_offsets : (n_steps, nc (d - 1)), optional
+        ``-tau`` per step: minus the obstacle's displacement along each contact's tangents
+        (default 0: the obstacles do not move tangentially).
     """
 
     strain_operator: sp.csr_matrix
@@ -197,6 +210,9 @@ class ContactModel:
     kinematics: str = "small"
     contact_law: str = "signorini"
     prescribed: Prescribed | None = None
+    tangent_operator: sp.csr_matrix | None = None
+    friction: np.ndarray | None = None
+    slip_offsets: np.ndarray | None = None
     _cache: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -245,13 +261,59 @@ class ContactModel:
                                  f"the model's material points have {k}")
         if self.prescribed is not None:
             _check_prescribed(self.prescribed, m * k, G, g0, float(self.length_scale))
+        self._check_friction(nc, n, n_steps)
         for k, v in dict(strain_operator=B, gap_operator=G, volumes=w, contact_area=a,
                          gap_offsets=g0, loads=f, load_parameter=lp, youngs_modulus=E,
                          length_scale=L).items():
             object.__setattr__(self, k, v)
         object.__setattr__(self, "_cache", {})
 
+    def _check_friction(self, nc: int, n: int, n_steps: int) -> None:
+        """Check and normalise the frictional fields; set the contact law they imply."""
+        if self.tangent_operator is None:
+            if self.contact_law == "coulomb":
+                raise InputError("Coulomb friction needs a tangent operator (the contacts' tangential displacements)")
+            if self.friction is not None or self.slip_offsets is not None:
+                raise InputError("friction coefficients or tangential obstacle motion need a tangent operator")
+            return
+        if self.kinematics != "small":
+            raise InputError("Coulomb friction needs small kinematics for now (kinematics = \"small\")")
+        T = sp.csr_matrix(self.tangent_operator, dtype=float)
+        if nc == 0 or T.shape[1] != n or T.shape[0] % nc or T.shape[0] == 0:
+            raise InputError(f"tangent operator has shape {T.shape}: expected (a multiple of {nc} contacts, {n})")
+        mu = _finite("friction", np.broadcast_to(0.0 if self.friction is None else self.friction, (nc,)).copy())
+        if np.any(mu < 0):
+            raise InputError(f"friction coefficients must be >= 0, got {float(mu.min()):g}")
+        nt = T.shape[0]
+        offsets = np.zeros((n_steps, nt)) if self.slip_offsets is None else self.slip_offsets
+        offsets = _finite("tangential obstacle motion", np.broadcast_to(offsets, (n_steps, nt)).copy())
+        if self.prescribed is not None and self.prescribed.gap_operator.nnz:
+            raise InputError("Coulomb friction at nodes whose displacements are prescribed is not supported")
+        for key, value in dict(tangent_operator=T, friction=mu, slip_offsets=offsets, contact_law="coulomb").items():
+            object.__setattr__(self, key, value)
+
     # ------------------------------------------------------------------ sizes
+    @property
+    def frictional(self) -> bool:
+        """Whether the contacts carry Coulomb friction (:attr:`tangent_operator`)."""
+        return self.tangent_operator is not None
+
+    @property
+    def contact_block(self) -> int:
+        """Components per contact: 1, or ``1 + (d - 1)`` with friction."""
+        return 1 + (self.tangent_operator.shape[0] // self.n_contacts if self.frictional else 0)
+
+    @property
+    def contact_operator(self) -> sp.csr_matrix:
+        """``[G; T]``: the normal gaps' and (with friction) the tangential displacements' operator,
+        component-major (cached)."""
+        if not self.frictional:
+            return self.gap_operator
+        C = self._cache.get("contact_operator")
+        if C is None:
+            C = self._cache["contact_operator"] = sp.vstack([self.gap_operator, self.tangent_operator]).tocsr()
+        return C
+
     @property
     def n_dofs(self) -> int:
         return self.strain_operator.shape[1]
@@ -373,16 +435,27 @@ class ContactModel:
     # -------------------------------------------------------------- load steps and their history
     def history_sizes(self) -> dict[str, int]:
         """Names and sizes of the parameters a step takes from the previous converged step, after
-        ``gap0`` and ``f`` (none here; a frictional law adds the previous tangential
-        displacements, a follower load the previous configuration)."""
-        return {}
+        ``gap0`` and ``f``: none without friction; with friction ``slip0 = -(T u_prev - tau_prev)``
+        (so that the slip is ``T u + slip_offset + slip0``) and the tangential tractions
+        ``traction0`` (Pa) of the last converged step."""
+        if not self.frictional:
+            return {}
+        nt = self.tangent_operator.shape[0]
+        return dict(slip0=nt, traction0=nt)
+
+    def friction_sizes(self) -> dict[str, int]:
+        """``{friction: nc, slip_offset: nc (d - 1)}`` with friction, else empty."""
+        if not self.frictional:
+            return {}
+        return dict(friction=self.n_contacts, slip_offset=self.tangent_operator.shape[0])
 
     def step_sizes(self) -> dict[str, int]:
         """Names and sizes of a load step's parameters, in order: ``gap0`` and ``f``, with a hard
         device ``u_prescribed`` (:data:`~ddcm_casadi.models.prescribed.PARAMETER`), those a
         model kind adds (:meth:`load_names`: e.g. an obstacle's travel per pair for gaps at the
         current configuration), then :meth:`history_sizes`."""
-        return dict(gap0=self.n_contacts, f=self.n_dofs, **self.prescribed_sizes(), **self.history_sizes())
+        return dict(gap0=self.n_contacts, f=self.n_dofs, **self.prescribed_sizes(), **self.friction_sizes(),
+                    **self.history_sizes())
 
     def prescribed_sizes(self) -> dict[str, int]:
         """``{u_prescribed: nD}`` with a hard device, else empty (the default problems are
@@ -393,7 +466,7 @@ class ContactModel:
         """The step parameters that grow with the load (linear in the load parameter between two
         steps, so that a sub-step interpolates them): ``gap0`` and ``f``, and with a hard device
         the prescribed displacements ``u_prescribed``."""
-        return ("gap0", "f") + tuple(self.prescribed_sizes())
+        return ("gap0", "f") + tuple(self.prescribed_sizes()) + (("slip_offset",) if self.frictional else ())
 
     def gap_expression(self, u, values):
         """The gaps (physical, ``nc``) for a CasADi symbol ``u`` (free displacements) with the
@@ -418,12 +491,21 @@ class ContactModel:
 
     def step_values(self, step: int, previous: dict | None = None) -> dict[str, np.ndarray]:
         """The parameter values of load step ``step`` by name: ``gap0``, ``f`` and those of
-        :meth:`history_sizes`. ``previous``: the physical fields (``u``, ``p``; for DDCM also
-        ``strain`` and ``stress``) of the last converged step, ``None`` before the first. The
-        drivers pass it; a model kind whose steps depend on their history overrides this."""
+        :meth:`history_sizes`. ``previous``: the physical fields (``u``, ``p``, ``traction``; for
+        DDCM also ``strain`` and ``stress``) and the index ``step`` of the last converged step,
+        ``None`` before the first. The drivers pass it; a model kind whose steps depend on their
+        history overrides this."""
         out = dict(gap0=self.gap_offsets[step], f=self.loads[step])
         if self.prescribed is not None:
             out[PRESCRIBED] = self.prescribed.values[step]
+        if self.frictional:
+            nt = self.tangent_operator.shape[0]
+            out.update(friction=self.friction, slip_offset=self.slip_offsets[step], slip0=np.zeros(nt),
+                       traction0=np.zeros(nt))
+            if previous is not None:  # the slip and the stick spring start at the last converged step
+                out["slip0"] = -(self.tangent_operator @ np.asarray(previous["u"], float)
+                                 + self.slip_offsets[previous["step"]])
+                out["traction0"] = np.asarray(previous["traction"], float)
         return out
 
     def gap(self, u: np.ndarray, step: int) -> np.ndarray:
@@ -532,15 +614,40 @@ class ContactModel:
         """One unknown, one material point, at most one pair: tables hold ``u`` and ``p`` themselves."""
         return self.n_dofs == 1 and self.n_contacts <= 1 and self.n_points == 1
 
-    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None, step: int = 0) -> dict:
+    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None, step: int = 0,
+                     traction: np.ndarray | None = None) -> dict:
         """The per-step columns of ``results.csv`` that describe the solution ``(u, p)`` of load step
         ``step`` (and the material points' ``stress``, for model kinds that measure with it).
         ``total_contact_force`` is ``sum a p``: the sum of the pairs' nodal contact forces as
-        magnitudes, of the modelled part, resolved along no direction."""
+        magnitudes, of the modelled part, resolved along no direction; with friction
+        ``total_tangential_force`` likewise ``sum a |r_T|`` (``traction``: the step's tangential
+        tractions)."""
         if self.scalar:
             return dict(u=float(u[-1]), p=float(p[0]) if p.size else float("nan"))
-        return dict(max_abs_u=float(np.max(np.abs(u))), total_contact_force=float(np.sum(self.contact_area * p)),
-                    active_contacts=int(np.sum(self.active_contacts(p))))
+        out = dict(max_abs_u=float(np.max(np.abs(u))), total_contact_force=float(np.sum(self.contact_area * p)),
+                   active_contacts=int(np.sum(self.active_contacts(p))))
+        if self.frictional and traction is not None:
+            r = coulomb.blocks(traction, self.contact_block - 1)
+            out["total_tangential_force"] = float(self.contact_area @ np.linalg.norm(r, axis=1))
+        return out
+
+    def contact_status(self, p: np.ndarray, traction: np.ndarray, slip: np.ndarray) -> np.ndarray:
+        """Per contact (stacked over steps if the arguments are) the status code of
+        :data:`CONTACT_STATUS` (0 open, 1 stick, 2 slip): open where ``p`` is not above 1e-8 of
+        the stress scale, slip where the traction is on the cone within that and the slip exceeds
+        1e-8 of the displacement scale (:func:`~ddcm_casadi.models.coulomb.contact_status`)."""
+        p = np.atleast_2d(np.asarray(p, float))
+        t, s = (np.atleast_2d(np.asarray(v, float)) for v in (traction, slip))
+        scales, b = self.scales, self.contact_block
+        out = np.zeros(p.shape, dtype=np.int8)
+        for k in range(p.shape[0]):
+            status = coulomb.contact_status(np.column_stack([np.zeros(p.shape[1]), coulomb.blocks(s[k], b - 1)]),
+                                            np.column_stack([p[k], coulomb.blocks(t[k], b - 1)]), self.friction,
+                                            1e-8 * scales["stress"])
+            moving = np.linalg.norm(coulomb.blocks(s[k], b - 1), axis=1) > 1e-8 * scales["displacement"]
+            status = np.where((status == "slip") & ~moving, "stick", status)
+            out[k] = [CONTACT_STATUS.index(v) for v in status]
+        return out
 
     def extra_fields(self, u: np.ndarray, stress: np.ndarray) -> dict:
         """Model-specific per-step fields (stacked over steps: ``u`` is ``(n_steps, n_dofs)``),

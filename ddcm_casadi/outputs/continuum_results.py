@@ -126,6 +126,16 @@ def _contact_fields(model: ContinuumModel, step) -> dict[str, np.ndarray]:
     np.minimum.at(gap, dofs, np.asarray(model.gap(step.u, step.step), dtype=float))
     node[dofs] = 1
     gap[node == 0] = np.nan
+    if model.frictional and step.traction is not None:  # friction force per area and slip as vectors
+        d = model.dimension
+        force = model.tangential_force_vectors(step.traction) / model.contact_area[:, None]
+        slip = model.tangential_force_vectors(step.slip) / model.contact_area[:, None]
+        status = np.full(n, -1, dtype=np.int8)
+        status[dofs] = model.contact_status(p, step.traction, step.slip)[0]
+        for name, values in (("tangential_traction", force), ("slip", slip)):
+            out[name] = np.zeros((n, d))
+            np.add.at(out[name], dofs, values)
+        out["contact_status"] = status
     return dict(out, contact_gap=gap, contact_node=node)
 
 
@@ -217,6 +227,42 @@ def draw_pressure_profile(cmp: Comparison) -> Figure:
     what = "true contact pressure (per current area)" if current else "contact pressure"
     return figure_pressure_profile(runs, hertz=hertz, xlabel=xlabel, ylabel=f"{what} (MPa)",
                                    title=f"{model.name}: {what}, last step")
+
+
+@register_drawing("traction_profile")
+def draw_traction_profile(cmp: Comparison) -> Figure:
+    """The tangential traction of every run at the last step along the surface, against the
+    Coulomb bounds ``+-mu p`` (``traction_profile.png``; 2-D: the signed traction along the
+    tangent, 3-D: its magnitude)."""
+    from matplotlib.figure import Figure as MplFigure
+
+    model = cmp.model
+    pairs, x = _profile_coordinate(model)
+    order = np.argsort(x)
+    pairs, x = pairs[order], x[order]
+    fig = MplFigure(figsize=(7, 4.2))
+    ax = fig.add_subplot()
+    styles = {"classical": dict(ls="-"), "ddcm": dict(ls="none", marker="o", ms=3)}
+    bound_drawn = False
+    for (variant, name), r in cmp.results.items():
+        last = r.steps[-1]
+        t = np.asarray(last.traction, float).reshape(model.dimension - 1, model.n_contacts)
+        value = t[0] if model.dimension == 2 else np.linalg.norm(t, axis=0)
+        ax.plot(x, value[pairs] / 1e6, label=f"{variant}/{name}" + ("" if last.converged else " (not converged)"),
+                **styles[variant])
+        if variant == "classical" and last.converged and not bound_drawn:
+            bound_drawn = True
+            bound = model.friction[pairs] * np.asarray(last.p, float)[pairs] / 1e6
+            ax.plot(x, bound, color="0.6", lw=0.8, ls="--", label=f"+-mu p (classical/{name})")
+            if model.dimension == 2:
+                ax.plot(x, -bound, color="0.6", lw=0.8, ls="--")
+    ax.set_xlabel("x (m)" if model.reference is None else "distance from the indenter's axis (m)")
+    ax.set_ylabel("tangential traction (MPa)" if model.dimension == 2 else "|tangential traction| (MPa)")
+    ax.set_title(f"{model.name}: friction traction, last step")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
 
 
 @register_drawing("deformed_body")

@@ -58,11 +58,19 @@ class ProblemPair:
         """Physical displacement, contact pressure, strain and stress from scaled unknowns
         (strain and stress flat and point-major: ``m k`` values). ``params``: the parameters the
         unknowns solved (the problem's of ``kind``); a model with prescribed displacements needs
-        them (its strains are ``B u + B_D u_D``)."""
+        them (its strains are ``B u + B_D u_D``). With friction also ``traction``: the tangential
+        tractions (Pa, component-major), ``p`` the normal pressures only, and (given ``params``)
+        ``slip``: the step's slips (m)."""
         s = self.scales(kind)
-        n = self.model.n_dofs
+        n, nc = self.model.n_dofs, self.model.n_contacts
         u = s["displacement"] * np.asarray(x[:n])
         pressure = s["stress"] * np.asarray(p)
+        extra = {}
+        if self.model.frictional:
+            pressure, extra["traction"] = pressure[:nc], pressure[nc:]
+            if params is not None:  # the step's slips T u + slip_offset + slip0
+                z = np.concatenate([np.asarray(x, float), np.asarray(p, float)])
+                extra["slip"] = s["displacement"] * self._problem(kind).gap_map.value(z, params)[nc:]
         u_D = None
         if self.model.prescribed is not None:
             if params is None:
@@ -73,28 +81,43 @@ class ProblemPair:
             stress = s["stress"] * np.asarray(x[n:])
         else:
             stress = self.model.stress(strain)
-        return dict(u=u, p=pressure, strain=strain, stress=stress)
+        return dict(u=u, p=pressure, strain=strain, stress=stress, **extra)
 
-    def scaled_start(self, kind: str, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None):
-        """Scaled unknowns ``(x, p)`` from physical fields (for warm starts)."""
+    def scaled_start(self, kind: str, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None,
+                     traction: np.ndarray | None = None):
+        """Scaled unknowns ``(x, p)`` from physical fields (for warm starts; with friction the
+        tangential ``traction`` follows the pressures, zero if not given)."""
         s = self.scales(kind)
         x = [np.asarray(u) / s["displacement"]]
         if kind == "mpcc":
             x.append(np.asarray(stress).reshape(-1) / s["stress"])
-        return np.concatenate(x), np.asarray(p) / s["stress"]
+        p = np.asarray(p, float).reshape(-1)
+        if self.model.frictional:
+            nt = self.model.tangent_operator.shape[0]
+            p = np.concatenate([p, np.zeros(nt) if traction is None else np.asarray(traction, float).reshape(-1)])
+        return np.concatenate(x), p / s["stress"]
 
 
 def _common(model: ContactModel, s: dict, fb_beta: float, n_z: int, P: Parameters) -> dict:
-    """The gaps ``(G u + gap0) / s_d`` with ``u = s_d u_hat`` (``gap0`` the first parameter) and the scales."""
+    """The gaps ``(G u + gap0) / s_d`` with ``u = s_d u_hat`` (``gap0`` the first parameter) and the
+    scales; with friction the slips ``(T u + slip_offset + slip0) / s_d`` below them
+    (component-major, :mod:`ddcm_casadi.models.coulomb`)."""
     nc = model.n_contacts
-    gap = Affine(sp.hstack([model.gap_operator, sp.csr_matrix((nc, n_z - model.n_dofs))]),
-                 sp.hstack([sp.identity(nc) / s["displacement"], sp.csr_matrix((nc, P.size - nc))]))
+    C = model.contact_operator
+    Q = sp.hstack([sp.identity(nc) / s["displacement"], sp.csr_matrix((nc, P.size - nc))]).tocsr()
+    if model.frictional:
+        nt = model.tangent_operator.shape[0]
+        Q = sp.vstack([Q, (_placed(sp.identity(nt), P, "slip_offset") + _placed(sp.identity(nt), P, "slip0"))
+                       / s["displacement"]]).tocsr()
+    gap = Affine(sp.hstack([C, sp.csr_matrix((C.shape[0], n_z - model.n_dofs))]), Q)
     if model.prescribed is not None and nc:  # + G_D u_D / s_d
-        gap = gap + Affine(sp.csr_matrix((nc, n_z)),
-                           _placed(model.prescribed.gap_operator / s["displacement"], P, PRESCRIBED))
+        gap = gap + Affine(sp.csr_matrix((C.shape[0], n_z)), sp.vstack([
+            _placed(model.prescribed.gap_operator / s["displacement"], P, PRESCRIBED),
+            sp.csr_matrix((C.shape[0] - nc, P.size))]))
     return dict(parameters=P, gap_map=gap, gap_ref=s["displacement"], pressure_ref=s["stress"],
                 contact_stiffness=model.contact_stiffness, fb_alpha=1.0 / (0.01 * model.length_scale),
-                fb_beta=fb_beta, contact_law=model.contact_law, kinematics=model.kinematics)
+                fb_beta=fb_beta, contact_law=model.contact_law, kinematics=model.kinematics,
+                block=model.contact_block)
 
 
 def _placed(A: sp.spmatrix, P: Parameters, name: str) -> sp.csr_matrix:
@@ -343,8 +366,10 @@ def build_problems(model: ContactModel) -> ProblemPair:
     if model.kinematics != "small":
         lk = model.local_kinematics()
         return _build_nonlinear(model) if lk is None else _build_local(model, lk)
-    n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
-    GtA = (model.gap_operator.T @ sp.diags(model.contact_area)).tocsr()  # contact forces G^T (a p)
+    n, m, k = model.n_dofs, model.n_points, model.strain_components
+    nc = model.n_contacts * model.contact_block  # the pairs: with friction, a block per contact
+    # contact forces G^T (a p) (with friction [G; T]^T (a [p; r_T]))
+    GtA = (model.contact_operator.T @ sp.diags(np.tile(model.contact_area, model.contact_block))).tocsr()
 
     classical = None
     if model.youngs_modulus is not None:

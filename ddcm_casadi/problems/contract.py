@@ -44,7 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.evaluate import NumericFunction
-from ddcm_casadi.problems.coulomb import blocks, natural_map
+from ddcm_casadi.models.coulomb import blocks, natural_map
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
 
@@ -111,7 +111,7 @@ class ComplementarityProblem:
         Components per contact (1 for Signorini; ``1 + (d - 1)`` for Coulomb friction in ``d``
         dimensions). The ``n_pairs = block n_contacts`` "gaps" and "pressures" are component-major:
         entry ``j n_contacts + c`` is component ``j`` of contact ``c``, the normal ones first
-        (:mod:`ddcm_casadi.problems.coulomb`). A frictional problem has the parameters
+        (:mod:`ddcm_casadi.models.coulomb`). A frictional problem has the parameters
         ``friction`` (``mu`` per contact) and ``traction0`` (the last converged step's scaled
         tangential tractions, ``n_pairs - n_contacts``).
     kinematics : {"small", "finite"}
@@ -171,7 +171,7 @@ class ComplementarityProblem:
 
     def coulomb_residual(self, gap: np.ndarray, p: np.ndarray, params: np.ndarray) -> np.ndarray:
         """``(nc, block)``: the natural-map residual of Coulomb's law per contact
-        (:func:`~ddcm_casadi.problems.coulomb.natural_map`), in scaled units."""
+        (:func:`~ddcm_casadi.models.coulomb.natural_map`), in scaled units."""
         mu = self.parameters.get(np.asarray(params, float).reshape(-1), "friction")
         return natural_map(blocks(gap, self.block), blocks(p, self.block), mu)
 

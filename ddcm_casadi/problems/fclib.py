@@ -42,7 +42,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.problems.coulomb import modified_slip, natural_map, project_cone
+from ddcm_casadi.models.coulomb import modified_slip, natural_map, project_cone
 
 
 # --------------------------------------------------------------------------------- problems

@@ -253,6 +253,45 @@ def _normal_rows(disc: fem.Discretisation, dofs: np.ndarray, normals: np.ndarray
     return sp.csr_matrix((normals.ravel(), (np.repeat(np.arange(nc), d), cols.ravel())), shape=(nc, disc.n_dofs))
 
 
+def tangent_basis(normals: np.ndarray) -> np.ndarray:
+    """``(nc, d - 1, d)``: unit tangents orthogonal to each unit normal, right-handed with it
+    (2-D: ``t = (n_y, -n_x)``; 3-D: ``t_1`` along ``e x n`` for the axis ``e`` least aligned
+    with ``n``, ``t_2 = n x t_1``)."""
+    n = np.asarray(normals, float)
+    if n.shape[1] == 2:
+        return np.stack([n[:, 1], -n[:, 0]], axis=1)[:, None, :]
+    e = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    t1 = np.cross(e, n)
+    t1 /= np.linalg.norm(t1, axis=1)[:, None]
+    return np.stack([t1, np.cross(n, t1)], axis=1)
+
+
+def friction_fields(disc: fem.Discretisation, contacts: Sequence, contact: dict, counterparts: list,
+                    free: np.ndarray, n_steps: int) -> dict:
+    """The :class:`~ddcm_casadi.models.base.ContactModel` fields of Coulomb friction
+    (``tangent_operator``, ``friction``, ``slip_offsets``) if any contact record has a
+    ``friction``, else none: per pair its tangents (:func:`tangent_basis`) on the vector dofs of
+    its node, component-major, and minus its obstacle's displacement along them per step."""
+    if not any(getattr(c, "friction", None) is not None for c in contacts):
+        return {}
+    for i, c in enumerate(contacts):
+        if c.kind != "obstacle" and getattr(c, "friction", None) is not None:
+            raise InputError(f"contact {i} ({c.name!r}): friction between two bodies is not supported yet "
+                             "(rigid obstacles only)")
+    owner, normals = contact["contact_obstacle"], contact["contact_normals"]
+    if not owner.size:
+        return {}
+    mu = np.array([contacts[o].friction or 0.0 for o in owner], float)
+    for c in contacts:
+        if c.friction is not None and not (np.isfinite(c.friction) and c.friction >= 0):
+            raise InputError(f"contact {c.name!r}: friction must be a number >= 0, got {c.friction!r}")
+    tangents = tangent_basis(normals)  # (nc, d - 1, d)
+    rows = sp.vstack([_normal_rows(disc, contact["contact_dofs"], tangents[:, j]) for j in range(tangents.shape[1])])
+    motion = np.stack([np.asarray(counterparts[o].displacements(n_steps)) for o in owner], axis=1)  # (steps, nc, d)
+    offsets = -np.einsum("snd,njd->sjn", motion, tangents).reshape(n_steps, -1)
+    return dict(tangent_operator=rows[:, free].tocsr(), friction=mu, slip_offsets=offsets)
+
+
 def _obstacle_pairs(disc: fem.Discretisation, c: Contact, index: int, n_steps: int, size: float) -> PairSet:
     """One pair per boundary dof of the contact surface against its rigid obstacle."""
     d, ob = disc.dimension, c.obstacle
@@ -265,7 +304,8 @@ def _obstacle_pairs(disc: fem.Discretisation, c: Contact, index: int, n_steps: i
     if float(np.min(gaps)) > size:
         raise InputError(f"obstacle {ob.name!r} cannot touch the body: it comes no closer than "
                          f"{float(np.min(gaps)):.3g} m along the path, more than the body's size {size:.3g} m")
-    _check_not_through(ob, gaps, disc.mesh.p.T, n_steps)
+    if ob.motion is None:  # a path of any shape is the user's to mean
+        _check_not_through(ob, gaps, disc.mesh.p.T, n_steps)
     N = ob.normals(X, n_steps)
     return PairSet(dofs, X, N, area, gaps, _normal_rows(disc, dofs, N), facets, ob)
 

@@ -70,10 +70,13 @@ class BodyForce:
 
 @dataclass(frozen=True)
 class Contact:
-    """A rigid ``obstacle`` that the dofs of the boundary ``where`` may touch."""
+    """A rigid ``obstacle`` that the dofs of the boundary ``where`` may touch; with ``friction``
+    (Coulomb's ``mu >= 0``; ``None``: frictionless, the Signorini law) the contacts carry
+    tangential tractions (:mod:`ddcm_casadi.models.coulomb`)."""
 
     obstacle: Obstacle
     where: Where
+    friction: float | None = None
 
     kind = "obstacle"
 

@@ -41,7 +41,8 @@ from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import block_diagonal, isotropic_elasticity
 from ddcm_casadi.models.base import ContactModel, FigureSpec, LocalKinematics, drawn_formulation
 from ddcm_casadi.models.continuum import fem, finite
-from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, isotropic_law,
+from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, friction_fields,
+                                                   isotropic_law, tangent_basis,
                                                    point_data, reference_loads, step_count)
 from ddcm_casadi.models.continuum.inputs import BodyContact, BodyForce, Contact, Material, Support, Traction
 from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
@@ -343,6 +344,14 @@ class ContinuumModel(ContactModel):
         p = np.asarray(p)
         return (self.contact_area * p)[..., None] * self.contact_normals
 
+    def tangential_force_vectors(self, traction: np.ndarray) -> np.ndarray:
+        """Nodal friction forces ``a r_T . t`` (N; N/m in 2-D) per pair, ``(..., nc, d)``, from the
+        tangential tractions (component-major, :func:`~ddcm_casadi.models.continuum.assembly.tangent_basis`)."""
+        t = tangent_basis(self.contact_normals)  # (nc, d - 1, d)
+        r = np.asarray(traction, float)
+        r = r.reshape(r.shape[:-1] + (self.dimension - 1, self.n_contacts))
+        return self.contact_area[:, None] * np.einsum("...jc,cjd->...cd", r, t)
+
     def path_warnings(self) -> list[str]:
         """:meth:`ContactModel.path_warnings`, plus volumetric locking: near-incompressible
         material (``nu >`` :data:`LOCKING_POISSON`) on linear (P1) elements."""
@@ -368,7 +377,8 @@ class ContinuumModel(ContactModel):
             out["reference"] = self.reference.describe()
         return out
 
-    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None, step: int = 0) -> dict:
+    def step_summary(self, u: np.ndarray, p: np.ndarray, stress: np.ndarray | None = None, step: int = 0,
+                     traction: np.ndarray | None = None) -> dict:
         """:meth:`ContactModel.step_summary` (``total_contact_force`` is ``sum a_0 p``, the sum of
         the nodal contact forces' magnitudes of the modelled part, along no direction), the
         resultant contact force along each obstacle's travel
@@ -376,7 +386,10 @@ class ContinuumModel(ContactModel):
         the full body, times :attr:`symmetry_factor`), the reference's columns (measured with
         ``stress``), and at finite strain ``min_J`` (the smallest ``det F`` of the material points)
         and ``max_contact_pressure_true`` (the largest pressure per current area, :meth:`true_pressure`)."""
-        out = super().step_summary(u, p)
+        out = super().step_summary(u, p, traction=traction)
+        if self.frictional and traction is not None:  # the resultant of the tangential tractions
+            force = self.tangential_force_vectors(traction).sum(axis=0)
+            out.update({f"tangential_force_{'xyz'[i]}": float(force[i]) for i in range(self.dimension)})
         if self.n_contacts:
             out.update(contact_force_columns(self, u, p, step))
         if self.reference is not None:
@@ -418,6 +431,8 @@ class ContinuumModel(ContactModel):
         held = set(np.asarray(self.contact_obstacle, dtype=int).tolist()) if self.n_contacts else set()
         if any(float(np.ptp(ob.travels(self.n_steps))) > 0 for o, ob in enumerate(self.obstacles) if o in held):
             specs["force_indentation.png"] = FigureSpec("force_indentation")
+        if self.frictional:
+            specs["traction_profile.png"] = FigureSpec("traction_profile")
         return {**specs, **super().figures(runs)}
 
 
@@ -484,11 +499,14 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
                          "configuration; finite kinematics needs rigid obstacles for now")
     G_all, area_all, gap0, obstacles, contact = contact_pairs(disc, contacts, free, n_steps, size)
     G = G_all[:, free].tocsr()
+    friction = friction_fields(disc, contacts, contact, obstacles, free, n_steps)
     loads = factors[:, None] * f_ref[free][None, :]
     travelling = [ob for ob in obstacles if ob.direction is not None]
     by_travel = bool(travelling) and load_factors is None
     load_parameter = travelling[0].travels(n_steps) if by_travel else factors
     lp_name = "obstacle travel (m)" if by_travel else "load factor"
+    if by_travel and getattr(travelling[0], "motion", None) is not None:
+        lp_name = "obstacle path length (m)"
     prescribed = continuum_prescribed(disc, supports, B_all, G_all, n_steps, load_factors, f_ref)
     if prescribed is not None and load_factors is None and not (by_travel and np.ptp(load_parameter) > 0):
         load_parameter, lp_name = np.arange(n_steps, dtype=float), "load step"  # a path set by the device
@@ -501,7 +519,7 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
         region_names=tuple(m.region or "(rest)" for m in materials), obstacles=tuple(obstacles),
         reference=reference, laws=tuple(m.law for m in materials), kinematics=kinematics, prescribed=prescribed,
         symmetry_factor=(getattr(reference, "force_factor", 1.0) if symmetry_factor is None else symmetry_factor),
-        **contact)
+        **contact, **friction)
     _check_held(model)
     return model
 

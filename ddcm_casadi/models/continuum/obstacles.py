@@ -71,11 +71,16 @@ class Obstacle:
         ``s_t`` (m), one per load step (a constant: the obstacle stands still there).
     name : str
         A label for tables and figures.
+    motion : sequence of sequences of float, optional
+        The obstacle's displacement vector per step (any path, e.g. pressed, then pushed
+        sideways), instead of ``direction`` and ``travel``; its ``travel`` is then the path's
+        length so far (the load parameter), set by :func:`moving`.
     """
 
     direction: Sequence[float] = field(default=(0.0, -1.0), kw_only=True)
     travel: float | Sequence[float] = field(default=0.0, kw_only=True)
     name: str = field(default="obstacle", kw_only=True)
+    motion: Sequence | None = field(default=None, kw_only=True)
 
     kind = "obstacle"
 
@@ -111,19 +116,31 @@ class Obstacle:
         """The translation ``s d`` of the obstacle for a travel ``s``."""
         return step_travel * _unit(f"obstacle {self.name!r} direction", self.direction, self.dimension)
 
+    def displacements(self, n_steps: int) -> np.ndarray:
+        """The obstacle's displacement per step, ``(n_steps, d)``: ``motion``, else ``s_t d``."""
+        if self.motion is None:
+            return np.stack([self.offset(st) for st in self.travels(n_steps)])
+        m = np.asarray(self.motion, dtype=float)
+        if m.shape != (n_steps, self.dimension):
+            raise InputError(f"obstacle {self.name!r}: motion has {m.shape[0]} displacements of {m.shape[-1]} "
+                             f"components, the load path {n_steps} steps in {self.dimension}-D")
+        return m
+
     def gap_offsets(self, x: np.ndarray, n_steps: int) -> np.ndarray:
-        """``phi(X - s_t d)`` per step and point: ``(n_steps, n)``."""
-        s = self.travels(n_steps)
-        return np.stack([self.phi(x - self.offset(st)) for st in s])
+        """``phi(X - m_t)`` per step and point: ``(n_steps, n)`` (``m_t`` :meth:`displacements`)."""
+        return np.stack([self.phi(x - m) for m in self.displacements(n_steps)])
 
     def normals(self, x: np.ndarray, n_steps: int) -> np.ndarray:
         """Normals at the reference configuration (obstacle at its first position): ``(n, d)``."""
-        return self.grad_phi(x - self.offset(self.travels(n_steps)[0]))
+        return self.grad_phi(x - self.displacements(n_steps)[0])
 
     def describe(self) -> dict:
         """A small record for results files."""
-        return dict(kind=self.kind, name=self.name, direction=list(map(float, self.direction)),
-                    travel=np.asarray(self.travel, dtype=float).tolist())
+        out = dict(kind=self.kind, name=self.name, direction=list(map(float, self.direction)),
+                   travel=np.asarray(self.travel, dtype=float).tolist())
+        if self.motion is not None:
+            out["motion"] = np.asarray(self.motion, dtype=float).tolist()
+        return out
 
     def drawing(self, step_travel: float) -> dict | None:
         """What :func:`~ddcm_casadi.outputs.continuum.figure_deformed_body` draws (2-D), or ``None``."""
@@ -390,3 +407,22 @@ class SignedDistance(Obstacle):
         if not np.all(norm > 0) or not np.all(np.isfinite(g)):
             raise InputError(f"obstacle {self.name!r}: the gradient of phi vanishes at a contact node")
         return g / norm
+
+
+def moving(obstacle: Obstacle, motion) -> Obstacle:
+    """``obstacle`` moved along ``motion`` (one displacement vector per step, ``(n_steps, d)``):
+    its ``travel`` becomes the path's length so far (the load parameter of tables and figures)
+    and its ``direction`` the path's overall direction (the first step's if it ends where it
+    began)."""
+    import dataclasses
+
+    m = np.asarray(motion, dtype=float)
+    if m.ndim != 2 or m.shape[1] != obstacle.dimension or not m.shape[0]:
+        raise InputError(f"obstacle {obstacle.name!r}: motion must be a list of {obstacle.dimension}-component "
+                         f"displacements, one per step")
+    if not np.all(np.isfinite(m)):
+        raise InputError(f"obstacle {obstacle.name!r}: motion must be finite")
+    steps = np.diff(np.vstack([np.zeros((1, m.shape[1])), m]), axis=0)
+    length = np.cumsum(np.linalg.norm(steps, axis=1))
+    overall = m[-1] if np.any(m[-1]) else next((v for v in m if np.any(v)), obstacle.offset(1.0))
+    return dataclasses.replace(obstacle, motion=m, travel=length, direction=tuple(overall))

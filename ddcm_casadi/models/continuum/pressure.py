@@ -278,6 +278,20 @@ def contact_results(model: ContactModel, fields: dict) -> dict:
                      contact_pressure_recovered="Pa; -n.sigma.n of the boundary elements projected on the "
                                                 "contact nodes with the lumped areas (docs/maths.md); zero where "
                                                 "p is zero")
+    if model.frictional:
+        traction, slip = (np.atleast_2d(np.asarray(fields[k], float)) for k in ("tangential_traction", "slip"))
+        friction = model.tangential_force_vectors(traction)  # (n_steps, nc, d)
+        out.update(friction_coefficient=model.friction, tangential_traction=traction, slip=slip,
+                   contact_status=fields["contact_status"], total_tangential_force=friction.sum(axis=1))
+        notes.update(friction_coefficient="Coulomb's mu per pair",
+                     tangential_traction="Pa; per step, tangent and pair (component-major: all pairs' first "
+                                         "tangent, then the second in 3-D): the friction traction on the body "
+                                         "along the pair's tangent (t = (n_y, -n_x) in 2-D)",
+                     slip="m; per step, tangent and pair: the step's tangential displacement relative to the "
+                          "obstacle (the opposite of the traction's direction where the pair slips)",
+                     contact_status="per step and pair: 0 open, 1 stick, 2 slip",
+                     total_tangential_force=f"{unit}; per step: the resultant vector of the nodal friction "
+                                            "forces a r_T t of the modelled part")
     return dict(out, contact_gap=gaps, total_contact_force=np.sum(model.contact_area * p, axis=-1),
                 obstacle_names=_names(model), obstacle_travel_directions=directions,
                 contact_force_vector_as_modelled=vectors, contact_force_along_travel_as_modelled=along,
