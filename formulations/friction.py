@@ -164,7 +164,7 @@ def coulomb_constraints(a: list, r: list, direction: list, mu, tau) -> list:
 
     The first two say ``u_hat in K_mu^*`` and ``r in K_mu``; the bracket is
     ``r . u_hat - mu p_N (|s_T| - |s_T|_tau)`` (De Saxcé's ``u_hat = u + mu |s_T| e_N``,
-    :mod:`ddcm_casadi.problems.coulomb`), so the last is the Scholtes relaxation of the cone
+    :mod:`ddcm_casadi.models.coulomb`), so the last is the Scholtes relaxation of the cone
     complementarity ``r . u_hat = 0``: every solution of Coulomb's law satisfies it, a point that
     does has ``0 <= r . u_hat <= tau (1 + mu p_N)``, and ``tau -> 0`` gives exactly the law, as
     ``g p <= tau`` does for the normal pairs. Every function is smooth for ``tau > 0`` (no

@@ -24,7 +24,7 @@ A BNLP solution is accepted only if the dropped signs hold (``g >= 0``, ``p >= 0
 a stationary point, not always the global one: the DDCM driver checks the other branches.
 
 Coulomb friction (``problem.frictional``: per contact the gap and slip ``u = (g_N, s_T)`` and the
-traction ``r = (p_N, r_T)``, :mod:`ddcm_casadi.problems.coulomb`). The traction is written
+traction ``r = (p_N, r_T)``, :mod:`ddcm_casadi.models.coulomb`). The traction is written
 ``r = (p_N, mu p_N rho)`` with ``p_N >= 0`` (a bound) and ``|rho| <= 1``, so it lies in the cone
 by construction, and the cone complementarity ``r in K, u_hat in K^*, r . u_hat = 0`` (De Saxcé)
 is relaxed as the normal pairs are (:func:`~ddcm_casadi.formulations.friction.coulomb_constraints`):
@@ -73,7 +73,7 @@ import numpy as np
 
 from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, identify, imposes_gap, imposes_pressure, signs_hold
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.problems.coulomb import blocks, flat
+from ddcm_casadi.models.coulomb import blocks, flat
 from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.homotopy import scholtes_homotopy
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count

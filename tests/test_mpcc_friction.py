@@ -13,7 +13,7 @@ import scipy.sparse as sp
 
 from ddcm_casadi import formulations
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.problems.coulomb import blocks, contact_status
+from ddcm_casadi.models.coulomb import blocks, contact_status
 from ddcm_casadi.problems.fclib import LocalProblem, as_complementarity_problem, read_fclib, write_fclib
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
