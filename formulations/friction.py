@@ -177,15 +177,17 @@ def coulomb_constraints(a: list, r: list, direction: list, mu, tau) -> list:
     return [a[0], 1 - sum(v**2 for v in direction), tau - dissipation]
 
 
-def coulomb_branch(a: list, r: list, mu, is_open, is_stick) -> list:
+def coulomb_branch(a: list, r: list, mu, is_open, is_stick, is_corner=0) -> list:
     """The ``b`` equations of one contact on one branch of Coulomb's law (``is_open``,
-    ``is_stick``: 0/1 per contact; neither: slip): open ``r = 0``; stick ``u = 0``; slip
-    ``g_N = 0`` and ``r_T + mu p_N s_T / |s_T| = 0`` (the traction on the cone's surface against
-    the slip, smooth where ``s_T != 0``). ``if_else`` keeps an unused branch's values (the slip
-    direction at ``s_T = 0``) out of the rows and their derivatives."""
+    ``is_stick``, ``is_corner``: 0/1 per contact; none: slip): open ``r = 0``; stick ``u = 0``;
+    slip ``g_N = 0`` and ``r_T + mu p_N s_T / |s_T| = 0`` (the traction on the cone's surface
+    against the slip, smooth where ``s_T != 0``); the corner ``g_N = 0, r_T = 0`` (closed without
+    traction; ``p_N = 0`` is the caller's extra row). ``if_else`` keeps an unused branch's values
+    (the slip direction at ``s_T = 0``) out of the rows and their derivatives."""
     length = norm(a[1:])
     slip = [rt + mu * r[0] * at / (length + (length == 0)) for at, rt in zip(a[1:], r[1:])]
-    tangential = [ca.if_else(is_open, rt, ca.if_else(is_stick, at, st, True), True)
+    free = is_open + is_corner
+    tangential = [ca.if_else(free, rt, ca.if_else(is_stick, at, st, True), True)
                   for at, rt, st in zip(a[1:], r[1:], slip)]
     return [ca.if_else(is_open, r[0], a[0], True)] + tangential
 

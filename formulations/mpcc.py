@@ -346,8 +346,8 @@ class _BuiltMPCC(BuiltFormulation):
         return w, iters, False
 
 
-#: Per-contact statuses of a frictional branch.
-OPEN, STICK, SLIP = 0, 1, 2
+#: Per-contact statuses of a frictional branch (a corner, closed without traction: projections only).
+OPEN, STICK, SLIP, CORNER = 0, 1, 2, 3
 #: IPOPT's iteration limit in a frictional branch NLP: the right branch from a relaxed solution
 #: takes 1-4 iterations on the generated FCLIB problems, a wrong one (a slip rule at ``s_T = 0``,
 #: an infeasible branch) ran to 500 or into restoration.
@@ -392,17 +392,16 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         ne = problem.n_residual
         self._bounds = dict(lbx=np.concatenate([np.full(nx, -np.inf), np.zeros(nc), np.full((b - 1) * nc, -np.inf)]),
                             lbg=np.zeros(ne + 3 * nc), ubg=np.concatenate([np.zeros(ne), np.full(3 * nc, np.inf)]))
-        # Branch NLP in z = [x; p]: the residual and b equations per contact, the statuses
-        # parameters (a square system for the classical problem).
+        # Branch NLP in z = [x; p]: the residual, b equations per contact and p_N (held at 0 at a
+        # corner, free elsewhere), the statuses parameters (a square system for the classical problem).
         zb = ca.SX.sym("z", nx + b * nc)
-        Pb = ca.SX.sym("P", base.size + 2 * nc)
-        own = Pb[:base.size]
+        Pb = ca.SX.sym("P", base.size + 3 * nc)
+        own, flags = Pb[:base.size], split(Pb, base.size, 3)
         ab, rb = split(problem.gap_map.render(zb, own), 0, b), split(zb, nx, b)
         self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
             "x": zb, "p": Pb, "f": problem.distance.render(zb, own) if problem.kind == "mpcc" else ca.SX.zeros(1, 1),
             "g": ca.vertcat(problem.residual_map.render(zb, own),
-                            *coulomb_branch(ab, rb, own[base.slice("friction")], Pb[base.size:base.size + nc],
-                                            Pb[base.size + nc:]))},
+                            *coulomb_branch(ab, rb, own[base.slice("friction")], *flags), rb[0])},
             {"ipopt": {**_ipopt_options(problem, opts), "max_iter": BRANCH_MAX_ITER}, **_NLPSOL})
         self._ne = ne
 
@@ -476,23 +475,53 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         """The branch NLP of the statuses identified at ``(x, p)``: returns ``((x, p), iterations,
         accepted)``. A solution is accepted if Coulomb's natural-map residual is at most
         ``comp_tol`` and the residual at most ``residual_tol`` (it then satisfies the law, all its
-        signs included). A branch solution that is not is where the identification erred: the
-        statuses identified there (an open contact that penetrates closes, a stuck one outside the
-        cone slides, a closed one that pulls opens) are tried next, as a primal-dual active-set
-        method would, at most :data:`BRANCH_ROUNDS` times and never twice the same."""
+        signs included), and a projection's corners are B-stationary (:meth:`_corners_stationary`).
+        A branch solution that is not is where the identification erred: the statuses identified
+        there (an open contact that penetrates closes, a stuck one outside the cone slides, a
+        closed one that pulls opens) are tried next, as a primal-dual active-set method would, at
+        most :data:`BRANCH_ROUNDS` times and never twice the same. In a projection, a contact
+        that has been tried both open and closed and would switch again is tried as a corner
+        (``g_N = 0, r = 0``), as a biactive normal pair is."""
         nx, nc, b, ne = self._nx, self._nc, self._b, self._ne
         z, iters, tried = np.concatenate([x, p]), 0, set()
         status = self._status(x, p, params)
-        g0 = np.zeros(ne + b * nc)
+        seen_open, seen_closed = np.zeros(nc, bool), np.zeros(nc, bool)
+        free = np.full(nc, np.inf)
         while len(tried) < BRANCH_ROUNDS and status.tobytes() not in tried:
             tried.add(status.tobytes())
-            run, z, _, its = _run(self._bnlp, dict(x0=z, p=np.concatenate([params, status == OPEN, status == STICK]),
-                                                   lbg=g0, ubg=g0))
+            corner = status == CORNER
+            bound = np.concatenate([np.zeros(ne + b * nc), np.where(corner, 0.0, free)])
+            flags = np.concatenate([params, status == OPEN, status == STICK, corner])
+            run, z, warm, its = _run(self._bnlp, dict(x0=z, p=flags, lbg=-bound, ubg=bound))
             iters += its
             if run:
                 break
             residual, comp, _, _ = self.metrics(z[:nx], z[nx:], params)
-            if comp <= self.opts.comp_tol and residual <= self.opts.residual_tol:
+            if (comp <= self.opts.comp_tol and residual <= self.opts.residual_tol
+                    and self._corners_stationary(warm[1], corner, params)):
                 return (z[:nx], z[nx:]), iters, True
-            status = self._status(z[:nx], z[nx:], params)
+            seen_open |= status == OPEN
+            seen_closed |= (status == STICK) | (status == SLIP)
+            new = self._status(z[:nx], z[nx:], params)
+            if self.problem.kind == "mpcc":
+                switching = (new == OPEN) != (status == OPEN)
+                new = np.where(corner | (switching & seen_open & seen_closed), CORNER, new)
+            status = new
         return (x, p), iters, False
+
+    def _corners_stationary(self, lam: np.ndarray, corner: np.ndarray, params) -> bool:
+        """B-stationarity at the corners (``g_N = 0, r = 0``) of a branch solution with CasADi's
+        multipliers ``lam`` (of ``f + lam^T g``): opening must not decrease the distance
+        (``lam_g <= 0``, as for a biactive normal pair) and neither may any traction in the cone,
+        ``-(lam_p, lam_T) in K_mu^*`` (``-lam_p >= mu |lam_T|``), both within
+        ``1e-8 max(1, max |lam|)``. Sufficient (the slip piece allows fewer tractions than the
+        cone), and the exact condition at ``mu = 0``."""
+        if not corner.any():
+            return True
+        nc, b, ne = self._nc, self._b, self._ne
+        mu = self.problem.parameters.get(params, "friction")
+        branch = lam[ne:]
+        lam_g, lam_p = branch[:nc], branch[b * nc:]
+        lam_t = np.linalg.norm(branch[nc:b * nc].reshape(b - 1, nc), axis=0)
+        tol = 1e-8 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
+        return bool(np.all(((lam_g <= tol) & (-lam_p >= mu * lam_t - tol))[corner]))
