@@ -341,7 +341,11 @@ class _BuiltMPCC(BuiltFormulation):
                   and comp <= self.opts.comp_tol and residual <= self.opts.residual_tol)
             if ok:
                 return w_new, iters, True
-            if not both.any():
+            if wrong_gap.any() or wrong_p.any():
+                # leave the corners that are not B-stationary along the piece their multiplier
+                # points to (the pressed block's edge: inner pairs in contact, the edge's biactive)
+                candidates.append((fix_gap & ~wrong_gap, fix_p & ~wrong_p))
+            elif not both.any():
                 break
         return w, iters, False
 
