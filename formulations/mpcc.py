@@ -350,8 +350,9 @@ class _BuiltMPCC(BuiltFormulation):
         return w, iters, False
 
 
-#: Per-contact statuses of a frictional branch (a corner, closed without traction: projections only).
-OPEN, STICK, SLIP, CORNER = 0, 1, 2, 3
+#: Per-contact statuses of a frictional branch; projections only: the corner (closed without
+#: traction) and the edge (stuck with the traction on the cone's surface).
+OPEN, STICK, SLIP, CORNER, EDGE = 0, 1, 2, 3, 4
 #: IPOPT's iteration limit in a frictional branch NLP: the right branch from a relaxed solution
 #: takes 1-4 iterations on the generated FCLIB problems, a wrong one (a slip rule at ``s_T = 0``,
 #: an infeasible branch) ran to 500 or into restoration.
@@ -396,16 +397,20 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         ne = problem.n_residual
         self._bounds = dict(lbx=np.concatenate([np.full(nx, -np.inf), np.zeros(nc), np.full((b - 1) * nc, -np.inf)]),
                             lbg=np.zeros(ne + 3 * nc), ubg=np.concatenate([np.zeros(ne), np.full(3 * nc, np.inf)]))
-        # Branch NLP in z = [x; p]: the residual, b equations per contact and p_N (held at 0 at a
-        # corner, free elsewhere), the statuses parameters (a square system for the classical problem).
+        # Branch NLP in z = [x; p]: the residual, b equations per contact and one more row (p_N at
+        # a corner, the cone's surface mu^2 p_N^2 - |r_T|^2 at an edge; free elsewhere), the
+        # statuses parameters (a square system for the classical problem).
         zb = ca.SX.sym("z", nx + b * nc)
-        Pb = ca.SX.sym("P", base.size + 3 * nc)
-        own, flags = Pb[:base.size], split(Pb, base.size, 3)
+        Pb = ca.SX.sym("P", base.size + 4 * nc)
+        own, (is_open, is_stick, is_corner, is_edge) = Pb[:base.size], split(Pb, base.size, 4)
         ab, rb = split(problem.gap_map.render(zb, own), 0, b), split(zb, nx, b)
+        mu_b = own[base.slice("friction")]
+        surface = mu_b**2 * rb[0]**2 - sum(v**2 for v in rb[1:])
         self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
             "x": zb, "p": Pb, "f": problem.distance.render(zb, own) if problem.kind == "mpcc" else ca.SX.zeros(1, 1),
             "g": ca.vertcat(problem.residual_map.render(zb, own),
-                            *coulomb_branch(ab, rb, own[base.slice("friction")], *flags), rb[0])},
+                            *coulomb_branch(ab, rb, mu_b, is_open, is_stick + is_edge, is_corner),
+                            ca.if_else(is_corner, rb[0], surface, True))},
             {"ipopt": {**_ipopt_options(problem, opts), "max_iter": BRANCH_MAX_ITER}, **_NLPSOL})
         self._ne = ne
 
@@ -434,13 +439,20 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         rho = w[nx + nc:nx + b * nc].reshape(b - 1, nc)
         return w[:nx], np.concatenate([pn, (mu * pn * rho).ravel()])
 
-    def _status(self, x, p, params) -> np.ndarray:
+    def _status(self, x, p, params, tol: float | None = None) -> np.ndarray:
         """Per contact the status identified at ``(x, p)``: closed where ``g_N <= p_N``; then
         stick where ``|s_T| < mu p_N - |r_T|`` (the slip smaller than the traction's distance to
-        the cone's surface), else slip."""
+        the cone's surface), else slip. With ``tol`` (projections), the degenerate ones: a corner
+        where ``|g_N|`` and ``|p_N|`` are at most ``tol``, else an edge where ``|s_T|`` and
+        ``|mu p_N - |r_T||`` are and ``p_N`` exceeds it."""
         u, r, mu = self._blocks(x, p, params)
         slip, room = np.linalg.norm(u[:, 1:], axis=1), mu * r[:, 0] - np.linalg.norm(r[:, 1:], axis=1)
-        return np.where(u[:, 0] > r[:, 0], OPEN, np.where(slip < room, STICK, SLIP))
+        status = np.where(u[:, 0] > r[:, 0], OPEN, np.where(slip < room, STICK, SLIP))
+        if tol is None:
+            return status
+        corner = np.maximum(np.abs(u[:, 0]), np.abs(r[:, 0])) <= tol
+        edge = (status != OPEN) & (np.maximum(slip, np.abs(room)) <= tol) & (r[:, 0] > tol)
+        return np.where(corner, CORNER, np.where(edge, EDGE, status))
 
     # ------------------------------------------------------------------ solves
     def solve(self, params, x0, p0, state=None) -> LocalSolution:
@@ -448,18 +460,24 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         params = np.asarray(params, float)
         x0, p0 = np.asarray(x0, float), np.asarray(p0, float)
         state = state or {}
-        if "status" in state and np.array_equal(state["status"], self._status(x0, p0, params)):
-            # The start's statuses are the last solution's: its branch NLP first (one IPOPT solve).
-            (x, p), iters, ok = self._branch_nlp(x0, p0, params)
+        last = state.get("status")
+        if last is not None and np.array_equal(np.where(last < CORNER, last, -1),
+                                                np.where(last < CORNER, self._status(x0, p0, params), -1)):
+            # The start's statuses are the last solution's (its corners and edges kept): its
+            # branch NLP first (one IPOPT solve).
+            (x, p), iters, ok, status = self._branch_nlp(x0, p0, params, 0.0, last)
             if ok:
-                return self._done(x, p, params, True, iters, 1, "converged (branch NLP from the start's branch)")
+                return self._done(x, p, params, True, iters, 1, "converged (branch NLP from the start's branch)",
+                                  status)
 
         def measure(w):
             residual, comp, _, _ = self.metrics(*self._from_nlp(w, params), params)
             return residual, comp
 
+        accepted = {}
+
         def branch_nlp(w, tau):
-            (x, p), iters, ok = self._branch_nlp(*self._from_nlp(w, params), params)
+            (x, p), iters, ok, accepted["status"] = self._branch_nlp(*self._from_nlp(w, params), params, tau)
             return (self._to_nlp(x, p, params) if ok else w), iters, ok
 
         out = scholtes_homotopy(_relaxed(self._solver, self.parameters, params, self._bounds), measure=measure,
@@ -468,64 +486,88 @@ class _BuiltCoulombMPCC(BuiltFormulation):
                                 tau_min=o.tau_min, comp_tol=o.comp_tol, residual_tol=o.residual_tol,
                                 max_homotopy=o.max_homotopy, early_branch=o.early_branch)
         x, p = self._from_nlp(out.w, params)
-        return self._done(x, p, params, out.converged, out.iterations, out.steps, out.message)
+        branch = out.converged and out.message.startswith("converged (branch NLP")
+        return self._done(x, p, params, out.converged, out.iterations, out.steps, out.message,
+                          accepted.get("status") if branch else None)
 
-    def _done(self, x, p, params, converged, iterations, outer, message) -> LocalSolution:
-        state = {"status": self._status(x, p, params)} if converged and self.opts.warm_branch else {}
+    def _done(self, x, p, params, converged, iterations, outer, message, status=None) -> LocalSolution:
+        if status is None:
+            status = self._status(x, p, params)
+        state = {"status": status} if converged and self.opts.warm_branch else {}
         return self._finish(x, p, params, converged=converged, iterations=iterations, outer=outer, state=state,
                             message=message)
 
-    def _branch_nlp(self, x, p, params) -> tuple[tuple[np.ndarray, np.ndarray], int, bool]:
-        """The branch NLP of the statuses identified at ``(x, p)``: returns ``((x, p), iterations,
-        accepted)``. A solution is accepted if Coulomb's natural-map residual is at most
-        ``comp_tol`` and the residual at most ``residual_tol`` (it then satisfies the law, all its
-        signs included), and a projection's corners are B-stationary (:meth:`_corners_stationary`).
-        A branch solution that is not is where the identification erred: the statuses identified
-        there (an open contact that penetrates closes, a stuck one outside the cone slides, a
-        closed one that pulls opens) are tried next, as a primal-dual active-set method would, at
-        most :data:`BRANCH_ROUNDS` times and never twice the same. In a projection, a contact
-        that has been tried both open and closed and would switch again is tried as a corner
-        (``g_N = 0, r = 0``), as a biactive normal pair is."""
+    def _branch_nlp(self, x, p, params, tau: float, status: np.ndarray | None = None):
+        """The branch NLP of ``status`` (default: identified at ``(x, p)``, for a projection with
+        the degenerate statuses within ``10 sqrt(tau) + 100 c``, ``c`` the natural-map residual):
+        returns ``((x, p), iterations, accepted, status)``. A solution is accepted if Coulomb's
+        natural-map residual is at most ``comp_tol`` and the residual at most ``residual_tol`` (it
+        then satisfies the law, all its signs included), and a projection's corners and edges are
+        B-stationary (:meth:`_leave`). A branch solution that is not is where the
+        identification erred: the statuses identified there (an open contact that penetrates
+        closes, a stuck one outside the cone slides, a closed one that pulls opens) are tried
+        next, as a primal-dual active-set method would, at most :data:`BRANCH_ROUNDS` times and
+        never twice the same. In a projection, a contact that has been tried both open and
+        closed and would switch again is tried as a corner, one tried both stuck and sliding as
+        an edge, as a biactive normal pair is; a corner or edge that is not B-stationary leaves
+        along the piece its multipliers point to (:meth:`_leave`)."""
         nx, nc, b, ne = self._nx, self._nc, self._b, self._ne
+        projection = self.problem.kind == "mpcc"
         z, iters, tried = np.concatenate([x, p]), 0, set()
-        status = self._status(x, p, params)
-        seen_open, seen_closed = np.zeros(nc, bool), np.zeros(nc, bool)
+        if status is None:
+            _, comp, _, _ = self.metrics(x, p, params)
+            status = self._status(x, p, params, 10.0 * np.sqrt(tau) + 100.0 * comp if projection else None)
+        seen = {k: np.zeros(nc, bool) for k in (OPEN, STICK, SLIP)}
         free = np.full(nc, np.inf)
         while len(tried) < BRANCH_ROUNDS and status.tobytes() not in tried:
             tried.add(status.tobytes())
-            corner = status == CORNER
-            bound = np.concatenate([np.zeros(ne + b * nc), np.where(corner, 0.0, free)])
-            flags = np.concatenate([params, status == OPEN, status == STICK, corner])
+            held = (status == CORNER) | (status == EDGE)
+            bound = np.concatenate([np.zeros(ne + b * nc), np.where(held, 0.0, free)])
+            flags = np.concatenate([params] + [status == k for k in (OPEN, STICK, CORNER, EDGE)])
             run, z, warm, its = _run(self._bnlp, dict(x0=z, p=flags, lbg=-bound, ubg=bound))
             iters += its
             if run:
                 break
             residual, comp, _, _ = self.metrics(z[:nx], z[nx:], params)
-            if (comp <= self.opts.comp_tol and residual <= self.opts.residual_tol
-                    and self._corners_stationary(warm[1], corner, params)):
-                return (z[:nx], z[nx:]), iters, True
-            seen_open |= status == OPEN
-            seen_closed |= (status == STICK) | (status == SLIP)
+            left = self._leave(warm[1], status, z, params)
+            if comp <= self.opts.comp_tol and residual <= self.opts.residual_tol and np.array_equal(left, status):
+                return (z[:nx], z[nx:]), iters, True, status
+            for k in seen:
+                seen[k] |= status == k
             new = self._status(z[:nx], z[nx:], params)
-            if self.problem.kind == "mpcc":
-                switching = (new == OPEN) != (status == OPEN)
-                new = np.where(corner | (switching & seen_open & seen_closed), CORNER, new)
+            if projection:
+                opens = (new == OPEN) != (status == OPEN)
+                slides = (new == SLIP) & (status == STICK) | (new == STICK) & (status == SLIP)
+                closed = seen[STICK] | seen[SLIP]
+                new = np.where(held, left, np.where(opens & seen[OPEN] & closed, CORNER,
+                                                    np.where(slides & seen[STICK] & seen[SLIP], EDGE, new)))
             status = new
-        return (x, p), iters, False
+        return (x, p), iters, False, status
 
-    def _corners_stationary(self, lam: np.ndarray, corner: np.ndarray, params) -> bool:
-        """B-stationarity at the corners (``g_N = 0, r = 0``) of a branch solution with CasADi's
-        multipliers ``lam`` (of ``f + lam^T g``): opening must not decrease the distance
-        (``lam_g <= 0``, as for a biactive normal pair) and neither may any traction in the cone,
-        ``-(lam_p, lam_T) in K_mu^*`` (``-lam_p >= mu |lam_T|``), both within
-        ``1e-8 max(1, max |lam|)``. Sufficient (the slip piece allows fewer tractions than the
-        cone), and the exact condition at ``mu = 0``."""
-        if not corner.any():
-            return True
+    def _leave(self, lam: np.ndarray, status: np.ndarray, z: np.ndarray, params) -> np.ndarray:
+        """``status`` with the corners and edges of the branch solution ``z`` that are not
+        B-stationary left along the piece their multipliers point to (CasADi's ``lam``, of
+        ``f + lam^T g``: a change ``dc`` of one held row changes the distance by ``-lam dc``), within
+        ``1e-8 max(1, max |lam|)``; the solution is B-stationary where nothing changes.
+
+        Corner (``g_N = 0, r = 0``): opening must not decrease the distance (``lam_g <= 0``, as for
+        a biactive normal pair; else open), nor any traction in the cone, ``-(lam_p, lam_T) in
+        K_mu^*`` (``-lam_p >= mu |lam_T|``; else stick. Sufficient: the slip piece allows fewer
+        tractions; exact at ``mu = 0``). Edge (``u = 0``, ``|r_T| = mu p_N``): neither sliding against
+        the traction (``s_T = -t r_T``, ``t > 0``: ``lam_s . r_T >= 0``; else slip) nor moving it
+        into the cone (``lam_h <= 0`` for ``h = mu^2 p_N^2 - |r_T|^2``; else stick)."""
+        corner, edge = status == CORNER, status == EDGE
+        if not (corner.any() or edge.any()):
+            return status
         nc, b, ne = self._nc, self._b, self._ne
         mu = self.problem.parameters.get(params, "friction")
         branch = lam[ne:]
-        lam_g, lam_p = branch[:nc], branch[b * nc:]
-        lam_t = np.linalg.norm(branch[nc:b * nc].reshape(b - 1, nc), axis=0)
+        lam_n, lam_t, lam_x = branch[:nc], branch[nc:b * nc].reshape(b - 1, nc), branch[b * nc:]
         tol = 1e-8 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
-        return bool(np.all(((lam_g <= tol) & (-lam_p >= mu * lam_t - tol))[corner]))
+        r_t = z[self._nx + nc:self._nx + b * nc].reshape(b - 1, nc)
+        opens = lam_n > tol
+        presses = -lam_x < mu * np.linalg.norm(lam_t, axis=0) - tol
+        slides = np.sum(lam_t * r_t, axis=0) < -tol * np.linalg.norm(r_t, axis=0)
+        enters = lam_x > tol
+        out = np.where(corner & opens, OPEN, np.where(corner & presses, STICK, status))
+        return np.where(edge & slides, SLIP, np.where(edge & enters, STICK, out))
