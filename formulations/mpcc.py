@@ -498,28 +498,42 @@ class _BuiltCoulombMPCC(BuiltFormulation):
                             message=message)
 
     def _branch_nlp(self, x, p, params, tau: float, status: np.ndarray | None = None):
-        """The branch NLP of ``status`` (default: identified at ``(x, p)``, for a projection with
-        the degenerate statuses within ``10 sqrt(tau) + 100 c``, ``c`` the natural-map residual):
-        returns ``((x, p), iterations, accepted, status)``. A solution is accepted if Coulomb's
-        natural-map residual is at most ``comp_tol`` and the residual at most ``residual_tol`` (it
-        then satisfies the law, all its signs included), and a projection's corners and edges are
-        B-stationary (:meth:`_leave`). A branch solution that is not is where the
-        identification erred: the statuses identified there (an open contact that penetrates
-        closes, a stuck one outside the cone slides, a closed one that pulls opens) are tried
-        next, as a primal-dual active-set method would, at most :data:`BRANCH_ROUNDS` times and
-        never twice the same. In a projection, a contact that has been tried both open and
-        closed and would switch again is tried as a corner, one tried both stuck and sliding as
-        an edge, as a biactive normal pair is; a corner or edge that is not B-stationary leaves
-        along the piece its multipliers point to (:meth:`_leave`)."""
+        """The branch NLP of ``status`` (default: identified at ``(x, p)``): returns ``((x, p),
+        iterations, accepted, status)``. A solution is accepted if Coulomb's natural-map residual
+        is at most ``comp_tol`` and the residual at most ``residual_tol`` (it then satisfies the
+        law, all its signs included), and a projection's corners and edges are B-stationary
+        (:meth:`_leave`). A branch solution that is not is where the identification erred: the
+        statuses identified there (an open contact that penetrates closes, a stuck one outside
+        the cone slides, a closed one that pulls opens) are tried next, as a primal-dual
+        active-set method would, at most :data:`BRANCH_ROUNDS` times and never twice the same. In
+        a projection, a contact tried both open and closed that would switch again is tried as a
+        corner, one tried both stuck and sliding as an edge, as a biactive normal pair is; a corner
+        or edge that is not B-stationary leaves along the piece its multipliers point to. Where
+        those rounds fail, a projection's rounds start again from the identification with the
+        degenerate statuses within ``10 sqrt(tau) + 100 c`` (``c`` the natural-map residual at
+        ``(x, p)``; :meth:`_status`)."""
+        starts = [self._status(x, p, params) if status is None else status]
+        if status is None and self.problem.kind == "mpcc":
+            _, comp, _, _ = self.metrics(x, p, params)
+            starts.append(self._status(x, p, params, 10.0 * np.sqrt(tau) + 100.0 * comp))
+        z0, iters, tried = np.concatenate([x, p]), 0, set()
+        for start in starts:
+            z, its, ok, status = self._rounds(z0, start, params, tried)
+            iters += its
+            if ok:
+                return (z[:self._nx], z[self._nx:]), iters, True, status
+        return (x, p), iters, False, status
+
+    def _rounds(self, z, status, params, tried: set) -> tuple[np.ndarray, int, bool, np.ndarray]:
+        """The active-set rounds of :meth:`_branch_nlp` from ``z`` and ``status`` (at most
+        :data:`BRANCH_ROUNDS`, none in ``tried``): ``(z, iterations, accepted, status)``."""
         nx, nc, b, ne = self._nx, self._nc, self._b, self._ne
         projection = self.problem.kind == "mpcc"
-        z, iters, tried = np.concatenate([x, p]), 0, set()
-        if status is None:
-            _, comp, _, _ = self.metrics(x, p, params)
-            status = self._status(x, p, params, 10.0 * np.sqrt(tau) + 100.0 * comp if projection else None)
         seen = {k: np.zeros(nc, bool) for k in (OPEN, STICK, SLIP)}
         free = np.full(nc, np.inf)
-        while len(tried) < BRANCH_ROUNDS and status.tobytes() not in tried:
+        iters = rounds = 0
+        while rounds < BRANCH_ROUNDS and status.tobytes() not in tried:
+            rounds += 1
             tried.add(status.tobytes())
             held = (status == CORNER) | (status == EDGE)
             bound = np.concatenate([np.zeros(ne + b * nc), np.where(held, 0.0, free)])
@@ -531,7 +545,7 @@ class _BuiltCoulombMPCC(BuiltFormulation):
             residual, comp, _, _ = self.metrics(z[:nx], z[nx:], params)
             left = self._leave(warm[1], status, z, params)
             if comp <= self.opts.comp_tol and residual <= self.opts.residual_tol and np.array_equal(left, status):
-                return (z[:nx], z[nx:]), iters, True, status
+                return z, iters, True, status
             for k in seen:
                 seen[k] |= status == k
             new = self._status(z[:nx], z[nx:], params)
@@ -542,7 +556,7 @@ class _BuiltCoulombMPCC(BuiltFormulation):
                 new = np.where(held, left, np.where(opens & seen[OPEN] & closed, CORNER,
                                                     np.where(slides & seen[STICK] & seen[SLIP], EDGE, new)))
             status = new
-        return (x, p), iters, False, status
+        return z, iters, False, status
 
     def _leave(self, lam: np.ndarray, status: np.ndarray, z: np.ndarray, params) -> np.ndarray:
         """``status`` with the corners and edges of the branch solution ``z`` that are not
