@@ -48,11 +48,16 @@ stick (``u = 0``) or slip (``g_N = 0``, ``r_T = -mu p_N s_T / |s_T|``), identifi
 relaxed point (closed where ``g_N <= p_N``; stick where ``|s_T| < mu p_N - |r_T|``), the
 statuses parameters of one NLP built once (:func:`~ddcm_casadi.formulations.friction.coulomb_branch`).
 A branch solution is accepted when the law's natural-map residual is at most ``comp_tol`` (so
-every sign holds) and the residual at most ``residual_tol``. Where no contact is degenerate
-(grazing, or at the stick-slip boundary) the branch is locally the whole admissible set, so a
-projection's branch KKT point is one of the projection; at a degenerate contact it is a KKT point
-of its piece (no B-stationarity test, unlike the normal pairs). With ``warm_branch`` the next
-solve first tries the branch NLP of the start's statuses when they are the last solution's.
+every sign holds) and the residual at most ``residual_tol``; one that is not re-identifies the
+statuses at its own point (a primal-dual active-set round). A projection also has degenerate
+branches, as the biactive normal pairs: the *corner* (``g_N = 0, r = 0``) and the *edge* (stuck,
+``u = 0``, with ``|r_T| = mu p_N``), tried where the rounds switch a contact back and forth or where
+the relaxed point is within ``10 sqrt(tau)`` of them, and accepted only if B-stationary (the
+distance decreases along none of the pieces that meet there, by the signs of the multipliers;
+otherwise the contact leaves along the piece they point to). Where no contact is degenerate the
+branch is locally the whole admissible set, so a projection's branch KKT point is one of the
+projection. With ``warm_branch`` the next solve first tries the branch NLP of the last solution's
+statuses when the start identifies them again.
 
 Measured on 12 generated FCLIB local problems (1-30 contacts, ``mu = 0.3``), IPOPT iterations
 summed over the 12: the first relaxed solve (``tau = 1e-2``, after which the branch NLP usually
