@@ -8,6 +8,8 @@ Writes ``DIR/benchmarks.json`` (a list of records with ``name``, ``unknowns``, `
 timing is the median of repeated runs, and every comparison is a ratio measured in this process
 run (the machines are shared and noisy). ``--quick`` keeps to about 10 minutes on 2 cores; the full
 run takes 40 minutes to 2 hours (the 1e6-unknown continuum alone 25-45 minutes and 15 GB).
+One record is the default FCLIB method on a generated frictional problem against projected
+Gauss-Seidel (``benchmarks/fclib.py`` measures the FCLIB problems themselves).
 
 The floor of one DDCM iteration is one factorisation and solve, with the package's sparse solver
 (:func:`ddcm_casadi.linalg.factorize`), of the same saddle-point system the projection solves,
@@ -564,6 +566,26 @@ def paper_shares(repeats: int) -> list[dict]:
     return out
 
 
+def fclib_hyperstatic(contacts: int, freedoms: int) -> dict:
+    """The default FCLIB method (:func:`~ddcm_casadi.problems.fclib.solve_fclib`) on a generated
+    problem: a body of ``freedoms`` freedoms (``M = I``, random ``H``) pressed onto ``contacts``
+    sticking contacts, so ``W = H^T H`` is singular and the reactions are not unique (plain
+    semismooth Newton stalls there); floor: projected Gauss-Seidel to the same 1e-8."""
+    from ddcm_casadi.problems.fclib import GlobalProblem, solve_fclib
+
+    rng = np.random.default_rng(0)
+    H = rng.normal(size=(freedoms, 3 * contacts))
+    r_bar = np.column_stack([rng.uniform(1, 2, contacts), rng.uniform(-0.1, 0.1, (contacts, 2))]).ravel()
+    local = GlobalProblem(sp.identity(freedoms, format="csr"), sp.csr_matrix(H), -H @ r_bar, np.zeros(3 * contacts),
+                          rng.uniform(0.3, 0.8, contacts), "hyperstatic").local()
+    s = solve_fclib(local, "default", tol=1e-8)
+    ref = solve_fclib(local, "pgs", tol=1e-8, max_sweeps=100_000)
+    return dict(name=f"FCLIB default method, generated hyperstatic problem, {contacts} contacts", unknowns=3 * contacts,
+                data_points=0, seconds=s.seconds, floor_seconds=ref.seconds, ratio=s.seconds / ref.seconds,
+                error=s.error, converged=s.converged, newton_iterations=s.iterations, stages="+".join(
+                    st["stage"] for st in s.log), pgs_sweeps=ref.sweeps, pgs_error=ref.error)
+
+
 def markdown(records: list[dict]) -> str:
     lines = ["| name | unknowns | data points | seconds | floor s | ratio | notes |", "|---|---|---|---|---|---|---|"]
     skip = {"name", "unknowns", "data_points", "seconds", "floor_seconds", "ratio"}
@@ -638,6 +660,7 @@ def main(argv=None) -> int:
             log(rec)
     for rec in paper_shares(3):
         log(rec)
+    log(fclib_hyperstatic(100, 120))
     sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is a folder of scripts
     from first_run import first_run
 

@@ -46,6 +46,7 @@ Trusses
     normal = [0.0, 1.0]     # outward normal (normalised)
     offset = -0.002         # d (m), or offsets = [...] with one value per step
     nodes = [0, 1]          # the nodes that may touch it
+    # friction = 0.3        # Coulomb friction (2-D, 3-D; absent: frictionless)
 
     [[data]]                # one table per material, in order; or a single [data] table
     hookean = { strain_min = -0.01, strain_max = 0.01, points = 2001 }   # or path = "file.csv"
@@ -175,7 +176,12 @@ def _case_obstacles(tables: list[dict], X: np.ndarray, M: np.ndarray, n_factors:
             elif offset.size != steps:
                 what = "[path] load_factors" if n_factors is not None else "the offsets of an earlier obstacle"
                 raise InputError(f"[{label}] offsets has {offset.size} values but {what} has {steps} steps")
-        out.append(Obstacle(normal=normal, offset=offset, nodes=nodes))
+        friction = None
+        if "friction" in ob:
+            friction = casefile.number(label, "friction", ob["friction"])
+            if friction < 0:
+                raise InputError(f"[{label}] friction must be >= 0, got {friction:g}")
+        out.append(Obstacle(normal=normal, offset=offset, nodes=nodes, friction=friction))
     return out
 
 
@@ -255,6 +261,6 @@ register_case_kind(
     "structure",
     sections={"structure": {"nodes", "members", "area", "youngs_modulus", "material", "supports", "loads",
                             "distributed_loads"},
-              "path": {"load_factors"}, "obstacles": {"normal", "offset", "offsets", "nodes"}},
+              "path": {"load_factors"}, "obstacles": {"normal", "offset", "offsets", "nodes", "friction"}},
     arrays={"obstacles"}, parse=parse_case, uses="[path] and [[obstacles]]", default_name="truss",
     kinematics=("small", "finite"))

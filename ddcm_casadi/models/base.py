@@ -643,9 +643,7 @@ class ContactModel:
         for k in range(p.shape[0]):
             status = coulomb.contact_status(np.column_stack([np.zeros(p.shape[1]), coulomb.blocks(s[k], b - 1)]),
                                             np.column_stack([p[k], coulomb.blocks(t[k], b - 1)]), self.friction,
-                                            1e-8 * scales["stress"])
-            moving = np.linalg.norm(coulomb.blocks(s[k], b - 1), axis=1) > 1e-8 * scales["displacement"]
-            status = np.where((status == "slip") & ~moving, "stick", status)
+                                            1e-8 * scales["stress"], 1e-8 * scales["displacement"])
             out[k] = [CONTACT_STATUS.index(v) for v in status]
         return out
 

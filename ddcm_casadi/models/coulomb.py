@@ -70,11 +70,24 @@ def natural_map(u: np.ndarray, r: np.ndarray, mu: np.ndarray) -> np.ndarray:
     return r - project_cone(r - modified_slip(u, mu), mu)
 
 
-def contact_status(u: np.ndarray, r: np.ndarray, mu: np.ndarray, tol: float) -> np.ndarray:
+def tangent_basis(normals: np.ndarray) -> np.ndarray:
+    """``(nc, d - 1, d)``: unit tangents orthogonal to each unit normal, right-handed with it
+    (2-D: ``t = (n_y, -n_x)``; 3-D: ``t_1`` along ``e x n`` for the axis ``e`` least aligned
+    with ``n``, ``t_2 = n x t_1``)."""
+    n = np.asarray(normals, float)
+    if n.shape[1] == 2:
+        return np.stack([n[:, 1], -n[:, 0]], axis=1)[:, None, :]
+    e = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    t1 = np.cross(e, n)
+    t1 /= np.linalg.norm(t1, axis=1)[:, None]
+    return np.stack([t1, np.cross(n, t1)], axis=1)
+
+
+def contact_status(u: np.ndarray, r: np.ndarray, mu: np.ndarray, tol: float, slip_tol: float) -> np.ndarray:
     """Per contact ``"open"``, ``"stick"`` or ``"slip"``: open where ``p_N <= tol``, slip where
     the traction is on the cone's surface (``|r_T| >= mu p_N - tol``) and the slip exceeds
-    ``tol``, stick otherwise."""
+    ``slip_tol``, stick otherwise."""
     u, r = np.asarray(u, float), np.asarray(r, float)
     mu = np.asarray(mu, float).reshape(-1)
     p, t, s = r[:, 0], np.linalg.norm(r[:, 1:], axis=1), np.linalg.norm(u[:, 1:], axis=1)
-    return np.where(p <= tol, "open", np.where((t >= mu * p - tol) & (s > tol), "slip", "stick"))
+    return np.where(p <= tol, "open", np.where((t >= mu * p - tol) & (s > slip_tol), "slip", "stick"))

@@ -236,7 +236,7 @@ def truss_model(*, nodes, members, area, youngs_modulus=None, supports, loads=No
         load_parameter_name="load step" if load_factors is None else "load factor",
         nodes=X, members=M.astype(np.intp), free_dofs=free, contact_nodes=pairs.node_indices(),
         contact_normals=np.asarray(pairs.normals).reshape(pairs.count, d), member_area=A, kinematics=kinematics,
-        prescribed=prescribed)
+        prescribed=prescribed, **pairs.friction_fields(X, free))
 
 
 def _path_steps(from_obstacles: int | None, devices: list, d: int, load_factors=None) -> int | None:

@@ -15,7 +15,7 @@ Every operator is built from index arrays, without a loop over members.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -24,6 +24,7 @@ import scipy.sparse.linalg as spla
 
 from ddcm_casadi.data.dataset import MaterialDataset, PointData
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.models import coulomb
 
 @dataclass(frozen=True)
 class Obstacle:
@@ -37,11 +38,15 @@ class Obstacle:
         ``d`` (m): a constant, or one value per load step (a moving obstacle).
     nodes : sequence of int
         Nodes that may touch this obstacle (one contact pair each).
+    friction : float, optional
+        Coulomb's ``mu >= 0`` (2-D and 3-D trusses; ``None``: frictionless). The obstacle moves
+        along its normal only, so the slip of a step is the node's tangential displacement.
     """
 
     normal: Sequence[float]
     offset: float | Sequence[float]
     nodes: Sequence[int]
+    friction: float | None = None
 
 
 
@@ -226,12 +231,29 @@ class ContactPairs:
         The obstacle's offset of each pair: one value, or one per step.
     n_steps : int or None
         The number of steps the offsets per step give (``None``: all constant).
+    frictions : list of float or None
+        The obstacle's Coulomb coefficient of each pair (``None``: frictionless).
     """
 
     normals: list
     nodes: list
     offsets: list
     n_steps: int | None
+    frictions: list = field(default_factory=list)
+
+    def friction_fields(self, X: np.ndarray, free: np.ndarray) -> dict:
+        """The :class:`~ddcm_casadi.models.base.ContactModel` fields of Coulomb friction if an
+        obstacle has a ``friction``, else none: per pair its unit tangents
+        (:func:`~ddcm_casadi.models.coulomb.tangent_basis`) on its node's dofs, component-major."""
+        if not any(f is not None for f in self.frictions):
+            return {}
+        nn, d = X.shape
+        tangents = coulomb.tangent_basis(np.asarray(self.normals))  # (nc, d - 1, d)
+        dof = (self.node_indices()[:, None] * d + np.arange(d)).ravel()
+        rows = [sp.csr_matrix((tangents[:, j].ravel(), (np.repeat(np.arange(self.count), d), dof)),
+                              shape=(self.count, nn * d)) for j in range(d - 1)]
+        return dict(tangent_operator=sp.vstack(rows).tocsr()[:, free],
+                    friction=np.array([f or 0.0 for f in self.frictions], float))
 
     @property
     def count(self) -> int:
@@ -243,7 +265,7 @@ class ContactPairs:
 
 def contact_pairs(obstacles: Sequence[Obstacle], nn: int, d: int) -> ContactPairs:
     """Check the obstacles and list their contact pairs (normals normalised)."""
-    normals, pair_nodes, offsets = [], [], []
+    normals, pair_nodes, offsets, frictions = [], [], [], []
     steps_from_obstacles = None
     for k, ob in enumerate(obstacles):
         n = np.asarray(ob.normal, dtype=float).ravel()
@@ -262,11 +284,16 @@ def contact_pairs(obstacles: Sequence[Obstacle], nn: int, d: int) -> ContactPair
             if steps_from_obstacles not in (None, off.size):
                 raise InputError("obstacles with offsets per step must all have the same number of steps")
             steps_from_obstacles = off.size
+        if ob.friction is not None and not (np.isfinite(ob.friction) and ob.friction >= 0):
+            raise InputError(f"obstacle {k}: friction must be a number >= 0, got {ob.friction!r}")
+        if ob.friction is not None and d == 1:
+            raise InputError(f"obstacle {k}: friction needs a 2-D or 3-D truss (a 1-D one has no tangent)")
         for node in nodes_k:
             normals.append(n)
             pair_nodes.append(int(node))
             offsets.append(off)
-    return ContactPairs(normals, pair_nodes, offsets, steps_from_obstacles)
+            frictions.append(ob.friction)
+    return ContactPairs(normals, pair_nodes, offsets, steps_from_obstacles, frictions)
 
 
 def load_path(load_factors, steps_from_obstacles: int | None) -> tuple[np.ndarray, int]:

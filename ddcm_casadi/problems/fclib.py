@@ -31,6 +31,7 @@ HDF5 is read with ``h5py`` (the ``fclib`` extra), imported where a file is read 
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 import time
@@ -230,8 +231,27 @@ def natural_map_error(problem: LocalProblem, r: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class FrictionSolution:
-    """A reference solve: reactions ``r`` and velocities ``u`` ``(nc, 3)``, the natural-map
-    error, sweeps, seconds, and whether the error reached the tolerance."""
+    """A solve of an FCLIB problem (:func:`solve_fclib`, :func:`solve_projected_gauss_seidel`).
+
+    Attributes
+    ----------
+    r, u : ndarray (nc, 3)
+        Reactions and velocities ``u = W r + q`` (a global problem's ``H^T v + w``), normal first.
+    error : float
+        :func:`natural_map_error` of ``r``.
+    iterations : int
+        Newton iterations (summed over every solve); projected Gauss-Seidel's sweeps for ``pgs``.
+    seconds : float
+        Wall time of the solve (reading and reducing the problem excluded).
+    converged : bool
+        ``error <= tol``.
+    method : str
+    sweeps : int
+        Projected Gauss-Seidel sweeps (summed over every stage).
+    log : tuple of dict
+        The stages in order: ``stage``, ``iterations``, ``error`` after it, ``seconds``.
+    message : str
+    """
 
     r: np.ndarray
     u: np.ndarray
@@ -239,10 +259,27 @@ class FrictionSolution:
     iterations: int
     seconds: float
     converged: bool
+    method: str = "pgs"
+    sweeps: int = 0
+    log: tuple = ()
+    message: str = ""
 
 
-def solve_projected_gauss_seidel(problem: LocalProblem, *, tol: float = 1e-8, max_sweeps: int = 10_000,
-                                 r0: np.ndarray | None = None) -> FrictionSolution:
+def _project_one(rn: float, r1: float, r2: float, mu: float) -> tuple[float, float, float]:
+    """:func:`~ddcm_casadi.models.coulomb.project_cone` of one 3-vector, in scalars (the sweep's
+    inner loop: numpy's per-call cost on 3-vectors is most of a sweep)."""
+    t = math.hypot(r1, r2)
+    if t <= mu * rn:
+        return rn, r1, r2
+    if mu * t <= -rn:
+        return 0.0, 0.0, 0.0
+    s = (rn + mu * t) / (1.0 + mu * mu)
+    f = mu * s / t
+    return s, f * r1, f * r2
+
+
+def solve_projected_gauss_seidel(problem: LocalProblem | GlobalProblem, *, tol: float = 1e-8,
+                                 max_sweeps: int = 10_000, r0: np.ndarray | None = None) -> FrictionSolution:
     """Projected Gauss-Seidel (an independent reference): sweep the contacts, each updated by the
     De Saxce fixed point ``r_c <- P_K(r_c - rho_c u_hat_c)`` with ``rho_c = 1 / max eig(W_cc)``
     and its own block of ``u`` refreshed, until :func:`natural_map_error` is below ``tol``. Not
@@ -252,21 +289,25 @@ def solve_projected_gauss_seidel(problem: LocalProblem, *, tol: float = 1e-8, ma
     W = sp.csr_matrix(local.W)
     nc = local.n_contacts
     blocks = [W[3 * c:3 * c + 3, 3 * c:3 * c + 3].toarray() for c in range(nc)]
-    rho = np.array([1.0 / max(float(np.max(np.linalg.eigvalsh(0.5 * (B + B.T)))), 1e-300) for B in blocks])
+    rho = [1.0 / max(float(np.max(np.linalg.eigvalsh(0.5 * (B + B.T)))), 1e-300) for B in blocks]
     r = np.zeros(3 * nc) if r0 is None else np.asarray(r0, float).ravel().copy()
-    rows = [W[3 * c:3 * c + 3] for c in range(nc)]
+    # dense rows where W is dense (a reduced global problem): one BLAS product per contact
+    dense = W.nnz > 0.25 * W.shape[0] ** 2
+    rows = [W[3 * c:3 * c + 3].toarray() if dense else W[3 * c:3 * c + 3] for c in range(nc)]
+    q, mu = local.q, [float(m) for m in local.mu]
     error = natural_map_error(local, r)
     sweep = 0
     while error > tol and sweep < max_sweeps:
         for c in range(nc):
-            sl = slice(3 * c, 3 * c + 3)
-            uc = rows[c] @ r + local.q[sl]
-            uhat = modified_slip(uc[None, :], local.mu[c:c + 1])[0]
-            r[sl] = project_cone((r[sl] - rho[c] * uhat)[None, :], local.mu[c:c + 1])[0]
+            un, u1, u2 = rows[c] @ r + q[3 * c:3 * c + 3]
+            un += mu[c] * math.hypot(u1, u2)
+            k, rc = 3 * c, rho[c]
+            r[k], r[k + 1], r[k + 2] = _project_one(r[k] - rc * un, r[k + 1] - rc * u1, r[k + 2] - rc * u2, mu[c])
         sweep += 1
         error = natural_map_error(local, r)
     return FrictionSolution(r.reshape(-1, 3), (W @ r + local.q).reshape(-1, 3), error, sweep,
-                            time.perf_counter() - t0, bool(error <= tol))
+                            time.perf_counter() - t0, bool(error <= tol), "pgs", sweep,
+                            (dict(stage="pgs", iterations=sweep, error=error, seconds=time.perf_counter() - t0),))
 
 
 # ------------------------------------------------------------------ as the project's problems
@@ -285,10 +326,12 @@ class FclibComplementarity:
     problem : ComplementarityProblem
     source : LocalProblem or GlobalProblem
     params : ndarray
-        The parameter values (``friction``, ``traction0 = 0``, and the data vector ``q`` or
-        ``f, w``).
+        The parameter values (``friction``, ``traction0 = 0``, the data vector ``q`` or
+        ``f, w``, and with a proximal term the centre ``r_c = 0``: :meth:`centred`).
     velocity_ref, reaction_ref : float
         The physical size of one scaled unit of ``x`` (``u`` or ``v``) and of ``r``.
+    proximal : float
+        ``eta`` of the proximal term (0: none).
     """
 
     problem: object
@@ -296,6 +339,7 @@ class FclibComplementarity:
     params: np.ndarray
     velocity_ref: float
     reaction_ref: float
+    proximal: float = 0.0
 
     def reactions(self, p: np.ndarray) -> np.ndarray:
         """FCLIB's contact-major reactions ``r`` from the scaled pressures ``p``."""
@@ -307,65 +351,326 @@ class FclibComplementarity:
         """The cold start ``x = 0, r = 0``."""
         return np.zeros(self.problem.n_x), np.zeros(self.problem.n_pairs)
 
+    def point(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The scaled ``(x, p)`` of the contact-major reactions ``r``: ``x`` the velocities
+        ``u = W r + q`` (local) or ``v = M^-1 (H r + f)`` (global; one sparse solve with ``M``), so a warm start satisfies the linear equations and only Coulomb's law is off
+        (at the centre, the proximal term vanishes)."""
+        r = np.asarray(r, float).ravel()
+        order = _component_major(r.size // 3)
+        src = self.source
+        if isinstance(src, LocalProblem):
+            x = (src.W @ r + src.q)[order]
+        else:
+            x = spla.spsolve(sp.csc_matrix(src.M, dtype=float), sp.csr_matrix(src.H) @ r + np.asarray(src.f, float))
+        return x / self.velocity_ref, r[order] / self.reaction_ref
+
+    def centred(self, r: np.ndarray) -> np.ndarray:
+        """The parameters with the proximal centre at the contact-major reactions ``r``."""
+        if not self.proximal:
+            raise InputError("this FCLIB complementarity problem has no proximal term (proximal = 0)")
+        params = np.array(self.params)
+        params[self.problem.parameters.slice("center")] = np.asarray(r, float).ravel()[_component_major(
+            self.source.n_contacts)]
+        return params
+
     def error(self, x: np.ndarray, p: np.ndarray, local: LocalProblem | None = None) -> float:
-        """FCLIB's natural-map error of the solution (:func:`natural_map_error`; a global problem's
-        velocities ``u = H^T v + w`` from ``v``, over the reduced ``|q|``: pass ``local`` to reuse it)."""
-        r = self.reactions(p).reshape(-1, 3)
-        if isinstance(self.source, LocalProblem):
-            return natural_map_error(self.source, r)
-        u = (sp.csr_matrix(self.source.H).T @ (self.velocity_ref * np.asarray(x, float)) + self.source.w).reshape(-1, 3)
-        local = local or self.source.local()
-        scale = float(np.linalg.norm(local.q))
-        return float(np.linalg.norm(natural_map(u, r, self.source.mu))) / (scale if scale > 0 else 1.0)
+        """FCLIB's natural-map error of the reactions (:func:`natural_map_error`) in the problem
+        itself (without a proximal term). A global problem's velocities are those at equilibrium
+        with the reactions, ``u = H^T M^-1 (H r + f) + w = W r + q`` (its local reduction; pass
+        ``local`` to reuse it), not ``H^T v + w`` of the iterate's ``v``: an iterate off
+        equilibrium is not credited. ``x`` is not needed (kept for the solution's pair)."""
+        return natural_map_error(self.source.local() if local is None else local, self.reactions(p).reshape(-1, 3))
 
 
-def as_complementarity_problem(source: LocalProblem | GlobalProblem) -> FclibComplementarity:
+def as_complementarity_problem(source: LocalProblem | GlobalProblem, *, proximal: float = 0.0) -> FclibComplementarity:
     r"""An FCLIB problem as a frictional complementarity problem that every formulation solves.
 
     Local: unknowns ``x = u``, residual ``x - W r - q``, "gaps" ``x`` (so ``(g_N, s_T) = u``).
     Global: unknowns ``x = v``, residual ``M v - H r - f``, "gaps" ``H^T v + w``. Vectors are
     reordered component-major. Scales: velocities by ``|q|_inf`` (local; global ``|w|_inf`` or the
     size of ``H^T M^{-1} f``), reactions so that ``W`` (or ``M``, ``H``) is O(1).
+
+    ``proximal = eta > 0`` adds the proximal-point term ``eta (r - r_c)`` to the velocities,
+    ``u = W r + q + eta (r - r_c)`` (global ``u = H^T v + w + eta (r - r_c)``), with the centre
+    ``r_c`` a parameter (:meth:`FclibComplementarity.centred`): the Delassus operator becomes
+    ``W + eta I``, positive definite where ``W`` is only semidefinite (more reactions than the
+    bodies' freedoms), and a solution with ``r = r_c`` solves the problem itself
+    (:func:`solve_fclib`).
     """
     from ddcm_casadi.problems.contract import ComplementarityProblem
     from ddcm_casadi.problems.maps import Affine
     from ddcm_casadi.problems.parameters import Parameters
 
+    eta = float(proximal)
+    if not (np.isfinite(eta) and eta >= 0):
+        raise InputError(f"proximal must be a finite number >= 0, got {proximal!r}")
     nc = source.n_contacts
+    m = 3 * nc
     order = _component_major(nc)
     mu = np.atleast_1d(np.asarray(source.mu, float))
     tiny = np.finfo(float).tiny
+    center = dict(center=m) if eta else {}
     if isinstance(source, LocalProblem):
         W = source.W[order][:, order].tocsr()
         q = source.q[order]
         u_ref = max(float(np.max(np.abs(q), initial=0.0)), tiny)
         d = W.diagonal()
         r_ref = u_ref / max(float(np.mean(d[d > 0])) if np.any(d > 0) else 1.0, tiny)
-        P = Parameters(friction=nc, traction0=2 * nc, q=3 * nc)
-        n = 3 * nc
-        residual = Affine(sp.hstack([sp.identity(n), -(r_ref / u_ref) * W]),
-                          sp.hstack([sp.csr_matrix((n, 3 * nc)), -sp.identity(n) / u_ref]))
-        gap = Affine(sp.hstack([sp.identity(n), sp.csr_matrix((n, n))]), sp.csr_matrix((n, P.size)))
-        params = P.pack(friction=mu, traction0=0.0, q=q)
-        unknowns, x_ref, g_ref = (("u", n),), u_ref, u_ref
+        P = Parameters(friction=nc, traction0=2 * nc, q=m, **center)
+        blocks = [sp.csr_matrix((m, 3 * nc)), -sp.identity(m) / u_ref] + ([eta * sp.identity(m) / u_ref] if eta else [])
+        residual = Affine(sp.hstack([sp.identity(m), -(r_ref / u_ref) * (W + eta * sp.identity(m))]), sp.hstack(blocks))
+        gap = Affine(sp.hstack([sp.identity(m), sp.csr_matrix((m, m))]), sp.csr_matrix((m, P.size)))
+        params = P.pack(friction=mu, traction0=0.0, q=q, **{k: 0.0 for k in center})
+        unknowns, x_ref, g_ref = (("u", m),), u_ref, u_ref
     else:
         M, H = sp.csr_matrix(source.M, dtype=float), sp.csr_matrix(source.H, dtype=float)[:, order].tocsr()
         f, w = np.asarray(source.f, float), np.asarray(source.w, float)[order]
         n = M.shape[0]
         f_ref = max(float(np.max(np.abs(f), initial=0.0)), tiny)
         h = max(float(abs(H).max()) if H.nnz else 1.0, tiny)
-        m = max(float(np.max(np.abs(M.diagonal()), initial=0.0)), tiny)
-        g_ref = max(float(np.max(np.abs(w), initial=0.0)), f_ref * h / m, tiny)
+        m_ref = max(float(np.max(np.abs(M.diagonal()), initial=0.0)), tiny)
+        g_ref = max(float(np.max(np.abs(w), initial=0.0)), f_ref * h / m_ref, tiny)
         x_ref, r_ref = g_ref / h, f_ref / h
-        P = Parameters(friction=nc, traction0=2 * nc, f=n, w=3 * nc)
+        P = Parameters(friction=nc, traction0=2 * nc, f=n, w=m, **center)
         residual = Affine(sp.hstack([(x_ref / f_ref) * M, -(r_ref / f_ref) * H]),
-                          sp.hstack([sp.csr_matrix((n, 3 * nc)), -sp.identity(n) / f_ref, sp.csr_matrix((n, 3 * nc))]))
-        gap = Affine(sp.hstack([(x_ref / g_ref) * H.T, sp.csr_matrix((3 * nc, 3 * nc))]),
-                     sp.hstack([sp.csr_matrix((3 * nc, 3 * nc + n)), sp.identity(3 * nc) / g_ref]))
-        params = P.pack(friction=mu, traction0=0.0, f=f, w=w)
+                          sp.hstack([sp.csr_matrix((n, 3 * nc)), -sp.identity(n) / f_ref, sp.csr_matrix((n, P.size - n - 3 * nc))]))
+        blocks = [sp.csr_matrix((m, 3 * nc + n)), sp.identity(m) / g_ref] + ([-eta * sp.identity(m) / g_ref] if eta else [])
+        prox = (eta * r_ref / g_ref) * sp.identity(m) if eta else sp.csr_matrix((m, m))
+        gap = Affine(sp.hstack([(x_ref / g_ref) * H.T, prox]), sp.hstack(blocks))
+        params = P.pack(friction=mu, traction0=0.0, f=f, w=w, **{k: 0.0 for k in center})
         unknowns = (("v", n),)
     problem = ComplementarityProblem(
         kind="mcp", parameters=P, unknowns=unknowns, residual_map=residual, gap_map=gap, distance=None,
         gap_ref=g_ref, pressure_ref=r_ref, contact_stiffness=r_ref / g_ref, fb_alpha=1.0 / g_ref,
         fb_beta=1.0 / r_ref, contact_law="coulomb", kinematics="small", block=3)
-    return FclibComplementarity(problem, source, params, x_ref, r_ref)
+    return FclibComplementarity(problem, source, params, x_ref, r_ref, eta)
+
+
+# ------------------------------------------------------------------------------- one entry point
+#: The formulations :func:`solve_fclib` runs by name: the registered formulation and its options.
+FORMULATION_METHODS: dict[str, tuple[str, dict]] = {
+    "fischer_burmeister": ("fischer_burmeister", {}),
+    "natural_map": ("fischer_burmeister", {"coulomb_function": "natural_map"}),
+    "augmented_lagrangian": ("augmented_lagrangian", {}),
+    "penalty": ("penalty", {}),
+}
+
+
+def frictional_methods() -> tuple[str, ...]:
+    """Every method of :func:`solve_fclib`: ``default``, ``pgs``, :data:`FORMULATION_METHODS`, then
+    any other registered formulation that supports the ``coulomb`` contact law."""
+    from ddcm_casadi import formulations
+
+    others = [name for name in formulations.available() if name not in FORMULATION_METHODS
+              and "coulomb" in formulations.get(name).supported_contact_laws]
+    return ("default", "pgs", *FORMULATION_METHODS, *others)
+
+#: The default method's projected Gauss-Seidel target before Newton (the FCLIB benchmarks' loose level).
+PGS_TOL = 1e-4
+#: The proximal ``eta`` is ``PROXIMAL_FACTOR min(1, e / PGS_TOL)`` times the mean diagonal of ``W``,
+#: rounded down to a power of ten (one build per power), never increasing, at least ``10^PROXIMAL_MIN_LEVEL``.
+PROXIMAL_FACTOR = 0.1
+#: Sweeps (at least) past PGS_TOL that measure projected Gauss-Seidel's rate: the default method
+#: goes on with it if that rate reaches ``tol`` in at most PGS_PATIENCE times the sweeps so far.
+PGS_PROBE = 5
+PGS_PATIENCE = 2.0
+PROXIMAL_MIN_LEVEL = -12
+#: Proximal steps without a 0.1 % decrease of the best error before the default method goes back to
+#: projected Gauss-Seidel.
+PROXIMAL_STALL = 3
+#: Semismooth Newton iterations per stage of the default method (its own stopping tests at
+#: :data:`NEWTON_TOL`; the natural-map error decides).
+NEWTON_MAX_ITER = 30
+NEWTON_TOL = 1e-12
+
+
+def _formulation(method: str, options: dict):
+    """The formulation of ``method`` (:data:`FORMULATION_METHODS` or a registered name) with ``options``."""
+    from ddcm_casadi import formulations
+
+    name, base = FORMULATION_METHODS.get(method, (method, {}))
+    return formulations.get(name, **{**base, **options})
+
+
+def _newton(built, fc: FclibComplementarity, params: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, bool, int]:
+    """``(r, converged, iterations)``: the formulation's semismooth Newton (its published system,
+    without the smoothing fallback) on ``fc`` from the reactions ``r``."""
+    from ddcm_casadi.loops.newton import newton_solve
+
+    system = built.newton_system()
+    z0, P = built.newton_point(params, *fc.point(r))
+    f = system.functions
+    res = newton_solve(f.rj, f.r, z0, P, jacobian=f.jacobian, tol=NEWTON_TOL, residual_tol=NEWTON_TOL,
+                       max_iter=NEWTON_MAX_ITER)
+    return fc.reactions(system.unpack(res.z)["p"]), res.converged, res.iterations
+
+
+def _positive_int(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= value <= 1_000_000:
+        raise InputError(f"{name} must be an integer in 1..1000000, got {value!r}")
+    return int(value)
+
+
+def solve_fclib(source: LocalProblem | GlobalProblem | str | os.PathLike, method: str = "default", *,
+                tol: float = 1e-8, r0: np.ndarray | None = None, max_sweeps: int = 1000, max_rounds: int = 3,
+                max_proximal: int = 40, newton: str = "augmented_lagrangian", **options) -> FrictionSolution:
+    r"""Solve an FCLIB problem to the natural-map error ``tol`` (:func:`natural_map_error`).
+
+    Parameters
+    ----------
+    source : LocalProblem, GlobalProblem or path
+        The problem, or an FCLIB file (:func:`read_fclib`).
+    method : str
+        ``"default"`` (below); ``"pgs"`` (:func:`solve_projected_gauss_seidel`, ``max_sweeps``);
+        or a formulation of :data:`FORMULATION_METHODS` (``fischer_burmeister``: the SOC
+        Fischer--Burmeister function, ``natural_map``, ``augmented_lagrangian``: Alart--Curnier,
+        ``penalty``; :func:`frictional_methods` lists them all), built on :func:`as_complementarity_problem` and solved once by its semismooth
+        Newton from ``r0`` (default: the cold start ``r = 0``).
+    tol : float
+        The natural-map error to reach, in ``[1e-15, 1)``.
+    r0 : (nc, 3) array, optional
+        Start reactions.
+    max_sweeps, max_rounds, max_proximal : int
+        Sweeps per projected Gauss-Seidel stage; rounds and proximal steps per round of the
+        default method.
+    newton : str
+        The formulation of the default method's Newton stages.
+    **options
+        Options of the formulation (``method`` or ``newton``).
+
+    Returns
+    -------
+    FrictionSolution
+        Reactions, velocities, error, Newton iterations, sweeps, seconds, ``converged``
+        (``error <= tol``) and the stages run (``log``).
+
+    Notes
+    -----
+    The default method is a hybrid in the spirit of Siconos' nonsmooth-Newton hybrids:
+
+    1. projected Gauss-Seidel to :data:`PGS_TOL` (the active set, roughly), then on to ``tol``
+       if its rate over :data:`PGS_PROBE` or more sweeps says that takes at most
+       :data:`PGS_PATIENCE` times the sweeps so far;
+    2. semismooth Newton of the ``newton`` formulation from the best point;
+    3. if Newton stalls: proximal-point steps ``r_{k+1}`` = the solution of the problem with
+       ``u = W r + q + eta_k (r - r_k)`` (:func:`as_complementarity_problem` with ``proximal``),
+       each by the same Newton from ``r_k``; ``eta_k`` shrinks with the error
+       (:data:`PROXIMAL_FACTOR`), so the steps approach Newton's on the problem itself while
+       ``W + eta I`` keeps the Jacobian nonsingular where ``W`` is only semidefinite (more
+       reaction components in contact than the bodies' freedoms: Newton's Jacobian is then
+       singular on the stick pieces);
+    4. if the proximal steps stall (:data:`PROXIMAL_STALL`): projected Gauss-Seidel from the best
+       point to a hundredth of its error, then 2-4 again, at most ``max_rounds`` times.
+
+    The best point met is returned. Nothing guarantees convergence (Coulomb friction is not a
+    potential); ``converged`` says (``docs/maths.md``, section 15).
+    """
+    methods = frictional_methods()
+    if method not in methods:
+        raise InputError(f"unknown FCLIB method {method!r}; known: {', '.join(methods)}")
+    if newton not in methods[2:]:
+        raise InputError(f"unknown Newton formulation {newton!r}; known: {', '.join(methods[2:])}")
+    if not (isinstance(tol, (int, float)) and 1e-15 <= tol < 1):
+        raise InputError(f"tol must be in [1e-15, 1), got {tol!r}")
+    max_sweeps, max_rounds, max_proximal = (_positive_int(k, v) for k, v in (
+        ("max_sweeps", max_sweeps), ("max_rounds", max_rounds), ("max_proximal", max_proximal)))
+    if options and method == "pgs":
+        raise InputError(f"method 'pgs' takes no formulation options, got {', '.join(sorted(options))}")
+    problem = source if isinstance(source, (LocalProblem, GlobalProblem)) else read_fclib(source)
+    local = problem.local()
+    if r0 is not None:
+        r0 = np.asarray(r0, float).ravel()
+        if r0.size != 3 * local.n_contacts or not np.all(np.isfinite(r0)):
+            raise InputError(f"r0 must hold 3 finite reactions per contact ({3 * local.n_contacts}), got {r0.size}")
+    t0 = time.perf_counter()
+    if method == "pgs":
+        return solve_projected_gauss_seidel(local, tol=tol, max_sweeps=max_sweeps, r0=r0)
+    if method == "default":
+        return _solve_default(problem, local, tol, r0, max_sweeps, max_rounds, max_proximal,
+                              _formulation(newton, options), t0)
+    fc = as_complementarity_problem(problem)
+    built = _formulation(method, options).build(fc.problem)
+    sol = built.solve(fc.params, *(fc.start() if r0 is None else fc.point(r0)))
+    error = fc.error(sol.x, sol.p, local)
+    seconds = time.perf_counter() - t0
+    r = fc.reactions(sol.p)
+    return FrictionSolution(r.reshape(-1, 3), (local.W @ r + local.q).reshape(-1, 3), error, sol.iterations,
+                            seconds, bool(error <= tol), method, 0,
+                            (dict(stage=method, iterations=sol.iterations, error=error, seconds=seconds),), sol.message)
+
+
+def _solve_default(problem: LocalProblem | GlobalProblem, local: LocalProblem, tol: float, r0, max_sweeps: int, max_rounds: int,
+                   max_proximal: int, formulation, t0: float) -> FrictionSolution:
+    """The default method of :func:`solve_fclib` (see there)."""
+    log: list[dict] = []
+    counts = dict(iterations=0, sweeps=0)
+
+    def stage(name: str, iterations: int, error: float, sweeps: int = 0, **extra) -> None:
+        counts["iterations"] += iterations
+        counts["sweeps"] += sweeps
+        log.append(dict(stage=name, iterations=sweeps or iterations, error=error,
+                        seconds=time.perf_counter() - t0, **extra))
+
+    pgs = solve_projected_gauss_seidel(local, tol=max(tol, PGS_TOL), max_sweeps=max_sweeps, r0=r0)
+    stage("pgs", 0, pgs.error, pgs.iterations)
+    if tol < pgs.error <= PGS_TOL and pgs.iterations:
+        # PGS on, if its rate over a few more sweeps reaches tol in at most PGS_PATIENCE times the sweeps so far
+        more = solve_projected_gauss_seidel(local, tol=tol, max_sweeps=max(PGS_PROBE, pgs.iterations // 5), r0=pgs.r)
+        stage("pgs", 0, more.error, more.iterations)
+        rate = (more.error / pgs.error) ** (1.0 / max(more.iterations, 1)) if pgs.error > 0 else 0.0
+        needed = math.log(tol / more.error) / math.log(rate) if 0 < rate < 1 and more.error > tol else 0.0
+        pgs = more
+        if more.error > tol and 0 < rate < 1 and needed <= PGS_PATIENCE * counts["sweeps"]:
+            pgs = solve_projected_gauss_seidel(local, tol=tol, max_sweeps=int(2 * needed) + PGS_PROBE, r0=more.r)
+            stage("pgs", 0, pgs.error, pgs.iterations)
+            if pgs.error > more.error:
+                pgs = more
+    best_r, best_e = pgs.r.ravel(), pgs.error
+    d = local.W.diagonal()
+    scale = float(np.mean(d[d > 0])) if np.any(d > 0) else 1.0
+    fc = built = None
+    proximal: dict[int, tuple] = {}  # one build per power of ten of eta
+    for _ in range(max_rounds if best_e > tol else 0):
+        if built is None:
+            fc = as_complementarity_problem(problem)
+            built = formulation.build(fc.problem)
+        r, _, its = _newton(built, fc, fc.params, best_r)
+        e = natural_map_error(local, r)
+        stage("newton", its, e)
+        if e < best_e:
+            best_r, best_e = r, e
+        if best_e <= tol:
+            break
+        r, e, level, stalls, steps, its = best_r, best_e, None, 0, 0, 0
+        while steps < max_proximal and stalls < PROXIMAL_STALL and best_e > tol:
+            steps += 1
+            wanted = max(PROXIMAL_MIN_LEVEL, math.floor(math.log10(PROXIMAL_FACTOR * min(1.0, e / PGS_TOL))))
+            level = wanted if level is None else min(level, wanted)
+            if level not in proximal:
+                fcp = as_complementarity_problem(problem, proximal=scale * 10.0**level)
+                proximal[level] = fcp, formulation.build(fcp.problem)
+            fcp, bp = proximal[level]
+            sol = bp.solve(fcp.centred(r), *fcp.point(r))  # with the formulation's smoothing fallback
+            its += sol.iterations
+            if not sol.converged:  # the step's own problem failed: regularise more, from the same centre
+                level, stalls = min(level + 1, 0), stalls + 1
+                continue
+            r = fcp.reactions(sol.p)
+            e = natural_map_error(local, r)
+            if e < (1 - 1e-3) * best_e:
+                best_r, best_e, stalls = r, e, 0
+            else:
+                stalls += 1
+        stage("proximal", its, best_e, steps=steps, eta=scale * 10.0**level if level is not None else 0.0)
+        if best_e <= tol:
+            break
+        pgs = solve_projected_gauss_seidel(local, tol=max(tol, best_e / 100), max_sweeps=max_sweeps, r0=best_r)
+        stage("pgs", 0, pgs.error, pgs.iterations)
+        if pgs.error < best_e:
+            best_r, best_e = pgs.r.ravel(), pgs.error
+        if best_e <= tol:
+            break
+    converged = bool(best_e <= tol)
+    return FrictionSolution(best_r.reshape(-1, 3), (local.W @ best_r + local.q).reshape(-1, 3), best_e,
+                            counts["iterations"], time.perf_counter() - t0, converged, "default", counts["sweeps"],
+                            tuple(log), "converged" if converged else f"error {best_e:.1e} > tol after {len(log)} stages")

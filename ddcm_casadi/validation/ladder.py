@@ -49,7 +49,7 @@ from ddcm_casadi.validation import continuum as continuum_rungs
 from ddcm_casadi.validation.quality_rungs import rung_search_quality
 from ddcm_casadi.validation.fixed_points import check_fixed_points
 from ddcm_casadi.validation.finite_rungs import rung_von_mises
-from ddcm_casadi.validation import finite_strain_rungs, hard_device_rungs, two_body_rungs
+from ddcm_casadi.validation import finite_strain_rungs, friction_rungs, hard_device_rungs, mindlin, two_body_rungs
 from ddcm_casadi.validation.verification import (  # noqa: F401 - as_records, markdown: ddcm-validate's API
     Check, as_records, fitted_rate, markdown,
 )
@@ -326,6 +326,8 @@ RUNGS: dict[str, Callable] = {
     **finite_strain_rungs.RUNGS,
     **hard_device_rungs.RUNGS,
     **two_body_rungs.RUNGS,
+    **friction_rungs.RUNGS,
+    **mindlin.RUNGS,
 }
 
 

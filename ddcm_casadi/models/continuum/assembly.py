@@ -22,6 +22,7 @@ import skfem
 from ddcm_casadi.data.dataset import MaterialDataset, PointData
 from ddcm_casadi.data.metric import isotropic_elasticity
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.models import coulomb
 from ddcm_casadi.models.continuum import fem, mortar
 from ddcm_casadi.models.continuum.mesh import select_facets
 from ddcm_casadi.models.continuum.inputs import (DEFAULT_SEARCH_SHARE, BodyContact, BodyForce, Contact, Material,
@@ -253,19 +254,6 @@ def _normal_rows(disc: fem.Discretisation, dofs: np.ndarray, normals: np.ndarray
     return sp.csr_matrix((normals.ravel(), (np.repeat(np.arange(nc), d), cols.ravel())), shape=(nc, disc.n_dofs))
 
 
-def tangent_basis(normals: np.ndarray) -> np.ndarray:
-    """``(nc, d - 1, d)``: unit tangents orthogonal to each unit normal, right-handed with it
-    (2-D: ``t = (n_y, -n_x)``; 3-D: ``t_1`` along ``e x n`` for the axis ``e`` least aligned
-    with ``n``, ``t_2 = n x t_1``)."""
-    n = np.asarray(normals, float)
-    if n.shape[1] == 2:
-        return np.stack([n[:, 1], -n[:, 0]], axis=1)[:, None, :]
-    e = np.eye(3)[np.argmin(np.abs(n), axis=1)]
-    t1 = np.cross(e, n)
-    t1 /= np.linalg.norm(t1, axis=1)[:, None]
-    return np.stack([t1, np.cross(n, t1)], axis=1)
-
-
 def friction_fields(disc: fem.Discretisation, contacts: Sequence, contact: dict, counterparts: list,
                     free: np.ndarray, n_steps: int) -> dict:
     """The :class:`~ddcm_casadi.models.base.ContactModel` fields of Coulomb friction
@@ -285,7 +273,7 @@ def friction_fields(disc: fem.Discretisation, contacts: Sequence, contact: dict,
     for c in contacts:
         if c.friction is not None and not (np.isfinite(c.friction) and c.friction >= 0):
             raise InputError(f"contact {c.name!r}: friction must be a number >= 0, got {c.friction!r}")
-    tangents = tangent_basis(normals)  # (nc, d - 1, d)
+    tangents = coulomb.tangent_basis(normals)  # (nc, d - 1, d)
     rows = sp.vstack([_normal_rows(disc, contact["contact_dofs"], tangents[:, j]) for j in range(tangents.shape[1])])
     motion = np.stack([np.asarray(counterparts[o].displacements(n_steps)) for o in owner], axis=1)  # (steps, nc, d)
     offsets = -np.einsum("snd,njd->sjn", motion, tangents).reshape(n_steps, -1)

@@ -41,8 +41,9 @@ from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import block_diagonal, isotropic_elasticity
 from ddcm_casadi.models.base import ContactModel, FigureSpec, LocalKinematics, drawn_formulation
 from ddcm_casadi.models.continuum import fem, finite
+from ddcm_casadi.models.coulomb import tangent_basis
 from ddcm_casadi.models.continuum.assembly import (contact_pairs, element_materials, free_dofs, friction_fields,
-                                                   isotropic_law, tangent_basis,
+                                                   isotropic_law,
                                                    point_data, reference_loads, step_count)
 from ddcm_casadi.models.continuum.inputs import BodyContact, BodyForce, Contact, Material, Support, Traction
 from ddcm_casadi.models.continuum.mesh import check_mesh, describe as describe_mesh
@@ -346,7 +347,7 @@ class ContinuumModel(ContactModel):
 
     def tangential_force_vectors(self, traction: np.ndarray) -> np.ndarray:
         """Nodal friction forces ``a r_T . t`` (N; N/m in 2-D) per pair, ``(..., nc, d)``, from the
-        tangential tractions (component-major, :func:`~ddcm_casadi.models.continuum.assembly.tangent_basis`)."""
+        tangential tractions (component-major, :func:`~ddcm_casadi.models.coulomb.tangent_basis`)."""
         t = tangent_basis(self.contact_normals)  # (nc, d - 1, d)
         r = np.asarray(traction, float)
         r = r.reshape(r.shape[:-1] + (self.dimension - 1, self.n_contacts))

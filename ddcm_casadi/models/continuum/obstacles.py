@@ -412,8 +412,8 @@ class SignedDistance(Obstacle):
 def moving(obstacle: Obstacle, motion) -> Obstacle:
     """``obstacle`` moved along ``motion`` (one displacement vector per step, ``(n_steps, d)``):
     its ``travel`` becomes the path's length so far (the load parameter of tables and figures)
-    and its ``direction`` the path's overall direction (the first step's if it ends where it
-    began)."""
+    and its ``direction`` that of its first move (a press, then a shear: the pressing direction,
+    along which the contact force is resolved)."""
     import dataclasses
 
     m = np.asarray(motion, dtype=float)
@@ -424,5 +424,5 @@ def moving(obstacle: Obstacle, motion) -> Obstacle:
         raise InputError(f"obstacle {obstacle.name!r}: motion must be finite")
     steps = np.diff(np.vstack([np.zeros((1, m.shape[1])), m]), axis=0)
     length = np.cumsum(np.linalg.norm(steps, axis=1))
-    overall = m[-1] if np.any(m[-1]) else next((v for v in m if np.any(v)), obstacle.offset(1.0))
-    return dataclasses.replace(obstacle, motion=m, travel=length, direction=tuple(overall))
+    first = next((v for v in steps if np.any(v)), obstacle.offset(1.0))
+    return dataclasses.replace(obstacle, motion=m, travel=length, direction=tuple(first))
