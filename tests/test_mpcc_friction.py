@@ -85,7 +85,7 @@ def test_generated_problems_have_open_stick_and_slip_contacts(solved):
     for fc, sol in solved.values():
         s = sol["augmented_lagrangian"]
         u = blocks(fc.problem.gap_map.value(np.concatenate([s.x, s.p]), fc.params), 3)
-        seen.update(contact_status(u, blocks(s.p, 3), fc.source.mu, 1e-9))
+        seen.update(contact_status(u, blocks(s.p, 3), fc.source.mu, 1e-9, 1e-9))
     assert seen == {"open", "stick", "slip"}
 
 
