@@ -66,7 +66,7 @@ ends the solve) took 301 in this form, 622 in the viscous form
 ``mu^2 p_N^2 >= |r_T|^2``), 1720 with 4 failures with ``|s_T|`` lifted to a variable
 ``sigma^2 >= |s_T|^2`` (exact, but degenerate at stick); a plain homotopy down to ``tau = 1e-12``
 (no branch NLP) failed 4, 5 and 10 times. With the branch NLP (and ``friction_tau0 = 1e-3``) this
-form solves all 12 in 10-34 iterations (``benchmarks/mpcc_friction.py``).
+form solves all 12 in 6-28 iterations (``benchmarks/mpcc_friction.py``).
 """
 
 from __future__ import annotations
@@ -106,8 +106,10 @@ class MPCC(Formulation):
             First relaxation ``tau`` of ``g p <= tau`` (scaled).
         friction_tau0 : float
             First relaxation of a frictional problem's ``r . u_hat <= tau`` (scaled; see the
-            module). Summed IPOPT iterations on 18 generated FCLIB problems (3-30 contacts,
-            ``mu`` 0.1-1): 1459 from ``1e-2``, 884 from ``1e-3``, 2438 from ``1e-4``.
+            module). Summed IPOPT iterations from ``1e-2``, ``1e-3``, ``1e-4``: 769, 922, 2555 on 18
+            generated FCLIB problems (3-30 contacts, ``mu`` 0.1-1); 274, 191, 311 on 12 others
+            (1-30 contacts); 1188, 742 (``1e-2``, ``1e-3``) on the friction rungs' block and
+            incline, classical and DDCM.
         tau_factor : float
             ``tau <- tau_factor * tau`` between homotopy steps (0 < factor < 1).
         comp_tol : float
