@@ -182,7 +182,8 @@ def coulomb_branch(a: list, r: list, mu, is_open, is_stick, is_corner=0) -> list
     ``is_stick``, ``is_corner``: 0/1 per contact; none: slip): open ``r = 0``; stick ``u = 0``;
     slip ``g_N = 0`` and ``r_T + mu p_N s_T / |s_T| = 0`` (the traction on the cone's surface
     against the slip, smooth where ``s_T != 0``); the corner ``g_N = 0, r_T = 0`` (closed without
-    traction; ``p_N = 0`` is the caller's extra row). ``if_else`` keeps an unused branch's values
+    traction; ``p_N = 0`` is the caller's extra row; an edge is stick with the cone's surface as
+    that row). ``if_else`` keeps an unused branch's values
     (the slip direction at ``s_T = 0``) out of the rows and their derivatives."""
     length = norm(a[1:])
     slip = [rt + mu * r[0] * at / (length + (length == 0)) for at, rt in zip(a[1:], r[1:])]

@@ -372,8 +372,9 @@ BRANCH_ROUNDS = 5
 class _BuiltCoulombMPCC(BuiltFormulation):
     """A frictional problem as an NLP for IPOPT (see the module): the relaxed NLP in
     ``w = [x; p_N; rho]`` (:func:`~.friction.coulomb_constraints`) along the Scholtes
-    homotopy, and the branch NLP in ``[x; p]`` of per-contact statuses (open, stick, slip). Both
-    are built once; the friction coefficients, the load and ``tau`` are parameters."""
+    homotopy, and the branch NLP in ``[x; p]`` of per-contact statuses (open, stick, slip; a
+    projection's corners and edges). Both are built once; the friction coefficients, the load,
+    ``tau`` and the statuses are parameters."""
 
     def __init__(self, problem: ComplementarityProblem, opts: MPCC.Options) -> None:
         super().__init__(problem)
@@ -389,17 +390,17 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         def split(v, start, count):
             return [v[start + j * nc:start + (j + 1) * nc] for j in range(count)]
 
-        def objective(z):
-            return problem.distance.render(z, own) if problem.kind == "mpcc" else ca.SX.zeros(1, 1)
+        def objective(z, P):
+            return problem.distance.render(z, P) if problem.kind == "mpcc" else ca.SX.zeros(1, 1)
 
         # Relaxed NLP: the traction r = (p_N, mu p_N rho) is in the cone by construction.
         w = ca.SX.sym("w", nx + b * nc)
         pn, direction = w[nx:nx + nc], split(w, nx + nc, b - 1)
-        z = ca.vertcat(w[:nx], *cone_traction(pn, direction, mu))
-        a = split(problem.gap_map.render(z, own), 0, b)
-        rows = coulomb_constraints(a, cone_traction(pn, direction, mu), direction, mu, tau)
+        r = cone_traction(pn, direction, mu)
+        z = ca.vertcat(w[:nx], *r)
+        rows = coulomb_constraints(split(problem.gap_map.render(z, own), 0, b), r, direction, mu, tau)
         self._solver = ca.nlpsol("mpcc_coulomb", "ipopt", {
-            "x": w, "p": P, "f": objective(z), "g": ca.vertcat(problem.residual_map.render(z, own), *rows)},
+            "x": w, "p": P, "f": objective(z, own), "g": ca.vertcat(problem.residual_map.render(z, own), *rows)},
             {"ipopt": _ipopt_options(problem, opts), **_NLPSOL})
         ne = problem.n_residual
         # |rho_j| <= 1 also as bounds: IPOPT keeps iterates inside bounds (fraction to the boundary),
@@ -419,7 +420,7 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         mu_b = own[base.slice("friction")]
         surface = mu_b**2 * rb[0]**2 - sum(v**2 for v in rb[1:])
         self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
-            "x": zb, "p": Pb, "f": problem.distance.render(zb, own) if problem.kind == "mpcc" else ca.SX.zeros(1, 1),
+            "x": zb, "p": Pb, "f": objective(zb, own),
             "g": ca.vertcat(problem.residual_map.render(zb, own),
                             *coulomb_branch(ab, rb, mu_b, is_open, is_stick + is_edge, is_corner),
                             ca.if_else(is_corner, rb[0], surface, True))},
@@ -509,7 +510,8 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         return self._finish(x, p, params, converged=converged, iterations=iterations, outer=outer, state=state,
                             message=message)
 
-    def _branch_nlp(self, x, p, params, tau: float, status: np.ndarray | None = None):
+    def _branch_nlp(self, x, p, params, tau: float, status: np.ndarray | None = None
+                    ) -> tuple[tuple[np.ndarray, np.ndarray], int, bool, np.ndarray]:
         """The branch NLP of ``status`` (default: identified at ``(x, p)``): returns ``((x, p),
         iterations, accepted, status)``. A solution is accepted if Coulomb's natural-map residual
         is at most ``comp_tol`` and the residual at most ``residual_tol`` (it then satisfies the
