@@ -22,14 +22,18 @@ references, the best of ``R/4`` and of ``R`` kicked restarts + greedy from every
 steps at the best known (within 1e-9), the max relative error of ``p`` and ``u`` against the
 noise-free classical solution (FB, ``E = 200 GPa``; mean over data sets), the cost as ``Z_E``
 projections relative to plain alternating, the steps converged and the wall time (and relative to
-plain: the greedy screen costs time that no projection count shows). Where the time
-goes (cProfile, one data set at 2 %, ``R = 20``, one BLAS thread: 9 s): 70 % in the ``Z_E``
-projections, nearly all of it the exact branch enumeration that checks each one
-(:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.solve`, 27 partitions of 3 pairs; the FB Newton
-solves take 7 %), 28 % in the greedy screen's closed forms
-(:meth:`~ddcm_casadi.problems.exact.AffineFamily.best`, 8 points x 2001 data per sweep); the restarts
-cost linearly in ``R``. A threaded BLAS made the screen 2-10x slower on a loaded 2-core machine,
-hence one thread by default (below).
+plain: the greedy screen costs time that no projection count shows). Where the time of
+"restarts 1 (kick) + greedy" goes (issue 28; process CPU time, 3 data sets x 3 noise levels, one
+BLAS thread, fresh problems per run as here): 56 % in the ``Z_E`` projections (the FB Newton solves,
+and 18 % the exact check of each by the bordered branch enumeration,
+:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.solve`: one solve with every constraint
+imposed, then a 6 x 6 block per branch), 25 % in the greedy screen (0.8 ms per sweep: 8 points x
+2001 data bounded by the projection without contact constraints, the few that may descend solved
+in closed form, :func:`~ddcm_casadi.drivers.ddcm_search.single_moves`), 11 % in the data search
+and fields, 4 % in the step checks; at 2.8x plain's projections it costs 3.2-4.4x plain's time
+(11-14x before: the enumeration factorised each of the 27 branches' KKT matrices and the screen
+evaluated every branch's quadratic for all 16 008 moves). A threaded BLAS made the screen 2-10x
+slower on a loaded 2-core machine, hence one thread by default (below).
 """
 
 from __future__ import annotations

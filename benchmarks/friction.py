@@ -69,9 +69,10 @@ def pair_records(label: str, frictional, frictionless, variants=("classical",)) 
     return out
 
 
-def friction_records(quick: bool) -> list[dict]:
-    """The 2-D and 3-D pairs of runs (classical; DDCM on the 2-D one)."""
-    records = []
+def friction_records(quick: bool, log=None) -> list[dict]:
+    """The 2-D and 3-D pairs of runs (classical; DDCM on the 2-D one); ``log(record)`` as each
+    pair of runs finishes."""
+    records = _Logged(log)
     level = 4 if quick else 6
     records += pair_records(f"Cattaneo-Mindlin 2-D, level {level}", mindlin_model(level),
                             mindlin_model(level, friction=None))
@@ -82,7 +83,22 @@ def friction_records(quick: bool) -> list[dict]:
     divisions = 8 if quick else 14
     records += pair_records(f"sphere sheared on a box 3-D, {divisions} cells", sphere_model(divisions, 0.3),
                             sphere_model(divisions, None))
-    return records
+    return list(records)
+
+
+class _Logged(list):
+    """A list that hands every record added to ``log``."""
+
+    def __init__(self, log) -> None:
+        super().__init__()
+        self._log = log
+
+    def __iadd__(self, records):
+        for r in records:
+            self.append(r)
+            if self._log is not None:
+                self._log(r)
+        return self
 
 
 def _with_data(model, data: MaterialDataset):
@@ -92,19 +108,22 @@ def _with_data(model, data: MaterialDataset):
     return replace(model, dataset=data)
 
 
+def print_row(r: dict) -> None:
+    """One Markdown row of a record."""
+    print(f"| {r['name'].split(', ', 1)[1]} | {r['unknowns']} | {r['contacts']} | {r['seconds']:.3g} | "
+          f"{r['floor_seconds']:.3g} | {r['ratio']:.2f} | {r['iterations']:.0f} ({r['frictionless_iterations']:.0f}) | "
+          f"{r['iteration_ratio']:.2f} | {r['converged']}/{r['frictionless_converged']} |", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", type=Path, default=Path("benchmark-results"))
     args = ap.parse_args(argv)
-    records = friction_records(args.quick)
     print("| run | unknowns | contacts | seconds | frictionless s | ratio | iterations (frictionless) | "
           "s per iteration ratio | converged |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for r in records:
-        print(f"| {r['name'].split(', ', 1)[1]} | {r['unknowns']} | {r['contacts']} | {r['seconds']:.3g} | "
-              f"{r['floor_seconds']:.3g} | {r['ratio']:.2f} | {r['iterations']:.0f} ({r['frictionless_iterations']:.0f}) | "
-              f"{r['iteration_ratio']:.2f} | {r['converged']}/{r['frictionless_converged']} |", flush=True)
+    records = friction_records(args.quick, log=print_row)
     args.out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(args.out / "friction.json", records)
     print(f"wrote {args.out / 'friction.json'}", file=sys.stderr)

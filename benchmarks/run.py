@@ -23,6 +23,9 @@ run (``benchmarks/first_run.py``).
 The one-off build (``build, ...`` records and ``build_seconds``: both problems and the
 formulation's CasADi Functions) is measured against the same floor, for bars, trusses and a
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
+Issue 28: ``DDCM search cost`` records, restarts + greedy against plain DDCM on the quality
+benchmark's noisy truss, their time ratio measured in this run (:func:`search_cost`), and ``first
+DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`).
 """
 
 from __future__ import annotations
@@ -586,6 +589,103 @@ def fclib_hyperstatic(contacts: int, freedoms: int) -> dict:
                     st["stage"] for st in s.log), pgs_sweeps=ref.sweeps, pgs_error=ref.error)
 
 
+def case_block(name: str, divisions: int):
+    """An example case of ``ddcm_casadi.cases`` (``examples/cases``) on a uniform
+    ``divisions x divisions`` mesh, without its grading."""
+    from ddcm_casadi import cases
+    from ddcm_casadi.casefiles.base import read_document
+    from ddcm_casadi.casefiles.config import case_from_dict
+
+    path = Path(cases.__file__).resolve().parent / name
+    doc = read_document(path)
+    doc["mesh"]["divisions"] = [divisions, divisions]
+    doc["mesh"].pop("refine_near", None)
+    return case_from_dict(doc, base_dir=path.parent, source=f"{path.stem} {divisions}x{divisions}").model
+
+
+#: 2-D continua for the first DDCM solve, by the material points asked: without contact (the
+#: hard-device block, 2 points per square) and with contact (the Hertz block, 6 per square).
+FIRST_SOLVE_MODELS = {
+    "without contact": lambda points: case_block("hard_device_block.toml", max(2, round((points / 2) ** 0.5))),
+    "with contact": lambda points: case_block("hertz2d.toml", max(2, round((points / 6) ** 0.5))),
+}
+
+
+def first_solve_record(family: str, points: int) -> dict:
+    """The first DDCM solve (FB) of a 2-D continuum of about ``points`` material points
+    (:data:`FIRST_SOLVE_MODELS`), to be run in a fresh process: ``seconds`` the solver's set-up
+    and its first solve of the load path, against the second solve of a new solver of the same
+    problems (``floor_seconds``); ``build_seconds`` the problems and the formulation before them.
+    The set-up builds nothing for a search it does not run (the exact branch enumeration: only
+    affine problems with 1 to 4 contact pairs, on first use)."""
+    model = FIRST_SOLVE_MODELS[family](points)
+    t0 = time.perf_counter()
+    problems = build_problems(model)
+    built = registry.get("fischer_burmeister").build(problems.projection)
+    t1 = time.perf_counter()
+    solver = DDCMSolver(problems, built)
+    setup = time.perf_counter() - t1
+    first = solver.solve(formulation_name="fischer_burmeister")
+    t2 = time.perf_counter()
+    second = DDCMSolver(problems, built).solve(formulation_name="fischer_burmeister")
+    again = time.perf_counter() - t2
+    seconds = setup + first.solve_seconds
+    return dict(name=f"first DDCM solve, 2-D continuum {family}: {model.name}", unknowns=problems.projection.n_x,
+                data_points=len(model.dataset), seconds=seconds, floor_seconds=again, ratio=seconds / again,
+                material_points=model.n_points, contact_pairs=model.n_contacts, build_seconds=t1 - t0,
+                setup_seconds=setup, first_step_seconds=first.steps[0].seconds, converged=bool(first.converged),
+                same_states=bool(all(np.array_equal(a.data_index, b.data_index)
+                                     for a, b in zip(first.steps, second.steps))),
+                note="seconds: set-up and first solve; floor: a second solver's solve of the same problems")
+
+
+#: The searches of :func:`search_cost`: plain DDCM and the better search it is measured against.
+SEARCH_COST_ROWS = ("plain", "restarts 1 (kick) + greedy")
+
+
+def search_cost(noise_levels, seeds, repeats: int) -> list[dict]:
+    """Restarts + greedy against plain DDCM on the noisy truss of the quality benchmark
+    (``benchmarks/ddcm_quality.py``: a Warren truss with 3 contacts, 2001 noisy data, 7 load steps,
+    FB), each run on freshly built problems as there (``compare``), the two alternated: per noise
+    level, the seconds of each summed over the data sets (median of ``repeats``; wall time, and the
+    process's CPU time, steadier on a shared machine), their ratio (issue 28's target: at most 3)
+    and the ratio of ``Z_E`` projections. ``steps_not_worse``: steps whose restarts + greedy
+    objective is at most plain's."""
+    from ddcm_quality import ddcm_objective, noisy_truss  # benchmarks/ is a folder of scripts
+    from ddcm_casadi.validation.quality_rungs import CONFIGURATIONS
+
+    out = []
+    for noise in noise_levels:
+        wall, cpu = {n: 0.0 for n in SEARCH_COST_ROWS}, {n: 0.0 for n in SEARCH_COST_ROWS}
+        projections, objective = {n: 0 for n in SEARCH_COST_ROWS}, {n: [] for n in SEARCH_COST_ROWS}
+        for seed in seeds:
+            model = noisy_truss(noise, seed)
+            times, paths = {n: [] for n in SEARCH_COST_ROWS}, {}
+            for _ in range(repeats):
+                for name in SEARCH_COST_ROWS:
+                    problems = build_problems(model)
+                    built = registry.get("fischer_burmeister").build(problems.projection)
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    path = DDCMSolver(problems, built, options=CONFIGURATIONS[name]).solve()
+                    times[name].append((time.perf_counter() - t0, time.process_time() - c0))
+                    paths[name] = path  # every repeat finds the same states
+            for name in SEARCH_COST_ROWS:
+                wall[name] += statistics.median(t[0] for t in times[name])
+                cpu[name] += statistics.median(t[1] for t in times[name])
+                projections[name] += sum(s.projections for s in paths[name].steps)
+                objective[name].append(ddcm_objective(model, paths[name]))
+        plain, better = SEARCH_COST_ROWS
+        obj_plain, obj_better = np.concatenate(objective[plain]), np.concatenate(objective[better])
+        out.append(dict(name=f"DDCM search cost: {better} / {plain}, noisy Warren truss, {noise:.0%} noise, "
+                             f"{len(seeds)} data sets", unknowns=problems.projection.n_x, data_points=len(model.dataset),
+                        seconds=wall[better], floor_seconds=wall[plain], ratio=wall[better] / wall[plain],
+                        cpu_seconds=cpu[better], cpu_floor_seconds=cpu[plain], cpu_ratio=cpu[better] / cpu[plain],
+                        projections_ratio=projections[better] / projections[plain],
+                        steps_not_worse=int(np.sum(obj_better <= obj_plain * (1 + 1e-9))), steps=int(obj_plain.size),
+                        note="seconds: restarts + greedy; floor: plain DDCM; target ratio <= 3"))
+    return out
+
+
 def markdown(records: list[dict]) -> str:
     lines = ["| name | unknowns | data points | seconds | floor s | ratio | notes |", "|---|---|---|---|---|---|---|"]
     skip = {"name", "unknowns", "data_points", "seconds", "floor_seconds", "ratio"}
@@ -665,6 +765,15 @@ def main(argv=None) -> int:
     from first_run import first_run
 
     log(first_run(5 if quick else 9))
+    # Issue 28: the better DDCM search at its projection cost, and the first DDCM solve of a
+    # continuum with no set-up for a search it does not run.
+    for rec in search_cost((0.02,) if quick else (0.01, 0.02, 0.05), (0,) if quick else (0, 1, 2), rep):
+        log(rec)
+    for family in FIRST_SOLVE_MODELS:
+        for rec in in_fresh_process("first_solve_record", family, 2 * 10**4,
+                                    label=f"first DDCM solve, 2-D continuum {family}, about 2e4 points",
+                                    unknowns=0):
+            log(rec)
     write_json_atomic(out / "benchmarks.json", records)
     write_bytes_atomic(out / "benchmarks.md", markdown(records).encode())
     print(f"wrote benchmarks.json and benchmarks.md to {out}", file=sys.stderr)

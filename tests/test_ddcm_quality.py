@@ -19,7 +19,9 @@ from ddcm_casadi.problems.exact import ExactEnumerator
 from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.validation.quality_rungs import noisy_dataset, noisy_paper_bar
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
-from ddcm_casadi.drivers.ddcm_search import elastic_state
+from ddcm_casadi.drivers import ddcm as ddcm_driver
+from ddcm_casadi.drivers.ddcm_search import descent_threshold, elastic_state, random_assignment, single_moves
+from ddcm_casadi.validation import ladder
 from ddcm_casadi.drivers.path import DDCMSolver
 from ddcm_casadi.models.truss import bar_chain
 
@@ -192,7 +194,7 @@ def _brute_force(problems, step, m, n):
     data = problems.model.dataset
     combos = np.array(list(itertools.product(range(n), repeat=m))).T  # (m, n^m)
     P = problems.projection_params(step, data.strain[combos], data.stress[combos])
-    ex = ExactEnumerator(problems.projection).solve(P)
+    ex = ExactEnumerator(problems.projection).solve(P, bordered=False)  # branch by branch: independent
     return float(np.min(ex.objective)) * problems.scales("mpcc")["energy"]
 
 
@@ -211,11 +213,106 @@ def test_single_moves_are_the_exact_projections_of_the_moved_assignments():
     moved = np.repeat(index[:, None], cand.size, axis=1)
     for a, i in enumerate(points):
         moved[i, a * cand.shape[1]:(a + 1) * cand.shape[1]] = cand[a]
-    direct = exact.solve(problems.projection_params(step, data.strain[moved], data.stress[moved])).objective
+    direct = exact.solve(problems.projection_params(step, data.strain[moved], data.stress[moved]),
+                         bordered=False).objective
     scale = max(1.0, float(np.max(np.abs(direct))))
     assert np.max(np.abs(obj.ravel() - direct)) <= ROUNDOFF * scale
-    own = exact.solve(problems.projection_params(step, data.strain[index], data.stress[index])).objective[0]
+    own = exact.solve(problems.projection_params(step, data.strain[index], data.stress[index]),
+                      bordered=False).objective[0]
     assert abs(mine - own) <= ROUNDOFF * max(1.0, abs(own))
+
+
+def _random_params(model, problems, rng, count):
+    """Projection parameters of ``count`` random data assignments over the load steps."""
+    cols = []
+    for j in range(count):
+        index = random_assignment(model, rng)
+        cols.append(problems.projection_params(j % model.n_steps, model.dataset.strain[index],
+                                               model.dataset.stress[index]))
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize("build", [ladder.stops_bar, ladder.warren_truss], ids=["stops bar", "truss"])
+def test_bordered_form_is_the_branch_by_branch_enumeration(build):
+    """One factorisation with every constraint imposed and 2 nc x 2 nc blocks per branch give the
+    exact projections that factorising each branch's own KKT matrix gives (4 and 3 pairs)."""
+    model = build()
+    problems = build_problems(model)
+    exact = ExactEnumerator(problems.projection)
+    assert exact.bordered
+    P = _random_params(model, problems, np.random.default_rng(3), 40)
+    fast, reference = exact.solve(P), exact.solve(P, bordered=False)
+    assert np.array_equal(fast.found, reference.found) and fast.found.all()
+    z, z_ref = np.vstack([fast.x, fast.p]), np.vstack([reference.x, reference.p])
+    assert np.max(np.abs(z - z_ref)) <= ROUNDOFF * max(1.0, float(np.max(np.abs(z_ref))))
+    assert np.max(np.abs(fast.objective - reference.objective)) <= ROUNDOFF * max(1.0, float(np.max(reference.objective)))
+
+
+@pytest.mark.parametrize("build", [ladder.stops_bar, ladder.warren_truss], ids=["stops bar", "truss"])
+def test_pruned_screen_keeps_every_descending_move(build):
+    """The screen's bound (the projection without contact constraints) leaves out only moves that
+    cannot descend: the descending moves and their objectives are those of the full screen, which
+    equal the branch-by-branch family's."""
+    model = build(n_data=300)
+    problems = build_problems(model)
+    exact = ExactEnumerator(problems.projection)
+    rng = np.random.default_rng(5)
+    step = model.n_steps - 1
+    points = np.arange(min(8, model.n_points))
+    cand = np.repeat(np.arange(len(model.dataset))[None, :], points.size, axis=0)
+    near = model.dataset.nearest(*_elastic_fields(model, problems, step))  # near a fixed point: few descend
+    for index in (near, random_assignment(model, rng)):
+        full, mine = single_moves(problems, exact, step, index, points, cand)
+        pruned, mine_pruned = single_moves(problems, exact, step, index, points, cand, prune=True)
+        assert mine_pruned == mine
+        limit = descent_threshold(mine)
+        assert np.array_equal(pruned < limit, full < limit)
+        kept = np.isfinite(pruned)
+        assert np.max(np.abs(pruned[kept] - full[kept]), initial=0.0) <= ROUNDOFF * max(1.0, abs(mine))
+    assert (full < limit).any()  # a random assignment has descending moves
+    # The bordered family against the branch-by-branch one: 40 random single moves from near, as
+    # directions (c = the identity: one move each).
+    data = model.dataset
+    P0 = problems.projection_params(step, data.strain[near], data.stress[near])
+    moved = np.repeat(near[:, None], 40, axis=1)
+    moved[rng.integers(0, model.n_points, 40), np.arange(40)] = rng.integers(0, len(data), 40)
+    D = problems.projection_params(step, data.strain[moved], data.stress[moved]) - P0[:, None]
+    a, b = exact.affine_family(P0, D).best(np.eye(40)), exact.affine_family(P0, D, bordered=False).best(np.eye(40))
+    assert np.all(np.isfinite(a)) and np.all(np.isfinite(b))
+    assert np.max(np.abs(a - b)) <= ROUNDOFF * max(1.0, float(np.max(b)))
+
+
+def _elastic_fields(model, problems, step):
+    """The classical solution's strain and stress at ``step`` (an assignment near a fixed point)."""
+    from ddcm_casadi.drivers.path import solve_classical
+
+    r = solve_classical(problems, formulations.get(FB).build(problems.classical), FB)
+    return r.steps[step].strain, r.steps[step].stress
+
+
+def test_no_enumeration_for_problems_without_pairs(monkeypatch):
+    """A projection without contact pairs is one linear solve: nothing to enumerate, reported
+    global (convex) when it converges; with pairs the enumeration is built on first use only."""
+    built_count = []
+    original = ddcm_driver.ExactEnumerator
+
+    def counting(*args, **kwargs):
+        built_count.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(ddcm_driver, "ExactEnumerator", counting)
+    device = bar_chain(length=1.0, elements=3, youngs_modulus=200e9, tip_displacements=[-0.001, -0.002],
+                       dataset=noisy_dataset(0.0, 0, n_data=50))
+    assert device.n_contacts == 0
+    problems = build_problems(device)
+    path = DDCMSolver(problems, formulations.get(FB).build(problems.projection)).solve()
+    assert path.converged and not built_count
+    assert all(s.projection_global is True and np.isnan(s.projection_error) for s in path.steps)
+    problems = build_problems(paper_bar())
+    solver = DDCMSolver(problems, formulations.get(FB).build(problems.projection))
+    assert not built_count  # not at set-up
+    path = solver.solve()
+    assert built_count == [1] and all(s.projection_global for s in path.steps)
 
 
 @pytest.mark.parametrize("elements, n_data", [(1, 200), (2, 30), (3, 10)])

@@ -75,7 +75,9 @@ class DDCMSolver:
     search : str, optional
         Replaces ``options.search``: a backend of :data:`ddcm_casadi.data.search.SEARCHES`.
     enumerate_pairs : int
-        Affine problems with at most this many contact pairs consult the exact branch enumeration.
+        Affine problems with at most this many contact pairs consult the exact branch enumeration
+        (:attr:`exact`, built on first use: every projection is checked against it where there is
+        at least one pair; without pairs a projection is one linear solve, nothing to enumerate).
     global_search : bool
         Report the global optimum where it can be enumerated.
     min_substep : float
@@ -109,18 +111,31 @@ class DDCMSolver:
         self.coverage = problems.projection.shared(
             ("data_coverage",), lambda: DataCoverage(model.dataset, model.n_points))
         self.affine = bool(problems.projection.affine)
-        self.exact = (problems.projection.shared(
-            ("exact_enumerator", enumerate_pairs), lambda: ExactEnumerator(problems.projection, max_pairs=enumerate_pairs))
-            if self.affine and not model.frictional and model.n_contacts <= enumerate_pairs else None)
+        self.enumerate_pairs = enumerate_pairs
+        enumerable = self.affine and not model.frictional and model.n_contacts <= enumerate_pairs
         # N^m assignments, in logarithms: it overflows a float for a continuum's thousands of points.
         log_assign = float(np.sum(np.log(point_ranges(model)[1].astype(float))))
-        self.global_search = (global_search and self.exact is not None
+        self.global_search = (global_search and enumerable
                               and (model.n_points == 1 or (self.options.exact_max > 0
                                                             and log_assign <= np.log(self.options.exact_max) + 1e-12)))
         self.scheme = SCHEMES[self.options.variant](model, self.options)
-        self.projection = Projection(problems, built, self.exact, self.EXACT_CACHE_VALUES)
+        # Without pairs a projection is one linear solve: nothing to check it against.
+        self.projection = Projection(problems, built, lambda: self.exact, self.EXACT_CACHE_VALUES,
+                                     check=enumerable and model.n_contacts > 0)
         #: What is left out for this problem, and why (each step's ``notes``, the path's ``warnings``).
         self.notes = self._skipped(model, enumerate_pairs)
+
+    @property
+    def exact(self) -> ExactEnumerator | None:
+        """The exact branch enumeration of an affine problem with at most ``enumerate_pairs``
+        contact pairs (else None), built on first use (the projection check, the greedy screen,
+        the global optimum) and shared by the solvers of one model."""
+        projection = self.problems.projection
+        model = self.problems.model
+        if not (self.affine and not model.frictional and model.n_contacts <= self.enumerate_pairs):
+            return None
+        return projection.shared(("exact_enumerator", self.enumerate_pairs),
+                                 lambda: ExactEnumerator(projection, max_pairs=self.enumerate_pairs))
 
     @property
     def max_outer(self) -> int:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ddcm_casadi.drivers.ddcm_search import point_ranges, random_assignment, single_moves
+from ddcm_casadi.drivers.ddcm_search import descent_threshold, point_ranges, random_assignment, single_moves
 from ddcm_casadi.drivers.records import Run, count
 
 #: Single-point moves screened per sweep of the greedy search (points x candidates).
@@ -73,12 +73,12 @@ def _screened_moves(solver, k: int, best: Run, order: np.ndarray) -> list[np.nda
     else:
         pts = f["strain"].reshape(model.n_points, -1)[order], f["stress"].reshape(model.n_points, -1)[order]
         cand = data.k_nearest(pts[0].ravel(), pts[1].ravel(), max(2, per_point))
-    obj, mine = single_moves(solver.problems, solver.exact, k, best.index, order, cand)
+    obj, mine = single_moves(solver.problems, solver.exact, k, best.index, order, cand, prune=True)
+    # Row-major, so the stable sort keeps the order of a stable sort of every move.
+    descending = np.flatnonzero(obj < descent_threshold(mine))
     moves = []
-    for a in np.argsort(obj, axis=None, kind="stable"):
+    for a in descending[np.argsort(obj.ravel()[descending], kind="stable")]:
         i, b = divmod(int(a), cand.shape[1])
-        if not obj[i, b] < mine - 1e-12 - 1e-9 * abs(mine):
-            break
         trial = best.index.copy()
         trial[order[i]] = cand[i, b]
         moves.append(trial)

@@ -28,15 +28,22 @@ class Projection:
         Needs the projection problem.
     built
         The projection formulation, built.
-    exact : ExactEnumerator or None
-        The exact branch enumeration (affine problems with few contact pairs), shared by the
-        formulations of one model.
+    exact : callable
+        Returns the exact branch enumeration (affine problems with few contact pairs, shared by
+        the formulations of one model; built on its first call) or None.
     cache_values : int
         Exact projections remembered per problem, keys and answers together at most this many floats.
+    check : bool
+        Check every projection against the exact one (restarting on its branch when it is better).
+        Without it a converged projection is reported global only where the problem is convex
+        (affine without contact pairs), with no error.
     """
 
-    def __init__(self, problems, built, exact, cache_values: int) -> None:
-        self.problems, self.built, self.exact, self.cache_values = problems, built, exact, cache_values
+    def __init__(self, problems, built, exact: Callable[[], object], cache_values: int, *, check: bool) -> None:
+        self.problems, self.built, self._exact, self.cache_values = problems, built, exact, cache_values
+        self.check = check
+        problem = problems.projection
+        self._convex = bool(problem.affine and problem.n_pairs == 0)
         #: The last converged step's physical fields (the history a model's step may depend on,
         #: :meth:`~ddcm_casadi.models.base.ContactModel.step_values`); set by the driver.
         self.previous: dict | None = None
@@ -78,8 +85,8 @@ class Projection:
                 sol = retry
             else:
                 sol.iterations += retry.iterations
-        if self.exact is None:
-            return sol, None, float("nan")
+        if not self.check:
+            return sol, (bool(sol.converged) if self._convex else None), float("nan")
         xe, pe, obj = self.exact_projection(params)
         tol = 1e-10 + 1e-8 * abs(obj)
         is_global = bool(sol.converged and sol.objective <= obj + tol)
@@ -91,6 +98,11 @@ class Projection:
         scale = max(1.0, float(np.max(np.abs(np.concatenate([xe, pe])))))
         err = float(np.max(np.abs(np.concatenate([sol.x - xe, sol.p - pe])))) / scale
         return sol, is_global, err
+
+    @property
+    def exact(self):
+        """The exact branch enumeration (built on first use), or None."""
+        return self._exact()
 
     def exact_projection(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """The exact projection ``(x, p, objective)`` (scaled) for the parameter vector ``params``.

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ddcm_casadi.problems.exact import ExactEnumerator
+from ddcm_casadi.problems.exact import BorderedFamily, ExactEnumerator, move_terms
 from ddcm_casadi.linalg import SingularMatrix, factorize
 from ddcm_casadi.data.metric import block_diagonal
 
@@ -117,6 +117,11 @@ def start_assignment(model, start: str, step: int, rng: np.random.Generator) -> 
     return random_assignment(model, rng)
 
 
+#: The solved directions of :func:`assignment_family` are remembered per problem and step where
+#: they take at most this many floats (8 MB).
+DIRECTION_CACHE_VALUES = 1_000_000
+
+
 def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
                       points: np.ndarray | None = None):
     r"""The exact projections of every assignment near ``index``, as closed forms.
@@ -124,13 +129,15 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     The projection's parameters are affine in the assigned data, ``P = P(index) + D c`` with
     ``c`` the data's strain and stress minus those of ``index`` at the material points ``points``
     (default: all; ``2 n k`` numbers for ``n`` points, point-major strains then stresses), so
-    every branch of ``Z_E`` is solved once for ``2 n k + 1`` right-hand sides
-    (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.affine_family`) and the objective of any
+    ``Z_E`` is solved once for ``2 n k + 1`` right-hand sides
+    (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.affine_family`; in the bordered form, for a
+    small model, once per step for every direction, :func:`_all_directions`) and the objective of any
     assignment that differs from ``index`` only at ``points`` is a closed-form quadratic in
     ``c``. Centring ``c`` on ``index`` keeps the terms small near the assignment found, where
     comparisons matter.
 
-    Returns ``(family, strain, stress)``: the :class:`~ddcm_casadi.problems.exact.AffineFamily` and the
+    Returns ``(family, strain, stress)``: the :class:`~ddcm_casadi.problems.exact.BorderedFamily`
+    (:class:`~ddcm_casadi.problems.exact.AffineFamily` where the bordered form is singular) and the
     assigned data of ``index`` as ``(m, k)`` arrays.
     """
     model = problems.model
@@ -138,37 +145,115 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     m, k = model.n_points, model.strain_components
     cur_e = data.strain[index].reshape(m, k)
     cur_s = data.stress[index].reshape(m, k)
-    base = problems.projection_params(step, cur_e.ravel(), cur_s.ravel())
     pts = np.arange(m) if points is None else np.asarray(points)
     comps = (pts[:, None] * k + np.arange(k)).ravel()
     cols = np.concatenate([comps, m * k + comps])  # their strains, then their stresses
-    zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
-    D = np.empty((base.size, cols.size))
-    for a, i in enumerate(cols):
-        unit = np.zeros(2 * m * k)
-        unit[i] = 1.0
-        D[:, a] = problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero
-    return exact.affine_family(base, D), cur_e, cur_s
+
+    def directions(columns) -> np.ndarray:
+        zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
+        unit = np.zeros((2 * m * k, len(columns)))
+        unit[columns, np.arange(len(columns))] = 1.0
+        return problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero[:, None]  # one column each
+
+    solved = _all_directions(problems, exact, step, directions) if exact.bordered else None
+    if solved is None:
+        return exact.affine_family(problems.projection_params(step, cur_e.ravel(), cur_s.ravel()), directions(cols)), \
+            cur_e, cur_s
+    # P(index) = P(0) + D c(index): the imposed solutions of index and of the directions by linearity.
+    dz, wz, E, W = solved
+    c = np.concatenate([cur_e.ravel(), cur_s.ravel()])
+    return exact.family(dz + E @ c, wz + W @ c, E[:, cols], W[:, cols]), cur_e, cur_s
+
+
+def _all_directions(problems, exact: ExactEnumerator, step: int, directions):
+    """``(d, mu)`` of the projection with every constraint imposed (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.imposed`)
+    for the zero assignment and for every direction of :func:`assignment_family` at ``step``,
+    solved once per problem and step (the greedy search screens sweep after sweep), or None
+    where they would exceed :data:`DIRECTION_CACHE_VALUES` floats."""
+    model = problems.model
+    n = 2 * model.n_points * model.strain_components
+    if n * (n + 2 * exact.nc + 2) > DIRECTION_CACHE_VALUES:  # d has 2 m k rows
+        return None
+
+    def solve():
+        d, w = exact.imposed(np.column_stack([problems.projection_params(step, np.zeros(n // 2), np.zeros(n // 2)),
+                                              directions(np.arange(n))]))
+        return d[:, 0], w[:, 0], d[:, 1:], w[:, 1:]
+
+    return problems.projection.shared(("assignment_directions", step), solve)
+
+
+def descent_threshold(mine: float) -> float:
+    """The objective a move must beat to descend from ``mine`` (past roundoff)."""
+    return mine - 1e-12 - 1e-9 * abs(mine)
+
+
+#: A move is left out by its lower bound only when the bound exceeds the descent threshold by this
+#: share of the terms that make it (far above the roundoff of the closed forms).
+PRUNE_MARGIN = 1e-6
 
 
 def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray,
-                 candidates: np.ndarray) -> tuple[np.ndarray, float]:
-    """The exact projection's objective (scaled) of every assignment that differs from ``index``
+                 candidates: np.ndarray, *, prune: bool = False) -> tuple[np.ndarray, float]:
+    r"""The exact projection's objective (scaled) of every assignment that differs from ``index``
     at one point: ``points[a]`` moved to datum ``candidates[a, b]``; returns ``(objectives,
     objective of index)`` with ``objectives`` shaped like ``candidates``. Only the moving points
-    enter the closed forms (``2 n k`` directions for ``n`` points, not ``2 m k``)."""
+    enter the closed forms (``2 n k`` directions for ``n`` points, not ``2 m k``), and each move's
+    ``c`` has ``2 k`` nonzeros.
+
+    ``prune``: a move whose lower bound, the projection without contact constraints
+    (:meth:`~ddcm_casadi.problems.exact.BorderedFamily.relaxed`, one quadratic in the move's ``2 k``
+    numbers), is above :func:`descent_threshold` is reported as ``inf`` without its branches:
+    it cannot descend. The moves that can are exactly those of the full screen.
+    """
     family, cur_e, cur_s = assignment_family(problems, exact, step, index, points)
     data, k = problems.model.dataset, problems.model.strain_components
     strain = data.strain.reshape(len(data), k)
     stress = data.stress.reshape(len(data), k)
     n, n_c = len(points), candidates.shape[1]
-    c = np.zeros((2 * n * k, n * n_c))
-    for a, i in enumerate(points):
-        cols = slice(a * n_c, (a + 1) * n_c)
-        c[a * k:(a + 1) * k, cols] = (strain[candidates[a]] - cur_e[i]).T
-        c[n * k + a * k:n * k + (a + 1) * k, cols] = (stress[candidates[a]] - cur_s[i]).T
-    mine = float(family.best(np.zeros((2 * n * k, 1)))[0])
-    return family.best(c).reshape(n, n_c), mine
+    points = np.asarray(points)
+
+    def pairs(indices):  # the data's strains and stresses, side by side
+        return np.concatenate([strain[indices], stress[indices]], axis=-1)
+
+    cur = np.concatenate([cur_e[points], cur_s[points]], axis=1)  # (n, 2 k)
+    rows = np.concatenate([np.arange(k) + k * np.arange(n)[:, None], n * k + np.arange(k) + k * np.arange(n)[:, None]],
+                          axis=1)  # (n, 2 k): each point's strain, then stress, directions
+    mine = family.base()
+    relaxed = family.relaxed() if prune and isinstance(family, BorderedFamily) else None
+    if relaxed is None:
+        return family.best_moves(rows, pairs(candidates) - cur[:, None, :]), mine
+    if np.all(candidates == candidates[:1]):  # one data set for every point
+        bound, size = _shared_bound(*relaxed, rows, pairs(candidates[0]), cur)
+    else:
+        linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, pairs(candidates) - cur[:, None, :])
+        bound, size = relaxed[0] + linear + quadratic, abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic)
+    limit = descent_threshold(mine)
+    a, b = np.nonzero(bound <= limit + PRUNE_MARGIN * (size + abs(limit)))  # far above the bound's roundoff
+    obj = np.full((n, n_c), np.inf)
+    obj[a, b] = family.best_moves(rows[a], (pairs(candidates[a, b]) - cur[a])[:, None, :])[:, 0]
+    return obj, mine
+
+
+def _shared_bound(a0: float, a1: np.ndarray, A2: np.ndarray, rows: np.ndarray, x: np.ndarray,
+                  cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""The quadratic ``a0 + a1^T c + c^T A2 c / 2`` of every move of point ``g`` (rows ``rows[g]``)
+    from ``cur[g]`` to a datum ``x[i]`` of one shared set ``x`` (``(N, j)``), and the size of its
+    terms: two ``(G, N)`` arrays. About a centre ``x0`` (``x = x0 + y``,
+    ``c = y + delta_g``, ``delta_g = x0 - cur[g]``) it is ``k_g + l_g^T y + y^T A_g y / 2``: two
+    products with the data's monomials instead of per-move arithmetic (``x0``: the mean of the
+    current data, inside the data's range)."""
+    g, A = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
+    centre = np.mean(cur, axis=0)
+    y, delta = x - centre, centre - cur
+    Ad = np.einsum("gpq,gq->gp", A, delta)
+    const = a0 + np.einsum("gp,gp->g", g + 0.5 * Ad, delta)
+    lin = g + Ad
+    M = (y[:, :, None] * y[:, None, :]).reshape(len(y), -1)  # (N, j^2)
+    Ag = A.reshape(len(A), -1)
+    bound = const[:, None] + lin @ y.T + 0.5 * (Ag @ M.T)
+    size = np.abs(const)[:, None] + np.abs(lin) @ np.abs(y).T + 0.5 * (np.abs(Ag) @ np.abs(M).T)
+    return bound, size
 
 
 def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,
@@ -180,7 +265,7 @@ def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarra
     data = model.dataset
     m, k = model.n_points, model.strain_components
     family, cur_e, cur_s = assignment_family(problems, exact, step, index)
-    mine = float(family.best(np.zeros((2 * m * k, 1)))[0])
+    mine = family.base()
     offset, size = point_ranges(model)
     total = int(np.prod(size.astype(float)))
     best = np.inf

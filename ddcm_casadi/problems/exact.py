@@ -5,8 +5,12 @@ projection is a union of convex QPs, one per branch. Every pair is either *free*
 *in contact* (``g = 0``) or *grazing* (both). For a convex QP, the optimum on a branch solves the
 equality-constrained QP of its active constraints, so the global projection is the best
 *sign-feasible* solution of these equality-constrained problems over all ``3^nc`` partitions
-(``2^nc`` for the classical problem). Each partition's KKT matrix is factorised once (sparse LU)
-and reused for any number of right-hand sides (load steps, data points).
+(``2^nc`` for the classical problem). A projection is solved in the bordered form (see
+:class:`ExactEnumerator`): one factorisation with every constraint imposed serves every branch,
+each branch then costing a ``2 nc x 2 nc`` block; branch by branch (the classical problem, the
+reference, a singular bordered matrix) each partition's KKT matrix is factorised once (sparse LU).
+Either is reused for any number of right-hand sides (load steps, data points). The linear parts are
+the problem's own sparse maps, and nothing is factorised before the first solve.
 
 This is independent of the formulations (no complementarity function, no IPOPT) and serves as the
 reference the tests and the DDCM driver check against. Its cost grows as ``3^nc``: it is meant for
@@ -16,9 +20,11 @@ Many projections at once (the DDCM global optimum). When only a few parameters c
 the projections, ``P = P0 + D c`` with ``D`` (n_params x r) and one ``c`` (r) per projection (the
 data assigned to the points), every branch's solution is affine in ``c``, ``z = z0 + Z c``, and its
 objective is the quadratic ``a0 + a1 . c + c^T A2 c / 2``: :meth:`ExactEnumerator.affine_family`
-solves each branch for ``r + 1`` right-hand sides only, and :meth:`AffineFamily.best` evaluates
-signs and objectives for millions of ``c`` with a few vector operations per branch (no solve
-per projection).
+solves ``r + 1`` right-hand sides only (once, or per branch), and :meth:`BorderedFamily.best`
+(:meth:`AffineFamily.best`) evaluates signs and objectives for millions of ``c`` with one
+quadratic and a ``2 nc``-vector per branch (a quadratic per branch): no solve per projection.
+:meth:`BorderedFamily.relaxed` is the projection without contact constraints, a lower bound of
+every branch (the greedy screen leaves out the moves it shows cannot descend).
 """
 
 from __future__ import annotations
@@ -26,7 +32,6 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
@@ -62,14 +67,6 @@ class Branch:
     pressure_multiplier: np.ndarray  # per pair; 0 where p = 0 is not imposed
 
 
-def _const(expr, args) -> sp.csc_matrix:
-    if ca.depends_on(expr, ca.vertcat(*args)):
-        raise InputError("exact enumeration needs a linear model")
-    out = ca.Function("c", args, [expr])(*[np.zeros(a.numel()) for a in args])
-    colind, row = out.sparsity().get_ccs()
-    return sp.csc_matrix((np.asarray(out.nonzeros(), float), row, colind), shape=out.shape)
-
-
 @dataclass
 class _AffineBranch:
     """One branch's solution as an affine function of ``c``: gaps, pressures and objective."""
@@ -83,17 +80,47 @@ class _AffineBranch:
     A2: np.ndarray      # (r, r)
 
 
+def _quadratic(c, a0: float, a1: np.ndarray, A2: np.ndarray) -> np.ndarray:
+    """``a0 + a1^T c + c^T A2 c / 2`` per column of ``c`` (dense, or sparse with few nonzeros)."""
+    if sp.issparse(c):
+        c = sp.csc_matrix(c)
+        return a0 + c.T @ a1 + 0.5 * np.asarray(c.multiply((c.T @ A2.T).T).sum(axis=0)).ravel()
+    return a0 + a1 @ c + 0.5 * np.einsum("ik,ik->k", c, A2 @ c)
+
+
+def move_terms(a1: np.ndarray, A2: np.ndarray, rows: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The linear and quadratic terms ``a1^T c`` and ``c^T A2 c / 2`` of the columns ``c`` whose
+    only nonzeros are ``d[g, i]`` at the rows ``rows[g]`` (``rows``: ``(G, j)``, one row set per
+    group; ``d``: ``(G, N, j)``): two ``(G, N)`` arrays."""
+    a1g, A2g = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
+    j = rows.shape[1]
+    if j > 4:  # many nonzeros per move: batched products
+        return np.matmul(d, a1g[:, :, None])[..., 0], 0.5 * np.sum(d * np.matmul(d, A2g), axis=2)
+    # Few (one-component points: 2): j^2 vector operations beat batched products of tiny matrices.
+    linear = sum(d[..., i] * a1g[:, i, None] for i in range(j))
+    quadratic = sum(d[..., i] * sum(d[..., m] * A2g[:, i, m, None] for m in range(j)) for i in range(j))
+    return linear, 0.5 * quadratic
+
+
+def _moves_matrix(rows: np.ndarray, d: np.ndarray, r: int) -> sp.csc_matrix:
+    """The columns of :func:`move_terms` as a sparse ``(r, G N)`` matrix (group-major)."""
+    G, N, j = d.shape
+    return sp.csc_matrix((d.ravel(), (np.repeat(rows, N, axis=0).ravel(), np.repeat(np.arange(G * N), j))),
+                         shape=(r, G * N))
+
+
 @dataclass
 class AffineFamily:
-    """The exact projections of ``P0 + D c`` for any ``c`` (see :meth:`ExactEnumerator.affine_family`)."""
+    """The exact projections of ``P0 + D c`` for any ``c`` (see :meth:`ExactEnumerator.affine_family`),
+    branch by branch (the reference form, used where the bordered form is singular)."""
 
     branches: list[_AffineBranch]
     sign_tol: float
 
-    def best(self, c: np.ndarray, *, chunk: int = 1 << 20) -> np.ndarray:
-        """The exact projection's objective (scaled) for every column of ``c`` (r, N): the
-        smallest over the sign-feasible branches, ``inf`` where none is."""
-        c = np.asarray(c, float)
+    def best(self, c, *, chunk: int = 1 << 20) -> np.ndarray:
+        """The exact projection's objective (scaled) for every column of ``c`` (r, N; dense or
+        sparse): the smallest over the sign-feasible branches, ``inf`` where none is."""
+        c = c.tocsc() if sp.issparse(c) else np.asarray(c, float)
         out = np.full(c.shape[1], np.inf)
         for a in range(0, c.shape[1], chunk):
             cc = c[:, a:a + chunk]
@@ -101,52 +128,252 @@ class AffineFamily:
             for b in self.branches:
                 ok = np.ones(cc.shape[1], dtype=bool)
                 for g0, gc in ((b.gap0, b.gap_c), (b.p0, b.p_c)):
-                    for i in range(g0.size):
-                        ok &= g0[i] + gc[i] @ cc >= -self.sign_tol
-                obj = b.a0 + b.a1 @ cc + 0.5 * np.einsum("ik,ik->k", cc, b.A2 @ cc)
+                    values = g0[:, None] + (cc.T @ gc.T).T if sp.issparse(cc) else g0[:, None] + gc @ cc
+                    ok &= np.all(values >= -self.sign_tol, axis=0)
+                obj = _quadratic(cc, b.a0, b.a1, b.A2)
                 better = ok & (obj < best)
                 best[better] = obj[better]
         return out
 
+    def base(self) -> float:
+        """:meth:`best` at ``c = 0``: the exact projection's objective of ``P0``."""
+        return float(self.best(np.zeros((self.branches[0].a1.size if self.branches else 0, 1)))[0])
+
+    def best_moves(self, rows: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """:meth:`best` of the columns with the nonzeros ``d[g, i]`` at ``rows[g]`` (:func:`move_terms`): ``(G, N)``."""
+        if not self.branches:
+            return np.full(d.shape[:2], np.inf)
+        return self.best(_moves_matrix(rows, d, self.branches[0].a1.size)).reshape(d.shape[:2])
+
+
+@dataclass
+class BorderedFamily:
+    r"""The exact projections of ``P0 + D c`` in the bordered form (:class:`_Bordered`): the
+    projection with every constraint imposed is the quadratic ``a0 + a1^T c + c^T A2 c / 2``, its
+    constraint multipliers ``w = w0 + W c``, and branch ``s`` adds ``w^T P_s w / 2`` to the
+    objective and frees its dropped constraints to the values ``-P_s w`` (gaps, pressures), which
+    must be ``>= 0``. Same answers as :class:`AffineFamily`, with one quadratic per ``c`` instead
+    of one per branch."""
+
+    a0: float
+    a1: np.ndarray       # (r,)
+    A2: np.ndarray       # (r, r)
+    w0: np.ndarray       # (2 nc,)
+    W: np.ndarray        # (2 nc, r)
+    P: np.ndarray        # (branches, 2 nc, 2 nc)
+    solvable: np.ndarray  # (branches,) bool
+    sign_tol: float
+    relaxed_P: np.ndarray | None = None  # M^-1: every constraint dropped (None: that problem is singular)
+
+    def relaxed(self) -> tuple[float, np.ndarray, np.ndarray] | None:
+        r"""``(a0, a1, A2)`` of the projection without any contact constraint (``R z = r`` only),
+        ``a0 + a1^T c + c^T A2 c / 2``, or None where that problem is singular. Every branch adds
+        constraints to it, so it is a lower bound of :meth:`best` (a convex QP: ``H`` is positive
+        semidefinite and ``K_R`` nonsingular, so its stationary point is its minimum)."""
+        if self.relaxed_P is None:
+            return None
+        Pw0, PW = self.relaxed_P @ self.w0, self.relaxed_P @ self.W
+        A2 = self.A2 + self.W.T @ PW
+        return self.a0 + 0.5 * float(self.w0 @ Pw0), self.a1 + self.W.T @ Pw0, 0.5 * (A2 + A2.T)
+
+    def best(self, c, *, chunk: int = 1 << 20) -> np.ndarray:
+        """As :meth:`AffineFamily.best`."""
+        c = c.tocsc() if sp.issparse(c) else np.asarray(c, float)
+        out = np.full(c.shape[1], np.inf)
+        for a in range(0, c.shape[1], chunk):
+            cc = c[:, a:a + chunk]
+            w = self.w0[:, None] + ((cc.T @ self.W.T).T if sp.issparse(cc) else self.W @ cc)
+            out[a:a + chunk] = _best_branch(_quadratic(cc, self.a0, self.a1, self.A2), w, self.P, self.solvable,
+                                            self.sign_tol)[0]
+        return out
+
+    def base(self) -> float:
+        """:meth:`best` at ``c = 0``: the exact projection's objective of ``P0``."""
+        return float(_best_branch(np.array([self.a0]), self.w0[:, None], self.P, self.solvable, self.sign_tol)[0][0])
+
+    def best_moves(self, rows: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """:meth:`best` of the columns with the nonzeros ``d[g, i]`` at ``rows[g]`` (:func:`move_terms`),
+        without forming them: ``(G, N)``."""
+        linear, quadratic = move_terms(self.a1, self.A2, rows, d)
+        w = self.w0[:, None, None] + np.einsum("mgj,gij->mgi", self.W[:, rows], d)  # (2 nc, G, N)
+        G, N = linear.shape
+        return _best_branch((self.a0 + linear + quadratic).ravel(), w.reshape(-1, G * N), self.P, self.solvable,
+                            self.sign_tol)[0].reshape(G, N)
+
+
+#: Branches x columns up to which :func:`_best_branch` treats every branch at once.
+ALL_BRANCHES_AT_ONCE = 1 << 16
+
+
+def _best_branch(base: np.ndarray, w: np.ndarray, P: np.ndarray, solvable: np.ndarray, sign_tol: float):
+    """``(objective, branch)`` per column of the bordered form: the smallest ``base + w^T P_s w / 2``
+    over the solvable branches ``s`` whose freed constraints ``-P_s w`` are ``>= -sign_tol`` (the
+    first such branch on ties, as the enumeration in order); ``inf`` and ``-1`` where none is."""
+    if P.shape[0] * w.shape[1] <= ALL_BRANCHES_AT_ONCE:  # few columns: one product for every branch
+        Pw = (P.reshape(-1, P.shape[2]) @ w).reshape(P.shape[0], P.shape[1], -1)
+        obj = np.where(np.all(Pw <= sign_tol, axis=1) & solvable[:, None],
+                       base + 0.5 * np.sum(w * Pw, axis=1), np.inf)
+        which = np.argmin(obj, axis=0)  # the first on ties
+        best = obj[which, np.arange(w.shape[1])]
+        return best, np.where(np.isfinite(best), which, -1)
+    best = np.full(w.shape[1], np.inf)
+    which = np.full(w.shape[1], -1)
+    for s in np.flatnonzero(solvable):
+        Pw = P[s] @ w
+        obj = base + 0.5 * np.einsum("ik,ik->k", w, Pw)
+        better = np.all(Pw <= sign_tol, axis=0) & (obj < best)
+        best[better], which[better] = obj[better], s
+    return best, which
+
+
+#: Bordered form: a branch whose block ``M_DD`` of the multipliers' inverse has a condition number
+#: above this is singular (its own KKT matrix is: ``det M_DD = det K_S / det K``).
+SINGULAR_CONDITION = 1e12
+
+
+@dataclass
+class _Bordered:
+    r"""The projection with every constraint imposed (``R z = r``, ``g = 0`` and ``p = 0`` at every
+    pair), factorised once, and what each branch changes (see :meth:`ExactEnumerator.solve`)."""
+
+    lu: object
+    Zc: np.ndarray       # (n_z, 2 nc): z of unit right-hand sides in the constraint rows
+    M: np.ndarray        # (2 nc, 2 nc): their multipliers
+    P: np.ndarray        # (branches, 2 nc, 2 nc): M_DD^-1 embedded at each branch's dropped rows
+    solvable: np.ndarray  # (branches,) bool
+    relaxed_P: np.ndarray | None  # M^-1 (every constraint dropped), None if singular
+
 
 class ExactEnumerator:
-    """Branch enumeration for a linear :class:`ComplementarityProblem` (built once, solves many)."""
+    """Branch enumeration for a linear :class:`ComplementarityProblem` (built once, solves many).
+
+    The problem's sparse maps are its linear parts: ``R = R_z z + R_P P``, ``g = G_z z + g_P P``
+    and, for a projection, ``f = |d|_W^2 / 2`` with ``d = D_z z + D_P P``, so ``grad f = H z + H_P P``
+    (:attr:`~ddcm_casadi.problems.maps.Distance.hessian`) and ``f(0; P) = P^T D_P^T W D_P P / 2``.
+    Nothing is factorised before the first solve.
+
+    Bordered form (projections). With ``K`` the KKT matrix of every constraint imposed and
+    ``M = (K^-1)`` restricted to the ``2 nc`` multipliers ``mu`` of ``g = 0`` and ``p = 0``, the
+    branch that drops the constraints ``D`` solves ``K y = b + E_D t`` with ``mu_D = 0``:
+    ``t = -M_DD^-1 mu_D(y_0)``. Its dropped constraints take the values ``t`` (the others stay 0)
+    and its objective is ``f(y_0) + mu_D^T M_DD^-1 mu_D / 2`` (from ``K``'s own equations:
+    ``C Z = I``, ``Z^T H Z = -M``). One solve with ``K`` then serves all ``3^nc`` branches. Where
+    ``K`` is singular (dependent constraints), each branch is factorised instead.
+    """
 
     def __init__(self, problem: ComplementarityProblem, *, max_pairs: int = 8, sign_tol: float = 1e-10) -> None:
         if problem.n_pairs > max_pairs:
             raise InputError(f"exact enumeration is limited to {max_pairs} contact pairs, got {problem.n_pairs}")
+        if not problem.affine:
+            raise InputError("exact enumeration needs a linear model")
         self.problem = problem
         self.sign_tol = sign_tol
-        z = ca.vertcat(problem.x, problem.p)
-        P = problem.params
-        self.nx, self.nc, self.nz = problem.n_x, problem.n_pairs, z.numel()
-        R, g = problem.residual, problem.gap
-        self.Rz = _const(ca.jacobian(R, z), [z, P])
-        self.Gz = _const(ca.jacobian(g, z), [z, P])
-        zero = ca.DM.zeros(self.nz)
-        # Affine parts as functions of the parameters: R(0; P), g(0; P), grad f(0; P), f(0; P).
-        obj = problem.objective if problem.objective is not None else ca.SX(0)
-        grad = ca.gradient(obj, z)
-        self.H = _const(ca.jacobian(grad, z), [z, P]) if problem.kind == "mpcc" else None
-        # Affine in the parameters too: R(0; P) = R_P P + R_0, likewise g and grad f; f(0; P) quadratic.
-        at0 = lambda e: ca.substitute(e, z, zero)  # noqa: E731
-        self._R_P = _const(ca.jacobian(at0(R), P), [z, P])
-        self._g_P = _const(ca.jacobian(at0(g), P), [z, P])
-        self._q_P = _const(ca.jacobian(at0(grad), P), [z, P])
-        f0 = at0(obj)
-        self._f_PP = _const(ca.hessian(f0, P)[0], [z, P])
-        const = ca.Function("const", [P], [at0(R), at0(g), at0(grad), f0, ca.gradient(f0, P)])
-        R0, g0, q0, f00, fP = const(np.zeros(P.numel()))
-        self._R_0, self._g_0, self._q_0 = (np.asarray(v, float).reshape(-1, 1) for v in (R0, g0, q0))
-        self._f_0, self._f_P = float(f00), np.asarray(fP, float).ravel()
+        self.nx, self.nc = problem.n_x, problem.n_pairs
+        self.nz = self.nx + self.nc
+        R, g = problem.residual_map, problem.gap_map
+        self.Rz, self.Gz = R.z.tocsc(), g.z.tocsc()
+        self._R_P, self._g_P = R.params, g.params
+        if problem.kind == "mpcc":
+            self.H, self._q_P = (m.tocsc() for m in problem.distance.hessian)
+            d = problem.distance.d
+            self._d, self._weight = d, problem.distance.weight
+            self._f_PP = (d.params.T @ self._weight @ d.params).tocsr()
+        else:
+            self.H = self._d = None
         self._factors: dict[tuple, object] = {}
+        self._bordered_form: _Bordered | None | bool = False  # False: not built yet
         self.partitions = list(itertools.product(
             (FREE, CONTACT) if problem.kind == "mcp" else (FREE, CONTACT, GRAZING), repeat=self.nc))
 
     def _affine_parts(self, params: np.ndarray):
-        f0 = self._f_0 + self._f_P @ params + 0.5 * np.einsum("ik,ik->k", params, self._f_PP @ params)
-        return (self._R_P @ params + self._R_0, self._g_P @ params + self._g_0,
-                self._q_P @ params + self._q_0, f0)
+        """``R(0; P)``, ``g(0; P)``, ``grad f(0; P)`` and ``f(0; P)`` per column of ``params``."""
+        if self.problem.kind == "mcp":
+            return self._R_P @ params, self._g_P @ params, np.zeros((self.nz, params.shape[1])), np.zeros(params.shape[1])
+        f0 = 0.5 * np.einsum("ik,ik->k", params, self._f_PP @ params)
+        return self._R_P @ params, self._g_P @ params, self._q_P @ params, f0
+
+    @property
+    def _bordered(self) -> _Bordered | None:
+        """The bordered form of a projection (built on first use), or None (a classical problem,
+        or ``K`` singular)."""
+        if self._bordered_form is False:
+            self._bordered_form = self._build_bordered() if self.problem.kind == "mpcc" else None
+        return self._bordered_form
+
+    def _build_bordered(self) -> _Bordered | None:
+        nc, nz = self.nc, self.nz
+        C = sp.vstack([self.Gz, sp.csr_matrix((np.ones(nc), (np.arange(nc), self.nx + np.arange(nc))),
+                                              shape=(nc, nz))]).tocsc()
+        K = sp.bmat([[self.H, self.Rz.T, C.T], [self.Rz, None, None], [C, None, None]]).tocsc()
+        try:
+            lu = factorize(K)
+        except SingularMatrix:
+            return None
+        n1 = nz + self.Rz.shape[0]
+        E = np.zeros((K.shape[0], 2 * nc))
+        E[n1 + np.arange(2 * nc), np.arange(2 * nc)] = 1.0
+        Y = lu.solve(E)
+        if not np.all(np.isfinite(Y)):
+            return None
+        M = 0.5 * (Y[n1:] + Y[n1:].T)
+        P = np.zeros((len(self.partitions), 2 * nc, 2 * nc))
+        solvable = np.ones(len(self.partitions), dtype=bool)
+        for s, part in enumerate(self.partitions):
+            part = np.asarray(part)
+            dropped = np.flatnonzero(np.concatenate([~imposes_gap(part), ~imposes_pressure(part)]))
+            if dropped.size == 0:
+                continue
+            MDD = M[np.ix_(dropped, dropped)]
+            if not np.linalg.cond(MDD) <= SINGULAR_CONDITION:
+                solvable[s] = False
+                continue
+            P[s][np.ix_(dropped, dropped)] = np.linalg.inv(MDD)
+        relaxed = np.linalg.inv(M) if nc and np.linalg.cond(M) <= SINGULAR_CONDITION else None
+        return _Bordered(lu=lu, Zc=Y[:nz], M=M, P=P, solvable=solvable, relaxed_P=relaxed)
+
+    def _imposed(self, params: np.ndarray, b: _Bordered) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The projection with every constraint imposed, per column of ``params``: ``(z0, d, mu)``,
+        ``d`` the distance (its objective is ``d^T W d / 2``: no cancellation of large terms) and
+        ``mu`` the multipliers of the ``2 nc`` constraints."""
+        R0, g0, q, _ = self._affine_parts(params)
+        y = b.lu.solve(np.vstack([-q, -R0, -g0, np.zeros((self.nc, params.shape[1]))]))
+        z0 = y[:self.nz]
+        return z0, self._d.z @ z0 + self._d.params @ params, y[self.nz + self.Rz.shape[0]:]
+
+    @property
+    def bordered(self) -> bool:
+        """Whether the projection has the bordered form (``K`` nonsingular; built on first use)."""
+        return self._bordered is not None
+
+    def imposed(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The distance ``d`` and the multipliers ``mu`` of the ``2 nc`` constraints of the projection
+        with every constraint imposed, per column of ``params`` (linear in them: the maps have no
+        constant terms). Needs the bordered form (:attr:`bordered`)."""
+        _, d, w = self._imposed(np.asarray(params, float), self._bordered)
+        return d, w
+
+    def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray) -> BorderedFamily:
+        """The :class:`BorderedFamily` of the projections of ``P0 + D c`` from :meth:`imposed` of
+        ``P0`` (``d0``, ``w0``) and of the columns of ``D`` (``E``, ``W``)."""
+        b = self._bordered
+        Wd0, WE = self._weight @ d0, self._weight @ E
+        A2 = E.T @ WE
+        return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=0.5 * (A2 + A2.T), w0=w0, W=W, P=b.P,
+                              solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
+
+    def _solve_bordered(self, params: np.ndarray, b: _Bordered) -> ExactSolution:
+        z0, d, w = self._imposed(params, b)
+        obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, self._weight @ d), w, b.P, b.solvable,
+                                  self.sign_tol)
+        found = which >= 0
+        cols = np.flatnonzero(found)
+        t = np.zeros((2 * self.nc, params.shape[1]))
+        t[:, cols] = -np.einsum("kij,jk->ik", b.P[which[cols]], w[:, cols])
+        z = np.where(found, z0 + b.Zc @ t, np.nan)
+        part = np.array(self.partitions, dtype=int).reshape(len(self.partitions), self.nc)
+        partition = np.zeros((self.nc, params.shape[1]), dtype=int)
+        partition[:, cols] = part[which[cols]].T
+        return ExactSolution(x=z[:self.nx], p=z[self.nx:], objective=obj, partition=partition, found=found)
 
     def _constraints(self, part) -> sp.csc_matrix:
         part = np.asarray(part)
@@ -190,11 +417,16 @@ class ExactEnumerator:
             return np.zeros(z.shape[1])
         return 0.5 * np.einsum("ik,ik->k", z, self.H @ z) + np.einsum("ik,ik->k", q, z) + f0
 
-    def solve(self, params: np.ndarray) -> ExactSolution:
-        """Exact solution for each column of ``params`` (a vector gives one column)."""
+    def solve(self, params: np.ndarray, *, bordered: bool = True) -> ExactSolution:
+        """Exact solution for each column of ``params`` (a vector gives one column); a projection
+        by the bordered form unless ``bordered`` is False (then, or where ``K`` is singular, each
+        branch's KKT matrix is factorised: the reference)."""
         params = np.asarray(params, float)
         if params.ndim == 1:
             params = params[:, None]
+        b = self._bordered if bordered else None
+        if b is not None:
+            return self._solve_bordered(params, b)
         k = params.shape[1]
         affine = self._affine_parts(params)
         best_obj = np.full(k, np.inf)
@@ -217,28 +449,37 @@ class ExactEnumerator:
         return ExactSolution(x=best_z[:self.nx], p=best_z[self.nx:], objective=best_obj,
                              partition=best_part, found=np.isfinite(best_obj))
 
-    def affine_family(self, base: np.ndarray, directions: np.ndarray) -> AffineFamily:
+    def affine_family(self, base: np.ndarray, directions: np.ndarray, *,
+                      bordered: bool = True) -> AffineFamily | BorderedFamily:
         r"""Every branch of the projections of ``P = base + directions @ c``, affine in ``c``.
 
-        On a branch the KKT system is linear in the parameters: with ``z0`` its solution for
-        ``base`` and ``Z`` for the columns of ``directions`` (without the constant parts),
-        ``z(c) = z0 + Z c``; the gradient's parameter part is ``q(c) = q0 + Q c`` and
-        ``f(0; P)`` is quadratic in ``P``, so the objective
-        ``f = z^T H z / 2 + q^T z + f(0; P)`` is
+        The maps have no constant terms, so every solution is linear in the parameters. By the
+        bordered form (unless ``bordered`` is False, or ``K`` is singular): one solve with ``K``
+        for the ``r + 1`` columns ``[base, directions]`` gives the distance ``d(c) = d_0 + E c``
+        of the projection with every constraint imposed, so its objective is
+        ``a_0 = d_0^T W d_0 / 2``, ``a_1 = E^T W d_0``, ``A_2 = E^T W E``, and the multipliers
+        ``w = w_0 + W c`` (:class:`BorderedFamily`). Branch by branch (:class:`AffineFamily`):
+        with ``z0`` a branch's solution for ``base`` and ``Z`` for ``directions``,
+        ``z(c) = z0 + Z c``, the gradient's parameter part ``q(c) = q0 + Q c`` and ``f(0; P)``
+        quadratic in ``P``, the objective ``f = z^T H z / 2 + q^T z + f(0; P)`` is
 
         .. math::  a_0 + a_1^T c + \tfrac12 c^T A_2 c,\quad
                    A_2 = Z^T H Z + Z^T Q + Q^T Z + D^T F_{PP} D .
 
-        Only ``r + 1`` right-hand sides are solved per branch, whatever the number of ``c``.
+        Only ``r + 1`` right-hand sides are solved (per branch, branch by branch), whatever the
+        number of ``c``.
         """
         if self.problem.kind != "mpcc":
             raise InputError("an affine family of projections needs a projection (mpcc) problem")
         base = np.asarray(base, float).reshape(-1, 1)
         D = np.asarray(directions, float)
+        if bordered and self.bordered:
+            d, w = self.imposed(np.hstack([base, D]))
+            return self.family(d[:, 0], w[:, 0], d[:, 1:], w[:, 1:])
         R0, g0, q0, f0 = self._affine_parts(base)
-        # The linear parts of R, g, grad f in the directions (no constants).
+        # The linear parts of R, g, grad f in the directions.
         RD, gD, qD = self._R_P @ D, self._g_P @ D, self._q_P @ D
-        fD = self._f_P @ D + (base[:, 0] @ (self._f_PP @ D))
+        fD = base[:, 0] @ (self._f_PP @ D)
         FDD = D.T @ (self._f_PP @ D)
         out = []
         for part in self.partitions:

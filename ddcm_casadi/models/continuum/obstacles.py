@@ -424,5 +424,6 @@ def moving(obstacle: Obstacle, motion) -> Obstacle:
         raise InputError(f"obstacle {obstacle.name!r}: motion must be finite")
     steps = np.diff(np.vstack([np.zeros((1, m.shape[1])), m]), axis=0)
     length = np.cumsum(np.linalg.norm(steps, axis=1))
-    first = next((v for v in steps if np.any(v)), obstacle.offset(1.0))
+    moved = [v for v in steps if np.any(v)]
+    first = moved[0] if moved else np.eye(m.shape[1])[-1]  # a path that stands still: any direction
     return dataclasses.replace(obstacle, motion=m, travel=length, direction=tuple(first))
