@@ -39,7 +39,7 @@ Newton fails by a smoothing continuation (``|v| -> sqrt(|v|^2 + s^2)``, ``[t]_+`
 :func:`~ddcm_casadi.loops.newton.smoothed_newton_solve`).
 
 The MPCC formulation (IPOPT) writes the law as smooth constraints instead
-(:func:`coulomb_constraints`).
+(:func:`coulomb_constraints`, :func:`coulomb_branch`).
 """
 
 from __future__ import annotations
@@ -147,22 +147,51 @@ FUNCTIONS: dict[str, Callable] = {
 }
 
 
-def coulomb_constraints(a: list, b: list, mu, tau) -> tuple[list, list]:
-    r"""Coulomb's law as smooth constraints for an NLP solver, relaxed by ``tau``:
-    ``(inequalities >= 0, equalities = 0)``.
+def cone_traction(p_n, direction: list, mu) -> list:
+    """The traction ``r = (p_N, mu p_N rho)`` of a normal pressure ``p_N >= 0`` and a friction
+    direction ``|rho| <= 1``: in the cone ``K_mu`` by construction, also at ``mu = 0``."""
+    return [p_n] + [mu * p_n * v for v in direction]
 
-    With ``r = (p_N, r_T)`` and ``u = (g_N, s_T)``: ``g_N >= 0``, ``p_N >= 0``, the cone
-    ``mu^2 p_N^2 - |r_T|^2 >= 0``, and the complementarity of the normal pair and of the slip,
-    ``tau - g_N p_N >= 0`` and ``r_T |s_T|_tau + mu p_N s_T = 0`` with
-    ``|s_T|_tau = sqrt(|s_T|^2 + tau^2)``. At ``tau = 0`` the last says ``r_T = -mu p_N s_T/|s_T|``
-    wherever ``s_T != 0`` (slip) and leaves ``r_T`` in the cone where ``s_T = 0`` (stick), which
-    with the others is Coulomb's law; ``tau > 0`` is a viscous regularisation of the stick
-    (``|s_T| ~ tau |r_T| / (mu p_N)``).
+
+def coulomb_constraints(a: list, r: list, direction: list, mu, tau) -> list:
+    r"""Coulomb's law as smooth inequalities ``>= 0`` for an NLP solver, relaxed by ``tau > 0``.
+
+    With ``u = (g_N, s_T)`` and the traction ``r = (p_N, mu p_N rho)`` of :func:`cone_traction`
+    (a bound ``p_N >= 0``), and ``|s_T|_tau = sqrt(|s_T|^2 + tau^2) - tau`` (smooth, ``0 <= |s_T| -
+    |s_T|_tau <= tau``):
+
+    .. math::  g_N \ge 0,\qquad 1 - |\rho|^2 \ge 0,\qquad
+               \tau - \bigl(p_N (g_N + \mu |s_T|_\tau) + r_T \cdot s_T\bigr) \ge 0 .
+
+    The first two say ``u_hat in K_mu^*`` and ``r in K_mu``; the bracket is
+    ``r . u_hat - mu p_N (|s_T| - |s_T|_tau)`` (De Saxcé's ``u_hat = u + mu |s_T| e_N``,
+    :mod:`ddcm_casadi.models.coulomb`), so the last is the Scholtes relaxation of the cone
+    complementarity ``r . u_hat = 0``: every solution of Coulomb's law satisfies it, a point that
+    does has ``0 <= r . u_hat <= tau (1 + mu p_N)``, and ``tau -> 0`` gives exactly the law, as
+    ``g p <= tau`` does for the normal pairs. Every function is smooth for ``tau > 0`` (no
+    ``|s_T|`` at stick), and ``r = (p_N, mu p_N rho)`` keeps an interior at ``mu = 0`` (then
+    ``r_T = 0``). Measured against the viscous form ``r_T sqrt(|s_T|^2 + tau^2) + mu p_N s_T = 0``
+    and a lifted ``|s_T|`` in :mod:`ddcm_casadi.formulations.mpcc`.
     """
-    slip = norm(a[1:], tau)
-    inequalities = [a[0], b[0], mu**2 * b[0]**2 - sum(v**2 for v in b[1:]), tau - a[0] * b[0]]
-    equalities = [bt * slip + mu * b[0] * at for at, bt in zip(a[1:], b[1:])]
-    return inequalities, equalities
+    slip = ca.sqrt(sum(v**2 for v in a[1:]) + tau**2) - tau
+    dissipation = r[0] * (a[0] + mu * slip) + sum(rt * at for rt, at in zip(r[1:], a[1:]))
+    return [a[0], 1 - sum(v**2 for v in direction), tau - dissipation]
+
+
+def coulomb_branch(a: list, r: list, mu, is_open, is_stick, is_corner=0) -> list:
+    """The ``b`` equations of one contact on one branch of Coulomb's law (``is_open``,
+    ``is_stick``, ``is_corner``: 0/1 per contact; none: slip): open ``r = 0``; stick ``u = 0``;
+    slip ``g_N = 0`` and ``r_T + mu p_N s_T / |s_T| = 0`` (the traction on the cone's surface
+    against the slip, smooth where ``s_T != 0``); the corner ``g_N = 0, r_T = 0`` (closed without
+    traction; ``p_N = 0`` is the caller's extra row; an edge is stick with the cone's surface as
+    that row). ``if_else`` keeps an unused branch's values
+    (the slip direction at ``s_T = 0``) out of the rows and their derivatives."""
+    length = norm(a[1:])
+    slip = [rt + mu * r[0] * at / (length + (length == 0)) for at, rt in zip(a[1:], r[1:])]
+    free = is_open + is_corner
+    tangential = [ca.if_else(free, rt, ca.if_else(is_stick, at, st, True), True)
+                  for at, rt, st in zip(a[1:], r[1:], slip)]
+    return [ca.if_else(is_open, r[0], a[0], True)] + tangential
 
 
 # ------------------------------------------------------------------------ systems

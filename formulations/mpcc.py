@@ -22,6 +22,51 @@ stalls, the branch is identified (``g_i = 0`` where ``g_i <= p_i``, else ``p_i =
 A BNLP solution is accepted only if the dropped signs hold (``g >= 0``, ``p >= 0`` within
 ``comp_tol``). The result is
 a stationary point, not always the global one: the DDCM driver checks the other branches.
+
+Coulomb friction (``problem.frictional``: per contact the gap and slip ``u = (g_N, s_T)`` and the
+traction ``r = (p_N, r_T)``, :mod:`ddcm_casadi.models.coulomb`). The traction is written
+``r = (p_N, mu p_N rho)`` with ``p_N >= 0`` (a bound) and ``|rho| <= 1``, so it lies in the cone
+by construction, and the cone complementarity ``r in K, u_hat in K^*, r . u_hat = 0`` (De Saxcé)
+is relaxed as the normal pairs are (:func:`~ddcm_casadi.formulations.friction.coulomb_constraints`):
+
+.. math::  g_N \ge 0,\quad |\rho|^2 \le 1,\quad
+           p_N (g_N + \mu |s_T|_\tau) + r_T \cdot s_T \le \tau,\qquad
+           |s_T|_\tau = \sqrt{|s_T|^2 + \tau^2} - \tau .
+
+What a solution means (Coulomb's law is not a potential):
+
+- classical (mcp): ``min 0`` subject to ``F(x, p) = 0`` and the law, a feasibility problem (as
+  the frictionless path with affine maps: friction needs small kinematics); any point that
+  satisfies the law is a solution, and IPOPT returns the one its path reaches;
+- DDCM (mpcc): ``min f`` (the projection's distance to the data) subject to ``h(x, p) = 0`` and
+  the law, a KKT point of the projection onto the frictional admissible set (a local one, as
+  without friction).
+
+The homotopy (same options, same stopping test, with Coulomb's natural-map residual as the
+complementarity measure) ends on a *branch NLP* in ``[x; p]``: per contact open (``r = 0``),
+stick (``u = 0``) or slip (``g_N = 0``, ``r_T = -mu p_N s_T / |s_T|``), identified from the
+relaxed point (closed where ``g_N <= p_N``; stick where ``|s_T| < mu p_N - |r_T|``), the
+statuses parameters of one NLP built once (:func:`~ddcm_casadi.formulations.friction.coulomb_branch`).
+A branch solution is accepted when the law's natural-map residual is at most ``comp_tol`` (so
+every sign holds) and the residual at most ``residual_tol``; one that is not re-identifies the
+statuses at its own point (a primal-dual active-set round). A projection also has degenerate
+branches, as the biactive normal pairs: the *corner* (``g_N = 0, r = 0``) and the *edge* (stuck,
+``u = 0``, with ``|r_T| = mu p_N``), tried where the rounds switch a contact back and forth or where
+the relaxed point is within ``10 sqrt(tau)`` of them, and accepted only if B-stationary (the
+distance decreases along none of the pieces that meet there, by the signs of the multipliers;
+otherwise the contact leaves along the piece they point to). Where no contact is degenerate the
+branch is locally the whole admissible set, so a projection's branch KKT point is one of the
+projection. With ``warm_branch`` the next solve first tries the branch NLP of the last solution's
+statuses when the start identifies them again.
+
+Measured on 12 generated FCLIB local problems (1-30 contacts, ``mu = 0.3``), IPOPT iterations
+summed over the 12: the first relaxed solve (``tau = 1e-2``, after which the branch NLP usually
+ends the solve) took 301 in this form, 622 in the viscous form
+``r_T sqrt(|s_T|^2 + tau^2) + mu p_N s_T = 0`` (free ``r_T``, the cone
+``mu^2 p_N^2 >= |r_T|^2``), 1720 with 4 failures with ``|s_T|`` lifted to a variable
+``sigma^2 >= |s_T|^2`` (exact, but degenerate at stick); a plain homotopy down to ``tau = 1e-12``
+(no branch NLP) failed 4, 5 and 10 times. With the branch NLP (and ``friction_tau0 = 1e-3``) this
+form solves all 12 in 6-28 iterations (``benchmarks/mpcc_friction.py``).
 """
 
 from __future__ import annotations
@@ -33,11 +78,13 @@ import numpy as np
 
 from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, identify, imposes_gap, imposes_pressure, signs_hold
 from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.models.coulomb import blocks, flat
 from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.homotopy import scholtes_homotopy
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .friction import cone_traction, coulomb_branch, coulomb_constraints
 from .registry import register
 
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
@@ -49,6 +96,7 @@ class MPCC(Formulation):
 
     name = "mpcc"
     title = "MPCC (IPOPT)"
+    supported_contact_laws = frozenset({"signorini", "coulomb"})
 
     @dataclass(frozen=True)
     class Options:
@@ -56,6 +104,12 @@ class MPCC(Formulation):
 
         tau0 : float
             First relaxation ``tau`` of ``g p <= tau`` (scaled).
+        friction_tau0 : float
+            First relaxation of a frictional problem's ``r . u_hat <= tau`` (scaled; see the
+            module). Summed IPOPT iterations from ``1e-2``, ``1e-3``, ``1e-4``: 769, 922, 2555 on 18
+            generated FCLIB problems (3-30 contacts, ``mu`` 0.1-1); 274, 191, 311 on 12 others
+            (1-30 contacts); 1188, 742 (``1e-2``, ``1e-3``) on the friction rungs' block and
+            incline, classical and DDCM.
         tau_factor : float
             ``tau <- tau_factor * tau`` between homotopy steps (0 < factor < 1).
         comp_tol : float
@@ -84,6 +138,7 @@ class MPCC(Formulation):
         """
 
         tau0: float = 1e-2
+        friction_tau0: float = 1e-3
         tau_factor: float = 1e-2
         tau_min: float = 1e-24
         comp_tol: float = 1e-11
@@ -95,7 +150,7 @@ class MPCC(Formulation):
 
     def _validate(self) -> None:
         super()._validate()
-        for k in ("tau0", "comp_tol", "residual_tol"):
+        for k in ("tau0", "friction_tau0", "comp_tol", "residual_tol"):
             positive_option(self.name, k, getattr(self.options, k))
         if not 0 < self.options.tau_factor < 1:
             from ddcm_casadi.errors import InputError
@@ -103,8 +158,58 @@ class MPCC(Formulation):
         if self.options.ipopt:
             check_ipopt_options(f"formulation {self.name!r}", self.options.ipopt)
 
-    def _build(self, problem: ComplementarityProblem) -> "_BuiltMPCC":
+    def _build(self, problem: ComplementarityProblem) -> BuiltFormulation:
+        if problem.frictional:
+            return _BuiltCoulombMPCC(problem, self.options)
         return _BuiltMPCC(problem, self.options)
+
+
+def _ipopt_options(problem: ComplementarityProblem, opts: "MPCC.Options") -> dict:
+    """IPOPT's options for ``problem`` (the user's ``ipopt`` last)."""
+    ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
+             "acceptable_tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500,
+             "mu_strategy": "adaptive"}
+    if problem.affine:
+        # IPOPT ignores the homotopy's warm multipliers without this (a deep relaxed solve then
+        # took 150-450 iterations on the Hertz example's projections). Not with finite
+        # kinematics: on the von Mises truss the step after the snap then fails.
+        ipopt["warm_start_init_point"] = "yes"
+    if problem.kind == "mcp":
+        # The classical NLP is a feasibility problem: its KKT matrix has a zero Hessian block.
+        # MUMPS's automatic ordering (as SCOTCH or PORD) then gives steps on which IPOPT needs
+        # 257 iterations of 0.2 s for one relaxed solve of the Hertz example, AMD 14 of 0.01 s
+        # (docs/performance.md, 2026-11-26). With the distance objective (DDCM) the automatic
+        # ordering is the faster one (38 ms against 117 ms an iteration).
+        ipopt["mumps_pivot_order"] = 0
+    ipopt.update(dict(opts.ipopt))
+    return ipopt
+
+
+#: CasADi's options of every NLP solver built here.
+_NLPSOL = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}
+
+
+def _run(solver, args: dict) -> tuple[str, np.ndarray, tuple | None, int]:
+    """One IPOPT solve: ``(status, w, warm, iterations)``, ``status`` ``""`` on success (then
+    ``warm`` the multipliers ``(lam_x, lam_g)``), else IPOPT's reason and ``w`` the start."""
+    sol = solver(**args)
+    stats = ipopt_stats(solver)
+    its = iteration_count(stats)
+    if stats["return_status"] not in _OK:
+        return f"IPOPT: {stats['return_status']}", np.asarray(args["x0"], float), None, its
+    return ("", np.asarray(sol["x"], float).ravel(),
+            (np.asarray(sol["lam_x"], float).ravel(), np.asarray(sol["lam_g"], float).ravel()), its)
+
+
+def _relaxed(solver, parameters, values, bounds: dict):
+    """``relaxed(w, tau, warm)`` of :func:`~ddcm_casadi.loops.homotopy.scholtes_homotopy` for the
+    relaxed NLP ``solver`` (parameters ``values`` and ``tau``; ``bounds``: ``lbx``, ``lbg``, ...)."""
+    def relaxed(w, tau, warm):
+        args = dict(x0=w, p=parameters.pack(values, tau=tau), **bounds)
+        if warm is not None:
+            args.update(lam_x0=warm[0], lam_g0=warm[1])
+        return _run(solver, args)
+    return relaxed
 
 
 class _BuiltMPCC(BuiltFormulation):
@@ -120,22 +225,7 @@ class _BuiltMPCC(BuiltFormulation):
         base = problem.parameters.extend(anchor=nx) if self._anchored else problem.parameters
         self._base = base
         self.parameters = base.extend(tau=1)
-        ipopt = {"print_level": 0, "sb": "yes", "bound_relax_factor": 0.0, "tol": 1e-12,
-                 "acceptable_tol": 1e-10, "constr_viol_tol": 1e-12, "max_iter": 500,
-                 "mu_strategy": "adaptive"}
-        if problem.affine:
-            # IPOPT ignores the homotopy's warm multipliers without this (a deep relaxed solve then
-            # took 150-450 iterations on the Hertz example's projections). Not with finite
-            # kinematics: on the von Mises truss the step after the snap then fails.
-            ipopt["warm_start_init_point"] = "yes"
-        if problem.kind == "mcp":
-            # The classical NLP is a feasibility problem: its KKT matrix has a zero Hessian block.
-            # MUMPS's automatic ordering (as SCOTCH or PORD) then gives steps on which IPOPT needs
-            # 257 iterations of 0.2 s for one relaxed solve of the Hertz example, AMD 14 of 0.01 s
-            # (docs/performance.md, 2026-11-26). With the distance objective (DDCM) the automatic
-            # ordering is the faster one (38 ms against 117 ms an iteration).
-            ipopt["mumps_pivot_order"] = 0
-        ipopt.update(dict(opts.ipopt))
+        ipopt = _ipopt_options(problem, opts)
         # SX throughout, local terms (finite strain) written out element by element: IPOPT's
         # Hessians of MX maps cost more than the expansion (measured on the 822-dof indentation:
         # 12 s to build and 302 s to solve in MX, 52 s and 17 s in SX).
@@ -148,13 +238,11 @@ class _BuiltMPCC(BuiltFormulation):
             return {"x": z, "p": P, "f": objective, "g": ca.vertcat(residual, gap, rows(p, gap, P))}
 
         self._solver = ca.nlpsol("mpcc", "ipopt", nlp(self.parameters, lambda p, gap, P: gap * p - P[self.parameters.slice("tau")]),
-                                 {"ipopt": ipopt, "print_time": False, "error_on_fail": False,
-                                  "show_eval_warnings": False})
+                                 {"ipopt": ipopt, **_NLPSOL})
         # Branch NLP: [residual; g; p] with equality bounds chosen per solve.
         # (an inverted element's terms are NaN at finite strain: IPOPT backs off, quietly)
         self._bnlp = ca.nlpsol("bnlp", "ipopt", nlp(base, lambda p, gap, P: p),
-                               {"ipopt": ipopt, "print_time": False, "error_on_fail": False,
-                                "show_eval_warnings": False})
+                               {"ipopt": ipopt, **_NLPSOL})
         w = ca.vertcat(problem.x, problem.p)
         self._ne = ne = problem.n_residual
         self._lbg = np.concatenate([np.zeros(ne), np.zeros(nc), np.full(nc, -np.inf)])
@@ -180,17 +268,7 @@ class _BuiltMPCC(BuiltFormulation):
                                     outer=1, message="converged (branch NLP from the start's branch)",
                                     state=self._next_state(True, polished, params))
 
-        def relaxed(w, tau, warm):
-            args = dict(x0=w, p=self.parameters.pack(values, tau=tau), lbx=self._lbx, lbg=self._lbg, ubg=self._ubg)
-            if warm is not None:
-                args.update(lam_x0=warm[0], lam_g0=warm[1])
-            sol = self._solver(**args)
-            stats = ipopt_stats(self._solver)
-            its = iteration_count(stats)
-            if stats["return_status"] not in _OK:
-                return f"IPOPT: {stats['return_status']}", w, None, its
-            return ("", np.asarray(sol["x"], float).ravel(),
-                    (np.asarray(sol["lam_x"], float).ravel(), np.asarray(sol["lam_g"], float).ravel()), its)
+        relaxed = _relaxed(self._solver, self.parameters, values, dict(lbx=self._lbx, lbg=self._lbg, ubg=self._ubg))
 
         def measure(w):
             residual, comp, _, _ = self.metrics(w[:nx], w[nx:], params)
@@ -257,13 +335,11 @@ class _BuiltMPCC(BuiltFormulation):
             inf = np.full(nc, np.inf)
             lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
             ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
-            sol = self._bnlp(x0=w, p=values, lbg=lbg, ubg=ubg)
-            stats = ipopt_stats(self._bnlp)
-            iters += iteration_count(stats)
-            if stats["return_status"] not in _OK:
+            status, w_new, warm, its = _run(self._bnlp, dict(x0=w, p=values, lbg=lbg, ubg=ubg))
+            iters += its
+            if status:
                 continue
-            w_new = np.asarray(sol["x"], float).ravel()
-            lam = np.asarray(sol["lam_g"], float).ravel()
+            lam = warm[1]
             # CasADi's lam_g is the multiplier of f + lam^T g: the convention of b_stationarity.
             wrong_gap, wrong_p = b_stationarity(lam[ne:ne + nc], lam[ne + nc:], fix_gap & fix_p)
             residual, comp, pen, _ = self.metrics(w_new[:nx], w_new[nx:], params)
@@ -272,6 +348,254 @@ class _BuiltMPCC(BuiltFormulation):
                   and comp <= self.opts.comp_tol and residual <= self.opts.residual_tol)
             if ok:
                 return w_new, iters, True
-            if not both.any():
+            if wrong_gap.any() or wrong_p.any():
+                # leave the corners that are not B-stationary along the piece their multiplier
+                # points to (the pressed block's edge: inner pairs in contact, the edge's biactive)
+                candidates.append((fix_gap & ~wrong_gap, fix_p & ~wrong_p))
+            elif not both.any():
                 break
         return w, iters, False
+
+
+#: Per-contact statuses of a frictional branch; projections only: the corner (closed without
+#: traction) and the edge (stuck with the traction on the cone's surface).
+OPEN, STICK, SLIP, CORNER, EDGE = 0, 1, 2, 3, 4
+#: IPOPT's iteration limit in a frictional branch NLP: the right branch from a relaxed solution
+#: takes 1-4 iterations on the generated FCLIB problems, a wrong one (a slip rule at ``s_T = 0``,
+#: an infeasible branch) ran to 500 or into restoration.
+BRANCH_MAX_ITER = 30
+#: Branch NLPs per attempt (the identified statuses, then those identified at each rejected
+#: branch solution).
+BRANCH_ROUNDS = 5
+
+
+class _BuiltCoulombMPCC(BuiltFormulation):
+    """A frictional problem as an NLP for IPOPT (see the module): the relaxed NLP in
+    ``w = [x; p_N; rho]`` (:func:`~.friction.coulomb_constraints`) along the Scholtes
+    homotopy, and the branch NLP in ``[x; p]`` of per-contact statuses (open, stick, slip; a
+    projection's corners and edges). Both are built once; the friction coefficients, the load,
+    ``tau`` and the statuses are parameters."""
+
+    def __init__(self, problem: ComplementarityProblem, opts: MPCC.Options) -> None:
+        super().__init__(problem)
+        self.opts = opts
+        nx, nc, b = problem.n_x, problem.n_contacts, problem.block
+        self._nx, self._nc, self._b = nx, nc, b
+        base = problem.parameters
+        self.parameters = base.extend(tau=1)
+        P = ca.SX.sym("P", self.parameters.size)
+        own, tau = P[:base.size], P[self.parameters.slice("tau")]
+        mu = own[base.slice("friction")]
+
+        def split(v, start, count):
+            return [v[start + j * nc:start + (j + 1) * nc] for j in range(count)]
+
+        def objective(z, P):
+            return problem.distance.render(z, P) if problem.kind == "mpcc" else ca.SX.zeros(1, 1)
+
+        # Relaxed NLP: the traction r = (p_N, mu p_N rho) is in the cone by construction.
+        w = ca.SX.sym("w", nx + b * nc)
+        pn, direction = w[nx:nx + nc], split(w, nx + nc, b - 1)
+        r = cone_traction(pn, direction, mu)
+        z = ca.vertcat(w[:nx], *r)
+        rows = coulomb_constraints(split(problem.gap_map.render(z, own), 0, b), r, direction, mu, tau)
+        self._solver = ca.nlpsol("mpcc_coulomb", "ipopt", {
+            "x": w, "p": P, "f": objective(z, own), "g": ca.vertcat(problem.residual_map.render(z, own), *rows)},
+            {"ipopt": _ipopt_options(problem, opts), **_NLPSOL})
+        ne = problem.n_residual
+        # |rho_j| <= 1 also as bounds: IPOPT keeps iterates inside bounds (fraction to the boundary),
+        # not inside general inequalities; from p_N ~ 0 (a cold start) rho is nearly free and its
+        # first step reached 1e6 (the pressed block: 156 iterations, 42 with the bounds).
+        unit = np.ones((b - 1) * nc)
+        self._bounds = dict(lbx=np.concatenate([np.full(nx, -np.inf), np.zeros(nc), -unit]),
+                            ubx=np.concatenate([np.full(nx + nc, np.inf), unit]),
+                            lbg=np.zeros(ne + 3 * nc), ubg=np.concatenate([np.zeros(ne), np.full(3 * nc, np.inf)]))
+        # Branch NLP in z = [x; p]: the residual, b equations per contact and one more row (p_N at
+        # a corner, the cone's surface mu^2 p_N^2 - |r_T|^2 at an edge; free elsewhere), the
+        # statuses parameters (a square system for the classical problem).
+        zb = ca.SX.sym("z", nx + b * nc)
+        Pb = ca.SX.sym("P", base.size + 4 * nc)
+        own, (is_open, is_stick, is_corner, is_edge) = Pb[:base.size], split(Pb, base.size, 4)
+        ab, rb = split(problem.gap_map.render(zb, own), 0, b), split(zb, nx, b)
+        mu_b = own[base.slice("friction")]
+        surface = mu_b**2 * rb[0]**2 - sum(v**2 for v in rb[1:])
+        self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
+            "x": zb, "p": Pb, "f": objective(zb, own),
+            "g": ca.vertcat(problem.residual_map.render(zb, own),
+                            *coulomb_branch(ab, rb, mu_b, is_open, is_stick + is_edge, is_corner),
+                            ca.if_else(is_corner, rb[0], surface, True))},
+            {"ipopt": {**_ipopt_options(problem, opts), "max_iter": BRANCH_MAX_ITER}, **_NLPSOL})
+        self._ne = ne
+
+    # ------------------------------------------------------------------ variables
+    def _blocks(self, x, p, params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(u, r, mu)``: the scaled gaps and tractions ``(nc, b)`` at ``(x, p)`` and the friction."""
+        z = np.concatenate([x, p])
+        gap = self.problem.gap_map.value(z, params)
+        return blocks(gap, self._b), blocks(p, self._b), self.problem.parameters.get(params, "friction")
+
+    def _to_nlp(self, x, p, params) -> np.ndarray:
+        """``w = [x; p_N; rho]`` of ``(x, p)``: ``rho = r_T / (mu p_N)`` (0 where ``mu p_N = 0``),
+        shrunk into the unit disc."""
+        _, r, mu = self._blocks(x, p, params)
+        pn = np.maximum(r[:, 0], 0.0)
+        bound = mu * pn
+        rho = r[:, 1:] / np.where(bound > 0, bound, 1.0)[:, None] * (bound > 0)[:, None]
+        rho /= np.maximum(1.0, np.linalg.norm(rho, axis=1))[:, None]
+        return np.concatenate([x, pn, flat(rho)])
+
+    def _from_nlp(self, w, params) -> tuple[np.ndarray, np.ndarray]:
+        """``(x, p)`` of ``w`` (the traction of :func:`~.friction.cone_traction`)."""
+        nx, nc, b = self._nx, self._nc, self._b
+        mu = self.problem.parameters.get(params, "friction")
+        pn = w[nx:nx + nc]
+        rho = w[nx + nc:nx + b * nc].reshape(b - 1, nc)
+        return w[:nx], np.concatenate([pn, (mu * pn * rho).ravel()])
+
+    def _status(self, x, p, params, tol: float | None = None) -> np.ndarray:
+        """Per contact the status identified at ``(x, p)``: closed where ``g_N <= p_N``; then
+        stick where ``|s_T| < mu p_N - |r_T|`` (the slip smaller than the traction's distance to
+        the cone's surface), else slip. With ``tol`` (projections), the degenerate ones: a corner
+        where ``|g_N|`` and ``|p_N|`` are at most ``tol``, else an edge where ``|s_T|`` and
+        ``|mu p_N - |r_T||`` are and ``p_N`` exceeds it."""
+        u, r, mu = self._blocks(x, p, params)
+        slip, room = np.linalg.norm(u[:, 1:], axis=1), mu * r[:, 0] - np.linalg.norm(r[:, 1:], axis=1)
+        status = np.where(u[:, 0] > r[:, 0], OPEN, np.where(slip < room, STICK, SLIP))
+        if tol is None:
+            return status
+        corner = np.maximum(np.abs(u[:, 0]), np.abs(r[:, 0])) <= tol
+        edge = (status != OPEN) & (np.maximum(slip, np.abs(room)) <= tol) & (r[:, 0] > tol)
+        return np.where(corner, CORNER, np.where(edge, EDGE, status))
+
+    # ------------------------------------------------------------------ solves
+    def solve(self, params, x0, p0, state=None) -> LocalSolution:
+        o = self.opts
+        params = np.asarray(params, float)
+        x0, p0 = np.asarray(x0, float), np.asarray(p0, float)
+        state = state or {}
+        last = state.get("status")
+        if last is not None and np.array_equal(np.where(last < CORNER, last, -1),
+                                                np.where(last < CORNER, self._status(x0, p0, params), -1)):
+            # The start's statuses are the last solution's (its corners and edges kept): its
+            # branch NLP first (one IPOPT solve).
+            (x, p), iters, ok, status = self._branch_nlp(x0, p0, params, 0.0, last)
+            if ok:
+                return self._done(x, p, params, True, iters, 1, "converged (branch NLP from the start's branch)",
+                                  status)
+
+        def measure(w):
+            residual, comp, _, _ = self.metrics(*self._from_nlp(w, params), params)
+            return residual, comp
+
+        accepted = {}
+
+        def branch_nlp(w, tau):
+            (x, p), iters, ok, accepted["status"] = self._branch_nlp(*self._from_nlp(w, params), params, tau)
+            return (self._to_nlp(x, p, params) if ok else w), iters, ok
+
+        out = scholtes_homotopy(_relaxed(self._solver, self.parameters, params, self._bounds), measure=measure,
+                                branch_nlp=branch_nlp, near_corner=lambda w, tau: False,
+                                w0=self._to_nlp(x0, p0, params), tau0=o.friction_tau0, tau_factor=o.tau_factor,
+                                tau_min=o.tau_min, comp_tol=o.comp_tol, residual_tol=o.residual_tol,
+                                max_homotopy=o.max_homotopy, early_branch=o.early_branch)
+        x, p = self._from_nlp(out.w, params)
+        branch = out.converged and out.message.startswith("converged (branch NLP")
+        return self._done(x, p, params, out.converged, out.iterations, out.steps, out.message,
+                          accepted.get("status") if branch else None)
+
+    def _done(self, x, p, params, converged, iterations, outer, message, status=None) -> LocalSolution:
+        if status is None:
+            status = self._status(x, p, params)
+        state = {"status": status} if converged and self.opts.warm_branch else {}
+        return self._finish(x, p, params, converged=converged, iterations=iterations, outer=outer, state=state,
+                            message=message)
+
+    def _branch_nlp(self, x, p, params, tau: float, status: np.ndarray | None = None
+                    ) -> tuple[tuple[np.ndarray, np.ndarray], int, bool, np.ndarray]:
+        """The branch NLP of ``status`` (default: identified at ``(x, p)``): returns ``((x, p),
+        iterations, accepted, status)``. A solution is accepted if Coulomb's natural-map residual
+        is at most ``comp_tol`` and the residual at most ``residual_tol`` (it then satisfies the
+        law, all its signs included), and a projection's corners and edges are B-stationary
+        (:meth:`_leave`). A branch solution that is not is where the identification erred: the
+        statuses identified there (an open contact that penetrates closes, a stuck one outside
+        the cone slides, a closed one that pulls opens) are tried next, as a primal-dual
+        active-set method would, at most :data:`BRANCH_ROUNDS` times and never twice the same. In
+        a projection, a contact tried both open and closed that would switch again is tried as a
+        corner, one tried both stuck and sliding as an edge, as a biactive normal pair is; a corner
+        or edge that is not B-stationary leaves along the piece its multipliers point to. Where
+        those rounds fail, a projection's rounds start again from the identification with the
+        degenerate statuses within ``10 sqrt(tau) + 100 c`` (``c`` the natural-map residual at
+        ``(x, p)``; :meth:`_status`)."""
+        starts = [self._status(x, p, params) if status is None else status]
+        if status is None and self.problem.kind == "mpcc":
+            _, comp, _, _ = self.metrics(x, p, params)
+            starts.append(self._status(x, p, params, 10.0 * np.sqrt(tau) + 100.0 * comp))
+        z0, iters, tried = np.concatenate([x, p]), 0, set()
+        for start in starts:
+            z, its, ok, status = self._rounds(z0, start, params, tried)
+            iters += its
+            if ok:
+                return (z[:self._nx], z[self._nx:]), iters, True, status
+        return (x, p), iters, False, status
+
+    def _rounds(self, z, status, params, tried: set) -> tuple[np.ndarray, int, bool, np.ndarray]:
+        """The active-set rounds of :meth:`_branch_nlp` from ``z`` and ``status`` (at most
+        :data:`BRANCH_ROUNDS`, none in ``tried``): ``(z, iterations, accepted, status)``."""
+        nx, nc, b, ne = self._nx, self._nc, self._b, self._ne
+        projection = self.problem.kind == "mpcc"
+        seen = {k: np.zeros(nc, bool) for k in (OPEN, STICK, SLIP)}
+        free = np.full(nc, np.inf)
+        iters = rounds = 0
+        while rounds < BRANCH_ROUNDS and status.tobytes() not in tried:
+            rounds += 1
+            tried.add(status.tobytes())
+            held = (status == CORNER) | (status == EDGE)
+            bound = np.concatenate([np.zeros(ne + b * nc), np.where(held, 0.0, free)])
+            flags = np.concatenate([params] + [status == k for k in (OPEN, STICK, CORNER, EDGE)])
+            run, z, warm, its = _run(self._bnlp, dict(x0=z, p=flags, lbg=-bound, ubg=bound))
+            iters += its
+            if run:
+                break
+            residual, comp, _, _ = self.metrics(z[:nx], z[nx:], params)
+            left = self._leave(warm[1], status, z, params)
+            if comp <= self.opts.comp_tol and residual <= self.opts.residual_tol and np.array_equal(left, status):
+                return z, iters, True, status
+            for k in seen:
+                seen[k] |= status == k
+            new = self._status(z[:nx], z[nx:], params)
+            if projection:
+                opens = (new == OPEN) != (status == OPEN)
+                slides = (new == SLIP) & (status == STICK) | (new == STICK) & (status == SLIP)
+                closed = seen[STICK] | seen[SLIP]
+                new = np.where(held, left, np.where(opens & seen[OPEN] & closed, CORNER,
+                                                    np.where(slides & seen[STICK] & seen[SLIP], EDGE, new)))
+            status = new
+        return z, iters, False, status
+
+    def _leave(self, lam: np.ndarray, status: np.ndarray, z: np.ndarray, params) -> np.ndarray:
+        """``status`` with the corners and edges of the branch solution ``z`` that are not
+        B-stationary left along the piece their multipliers point to (CasADi's ``lam``, of
+        ``f + lam^T g``: a change ``dc`` of one held row changes the distance by ``-lam dc``), within
+        ``1e-8 max(1, max |lam|)``; the solution is B-stationary where nothing changes.
+
+        Corner (``g_N = 0, r = 0``): opening must not decrease the distance (``lam_g <= 0``, as for
+        a biactive normal pair; else open), nor any traction in the cone, ``-(lam_p, lam_T) in
+        K_mu^*`` (``-lam_p >= mu |lam_T|``; else stick. Sufficient: the slip piece allows fewer
+        tractions; exact at ``mu = 0``). Edge (``u = 0``, ``|r_T| = mu p_N``): neither sliding against
+        the traction (``s_T = -t r_T``, ``t > 0``: ``lam_s . r_T >= 0``; else slip) nor moving it
+        into the cone (``lam_h <= 0`` for ``h = mu^2 p_N^2 - |r_T|^2``; else stick)."""
+        corner, edge = status == CORNER, status == EDGE
+        if not (corner.any() or edge.any()):
+            return status
+        nc, b, ne = self._nc, self._b, self._ne
+        mu = self.problem.parameters.get(params, "friction")
+        branch = lam[ne:]
+        lam_n, lam_t, lam_x = branch[:nc], branch[nc:b * nc].reshape(b - 1, nc), branch[b * nc:]
+        tol = 1e-8 * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
+        r_t = z[self._nx + nc:self._nx + b * nc].reshape(b - 1, nc)
+        opens = lam_n > tol
+        presses = -lam_x < mu * np.linalg.norm(lam_t, axis=0) - tol
+        slides = np.sum(lam_t * r_t, axis=0) < -tol * np.linalg.norm(r_t, axis=0)
+        enters = lam_x > tol
+        out = np.where(corner & opens, OPEN, np.where(corner & presses, STICK, status))
+        return np.where(edge & slides, SLIP, np.where(edge & enters, STICK, out))
