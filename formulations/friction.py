@@ -472,6 +472,7 @@ class BuiltCoulomb(BuiltFormulation):
         self._stats = dict(solves=0, predicted=0, smoothed=0, polished=0)
         self._scales = (a_scale, b_scale)
         self._polish: CoulombSystem | None = None
+        self._factors = UpdatingFactors()
 
     def newton_system(self):
         return self.system.newton_system()
@@ -494,7 +495,7 @@ class BuiltCoulomb(BuiltFormulation):
         if self._polish is None:
             self._polish = CoulombSystem(self.problem, "natural_map", *self._scales, self.gap)
         built = self._polish._built
-        kw = dict(kw, jacobian=built.jacobian)
+        kw = dict(kw, jacobian=built.jacobian, factors=UpdatingFactors())
         trial = newton_solve(built.rj, built.r, res.z, self._polish.parameters.pack(params, smoothing=0.0), **kw)
         if not trial.converged:
             return res, 0.0
@@ -511,7 +512,9 @@ class BuiltCoulomb(BuiltFormulation):
         system = self.system
         built = system._built
         P = system.parameters
-        kw = dict(jacobian=built.jacobian, **self.newton)
+        # the Jacobians of successive Newton steps differ in the contacts' rows only (and between
+        # steps of a path in those of the contacts that changed piece): low-rank updates
+        kw = dict(jacobian=built.jacobian, factors=self._factors, **self.newton)
         z0 = system.start(x0, p0, state)
         if self.pieces is not None:
             pieces = self.pieces
