@@ -44,6 +44,7 @@ from ddcm_casadi.drivers import ddcm_improve
 from ddcm_casadi.drivers.checks import finish_step
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.drivers.ddcm_projection import Projection
+from ddcm_casadi.drivers.ddcm_reduced import path_description
 from ddcm_casadi.drivers.ddcm_search import point_ranges, start_assignment
 from ddcm_casadi.drivers.records import (
     MaterialStates, PathResult, Run, StepResult, check_convergence, count, new_tally,
@@ -235,7 +236,7 @@ class DDCMSolver:
         solution (``warm``), or from its own start; a step that fails is bisected
         (:meth:`_bisect`); ``progress(step)`` after each."""
         problems, model = self.problems, self.problems.model
-        out = PathResult("ddcm", formulation_name, warnings=list(self.notes))
+        out = PathResult("ddcm", formulation_name, warnings=list(self.notes), projection_path=path_description(self.built))
         warm = (np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None)
         start, self.projection.previous = None, None
         converged = None  # the last converged step: (k, its history, material states, Z_E solution)

@@ -81,11 +81,12 @@ def block_inverse(M: sp.spmatrix) -> sp.csr_matrix:
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
 
 
-def refusal(problem: ComplementarityProblem, *, max_pairs: int = MAX_PAIRS) -> str:
+def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) -> str:
     """Why the reduction does not apply to ``problem`` (one line), or ``""``: it needs an affine
     projection whose objective separates strains (of ``u``) from stresses (of ``sigma``), whose
     equilibrium does not involve ``u``, whose gaps involve ``u`` only, and at most ``max_pairs``
-    contact pairs."""
+    contact pairs (default :data:`MAX_PAIRS`)."""
+    max_pairs = MAX_PAIRS if max_pairs is None else max_pairs
     if problem.kind != "mpcc":
         return "not a DDCM projection"
     if not problem.affine or problem.distance is None:
@@ -101,10 +102,10 @@ def refusal(problem: ComplementarityProblem, *, max_pairs: int = MAX_PAIRS) -> s
     if problem.n_pairs and _rows(g, slice(n, None)).any():
         return "the gaps involve more than the displacements"
     on_u, on_s, on_p = (_rows(d, s) for s in (slice(0, n), slice(n, n + mk), slice(n + mk, None)))
-    if on_p.any() or (on_u & on_s).any() or not (on_u | on_s).all() or on_s.sum() != mk:
+    if on_p.any() or (on_u & on_s).any() or on_s.sum() != mk:
         return "the distance does not separate strains and stresses"
     W = sp.csr_matrix(problem.distance.weight)
-    if W[np.flatnonzero(on_u)][:, np.flatnonzero(on_s)].count_nonzero():
+    if W[np.flatnonzero(~on_s)][:, np.flatnonzero(on_s)].count_nonzero():
         return "the metric couples strains and stresses"
     return ""
 
@@ -135,8 +136,9 @@ class Reduction:
         self.n, self.mk, self.nc = n, mk, nc
         R, Gm, dist = problem.residual_map, problem.gap_map, problem.distance
         d, W = dist.d, sp.csr_matrix(dist.weight)
-        e_rows = np.flatnonzero(_rows(d.z, slice(0, n)))
-        s_rows = np.flatnonzero(_rows(d.z, slice(n, n + mk)))
+        # the stress rows, and every other (strains; constant where no free dof moves a point)
+        on_s = _rows(d.z, slice(n, n + mk))
+        e_rows, s_rows = np.flatnonzero(~on_s), np.flatnonzero(on_s)
         A_u = d.z[e_rows][:, :n].tocsc()
         self._a = d.params[e_rows].tocsr()  # a = a_P P
         W_e = W[e_rows][:, e_rows]
