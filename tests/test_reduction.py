@@ -153,7 +153,7 @@ def test_reduction_is_reported_and_can_be_switched_off():
 def test_finite_kinematics_keep_the_full_path():
     from ddcm_casadi.models.von_mises import von_mises_truss
 
-    data = MaterialDataset.hookean(200e9, -0.05, 0.05, 41)
+    data = MaterialDataset.hookean(200e9, -0.05, 0.05, 41, c=200e9)
     problems = build_problems(von_mises_truss(steps=4, dataset=data))
     assert refusal(problems.projection) == "the projection is not affine with a quadratic distance"
     built = build_projection(formulations.get("fischer_burmeister"), problems)
