@@ -59,15 +59,15 @@ class ReducedProjection(BuiltFormulation):
         ``lambda`` of ``x0`` (:meth:`Reduction.condensed_start`) and ``p0``, then ``x`` recovered."""
         red = self.reduction
         params = np.asarray(params, float)
-        b, c = red.right_hand_sides(params)
+        u0, eta0 = red.particular(params)
         if self.inner is None:
             lam, p, converged, iterations, outer, state, message = np.zeros(0), np.zeros(0), True, 1, 0, None, ""
         else:
-            sol = self.inner.solve(red.condensed_params(params, b, c), red.condensed_start(params, b, x0),
+            sol = self.inner.solve(red.condensed_params(params, u0, eta0), red.condensed_start(u0, x0),
                                    np.asarray(p0, float), state)
             lam, p, converged, iterations = sol.x, sol.p, sol.converged, sol.iterations
             outer, state, message = sol.outer_iterations, sol.state, sol.message
-        x = red.recover(params, b, c, lam, p)
+        x = red.recover(params, u0, eta0, lam, p)
         return self._finish(x, p, params, converged=converged, iterations=iterations, outer=outer, state=state,
                             message=message)
 

@@ -47,6 +47,10 @@ from ddcm_casadi.problems.parameters import Parameters
 MAX_PAIRS = 500
 #: Relative size (Frobenius) of ``K_s - alpha K_u`` up to which the two share one factor.
 PROPORTIONAL = 1e-12
+#: Right-hand sides per back-solve: SuperLU's solve with many columns is slower per column than
+#: with a few (measured on K_C of 23 436 dofs: 109 columns at once 14.7 s, by 16 4.4 s, by 4 0.74 s,
+#: one by one 1.5 s).
+SOLVE_BLOCK = 4
 #: Largest dense ``n x nc`` block kept (bytes); above, the full path is kept.
 MAX_DENSE_BYTES = 2 * 1024**3
 
@@ -81,6 +85,17 @@ def block_inverse(M: sp.spmatrix) -> sp.csr_matrix:
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
 
 
+#: Entries of ``lambda`` or ``p`` below this fraction of the largest are round-off of an open pair
+#: (exactly zero in exact arithmetic): their kept columns are skipped in the recovery.
+ROUND_OFF = 64 * np.finfo(float).eps
+
+
+def _significant(v: np.ndarray) -> np.ndarray:
+    """The indices of the entries of ``v`` above :data:`ROUND_OFF` times its largest."""
+    a = np.abs(v)
+    return np.flatnonzero(a > ROUND_OFF * np.max(a, initial=0.0))
+
+
 def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) -> str:
     """Why the reduction does not apply to ``problem`` (one line), or ``""``: it needs an affine
     projection whose objective separates strains (of ``u``) from stresses (of ``sigma``), whose
@@ -96,6 +111,9 @@ def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) ->
     if problem.n_pairs > max_pairs:
         return f"{problem.n_pairs} contact pairs (the condensed problem is assembled up to {max_pairs})"
     n, mk = (size for _, size in problem.unknowns)
+    if 8 * n * problem.n_pairs > MAX_DENSE_BYTES:
+        return (f"the kept columns K_C^-1 G^T would take {8 * n * problem.n_pairs / 1024**3:.1f} GB "
+                f"(at most {MAX_DENSE_BYTES / 1024**3:.0f})")
     h, g, d = problem.residual_map.z, problem.gap_map.z, problem.distance.d.z
     if _rows(h, slice(0, n)).any():
         return "the equilibrium involves the displacements"
@@ -124,6 +142,8 @@ class Reduction:
         ``K_s = alpha K_u`` when the metric is Hookean (one factor), else ``None`` (two).
     factorizations : int
         Sparse factorisations made (1 with a Hookean metric).
+    factor : Factor
+        The kept factor of ``K_u`` (:func:`~ddcm_casadi.linalg.factorize`).
     """
 
     def __init__(self, problem: ComplementarityProblem) -> None:
@@ -159,7 +179,7 @@ class Reduction:
         self.G = Gm.z[:, :n].tocsr()
         self._g = Gm.params.tocsr()
         self.factorizations = 1
-        self._factor_u = factorize(self.K_u)
+        self.factor = factorize(self.K_u)
         scale = float((K_s.multiply(self.K_u)).sum()) / max(float(self.K_u.multiply(self.K_u).sum()), 1e-300)
         if _frobenius(K_s - scale * self.K_u) <= PROPORTIONAL * _frobenius(K_s):
             self.alpha = scale
@@ -171,21 +191,34 @@ class Reduction:
         if nc:
             # nc back-solves: the columns K_u^-1 G^T and K_s^-1 R_p (shared when R_p is a
             # multiple of G^T column by column, as the contact forces G^T (a p) are)
-            self.Z_u = np.asarray(self._factor_u.solve(self.G.T.toarray()), float).reshape(n, nc)
+            self.Z_u = self._back_solves(self.factor.solve, self.G.T)
             ratio = self._column_ratio()
-            if ratio is not None and self.alpha is not None:
-                self.Z_p = self.Z_u * (ratio / self.alpha)
+            if ratio is not None and self.alpha is not None:  # K_s^-1 R_p = Z_u diag(r) / alpha
+                self._p_scale, self.Z_p = ratio / self.alpha, None
+                self.D_p = (self.R_p.T @ self.Z_u) * self._p_scale
             else:
-                self.Z_p = np.asarray(self._solve_s(self.R_p.toarray()), float).reshape(n, nc)
+                self._p_scale = None
+                self.Z_p = self._back_solves(self._solve_s, self.R_p)
+                self.D_p = self.R_p.T @ self.Z_p
             self.D_u = self.G @ self.Z_u
-            self.D_p = self.R_p.T @ self.Z_p
             self.D_u, self.D_p = 0.5 * (self.D_u + self.D_u.T), 0.5 * (self.D_p + self.D_p.T)
             self._D_p = sla.cho_factor(self.D_p)
             GGt = (self.G @ self.G.T).toarray()
             self._GGt = sla.cho_factor(GGt)
         else:
             self.Z_u = self.Z_p = np.zeros((n, 0))
+            self._p_scale = None
             self.D_u = self.D_p = np.zeros((0, 0))
+
+    def _back_solves(self, solve, columns: sp.spmatrix) -> np.ndarray:
+        """``solve`` applied to the columns of ``columns``, :data:`SOLVE_BLOCK` at a time, into one
+        column-major ``n x nc`` array (the recovery takes whole columns)."""
+        columns = sp.csc_matrix(columns)
+        out = np.empty((self.n, columns.shape[1]), order="F")
+        for j in range(0, columns.shape[1], SOLVE_BLOCK):
+            block = columns[:, j:j + SOLVE_BLOCK].toarray()
+            out[:, j:j + block.shape[1]] = np.asarray(solve(block), float).reshape(block.shape)
+        return out
 
     def _column_ratio(self) -> np.ndarray | None:
         """``r`` with ``R_p = G^T diag(r)``, or ``None``."""
@@ -199,7 +232,7 @@ class Reduction:
     def _solve_s(self, rhs: np.ndarray) -> np.ndarray:
         """``K_s^-1 rhs``."""
         if self._factor_s is None:
-            return self._factor_u.solve(rhs) / self.alpha
+            return self.factor.solve(rhs) / self.alpha
         return self._factor_s.solve(rhs)
 
     # ------------------------------------------------------------------ the condensed problem
@@ -222,37 +255,47 @@ class Reduction:
             contact_stiffness=full.contact_stiffness, fb_alpha=full.fb_alpha, fb_beta=full.fb_beta,
             contact_law=full.contact_law, kinematics=full.kinematics)
 
-    def right_hand_sides(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(b, c)`` at the projection's parameter values."""
+    def particular(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(u_0, eta_0) = (K_u^-1 b, K_s^-1 c)`` at the projection's parameter values: the
+        projection without contact forces, by one solve with two right-hand sides (two solves
+        without a shared factor)."""
         params = np.asarray(params, float)
-        return self._b @ params, self._c @ params
+        b, c = self._b @ params, self._c @ params
+        if self._factor_s is None:
+            both = np.asarray(self.factor.solve(np.column_stack([b, c])), float).reshape(self.n, 2)
+            return both[:, 0], both[:, 1] / self.alpha
+        return self.factor.solve(b), self._factor_s.solve(c)
 
-    def condensed_params(self, params: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-        """The condensed problem's parameter vector: ``g_c = Z_u^T b + g`` and ``t = D_p^-1 Z_p^T c``."""
+    def condensed_params(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray) -> np.ndarray:
+        """The condensed problem's parameter vector: ``g_c = G u_0 + g`` and
+        ``t = D_p^-1 R_p^T eta_0`` (sparse products and an ``nc x nc`` solve)."""
         if not self.nc:
             return np.zeros(0)
-        gap_offset = self.Z_u.T @ b + self._g @ np.asarray(params, float)
-        t = sla.cho_solve(self._D_p, self.Z_p.T @ c)
+        gap_offset = self.G @ u0 + self._g @ np.asarray(params, float)
+        t = sla.cho_solve(self._D_p, self.R_p.T @ eta0)
         return self.condensed.parameters.pack(gap_offset=gap_offset, pressure_offset=t)
 
-    def condensed_start(self, params: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:
+    def condensed_start(self, u0: np.ndarray, x: np.ndarray) -> np.ndarray:
         """``lambda`` of a projection start ``x``: the least-squares solution of
-        ``G^T lambda = K_u u - b`` (exact where ``u`` is a solution's)."""
+        ``G^T lambda = K_u (u - u_0)`` (exact where ``u`` is a solution's)."""
         if not self.nc:
             return np.zeros(0)
         u = np.asarray(x, float)[:self.n]
-        return sla.cho_solve(self._GGt, self.G @ (self.K_u @ u - b))
+        return sla.cho_solve(self._GGt, self.G @ (self.K_u @ (u - u0)))
 
-    def recover(self, params: np.ndarray, b: np.ndarray, c: np.ndarray, lam: np.ndarray,
+    def recover(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray, lam: np.ndarray,
                 p: np.ndarray) -> np.ndarray:
-        """The projection's ``x = [u; sigma]`` from the condensed ``(lambda, p)``: one solve with
-        two right-hand sides, ``K_u [u, alpha eta] = [b + G^T lambda, c + R_p p]`` (two solves
-        without a shared factor), then ``sigma = sigma_0 - M^-1 R_sigma^T eta``."""
-        rhs_u = b + self.G.T @ lam if self.nc else b
-        rhs_s = c + self.R_p @ p if self.nc else c
-        if self._factor_s is None:
-            both = np.asarray(self._factor_u.solve(np.column_stack([rhs_u, rhs_s])), float).reshape(self.n, 2)
-            u, eta = both[:, 0], both[:, 1] / self.alpha
-        else:
-            u, eta = self._factor_u.solve(rhs_u), self._factor_s.solve(rhs_s)
+        """The projection's ``x = [u; sigma]`` from the condensed ``(lambda, p)``:
+        ``u = u_0 + K_u^-1 G^T lambda`` and ``eta = eta_0 + K_s^-1 R_p p`` from the kept columns
+        (only those of the nonzero ``lambda`` and ``p``: the closed pairs), then
+        ``sigma = sigma_0 - M^-1 R_sigma^T eta``."""
+        u, eta = u0, eta0
+        if self.nc:
+            on = _significant(lam)
+            u = u0 + self.Z_u[:, on] @ lam[on]
+            on = _significant(p)
+            if self._p_scale is not None:
+                eta = eta0 + self.Z_u[:, on] @ (self._p_scale[on] * p[on])
+            else:
+                eta = eta0 + self.Z_p[:, on] @ p[on]
         return np.concatenate([u, self._sigma0 @ np.asarray(params, float) - self._MRt @ eta])
