@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -261,15 +262,16 @@ print(json.dumps(out if isinstance(out, list) else [out]))
 """
 
 
-def in_fresh_process(function: str, *args, label: str, unknowns: int) -> list[dict]:
+def in_fresh_process(function: str, *args, label: str, unknowns: int, env: dict | None = None) -> list[dict]:
     """The records of ``function(*args)`` (a function of this module) run in a fresh process: its
     peak memory its own, and a size the machine cannot hold (killed for memory, exit status -9)
-    reported as a record named ``label`` (of about ``unknowns`` unknowns) with the error, not fatal."""
+    reported as a record named ``label`` (of about ``unknowns`` unknowns) with the error, not fatal.
+    ``env``: variables added to the process's environment."""
     here = Path(__file__).resolve().parent
     cmd = [sys.executable, "-c", FRESH, str(here), function, json.dumps(args)]
     # Run from this folder: ``python -c`` puts its working directory first on sys.path, and from the
     # repository's root that would import the source tree instead of the installed package.
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=here)
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=here, env={**os.environ, **(env or {})})
     if proc.returncode == 0:
         return json.loads(proc.stdout.strip().splitlines()[-1])
     return [dict(name=label, unknowns=unknowns, data_points=0,
@@ -720,14 +722,16 @@ def main(argv=None) -> int:
                     log(rec)
     # The Kirchdoerfer-Ortiz reduction: a DDCM iteration against its cached-factor floor, with
     # and without contact, each in a fresh process; today's full path beside it up to 1e5 (at
-    # 1e6 it costs 93 s an iteration).
+    # 1e6 it costs 93 s an iteration). One BLAS thread: on a shared 2-core machine OpenBLAS's
+    # threads spin, and a dense product of 1e4 entries stalled for 10-20 ms (0.3 ms alone).
+    one_thread = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     for u in ((10**4, 10**5) if quick else (10**4, 10**5, 10**6)):
         for contact in (True, False):
             for rec in in_fresh_process("reduction_record", u, contact, 1 if u > 10**5 else rep, u <= 10**5,
                                         label=f"reduced DDCM iteration, 2-D continuum, about {u:.0e} unknowns",
-                                        unknowns=u):
+                                        unknowns=u, env=one_thread):
                 log(rec)
-        for rec in in_fresh_process("reduction_factor", u, 1 if u > 10**5 else rep,
+        for rec in in_fresh_process("reduction_factor", u, 1 if u > 10**5 else rep, env=one_thread,
                                     label=f"reduction factorisation, about {u:.0e} unknowns", unknowns=u):
             log(rec)
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):

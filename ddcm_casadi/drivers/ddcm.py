@@ -109,9 +109,14 @@ class DDCMSolver:
         self.coverage = problems.projection.shared(
             ("data_coverage",), lambda: DataCoverage(model.dataset, model.n_points))
         self.affine = bool(problems.projection.affine)
+        # A reduced projection without pairs is already the closed form of the exact projection:
+        # the enumeration is built only for what else uses it (greedy screen, certificates).
+        o = self.options
+        wanted = (not getattr(built, "closed_form", False) or o.improve == "greedy" or model.n_points == 1
+                  or o.exact_max > 0)
         self.exact = (problems.projection.shared(
             ("exact_enumerator", enumerate_pairs), lambda: ExactEnumerator(problems.projection, max_pairs=enumerate_pairs))
-            if self.affine and model.n_contacts <= enumerate_pairs else None)
+            if self.affine and model.n_contacts <= enumerate_pairs and wanted else None)
         # N^m assignments, in logarithms: it overflows a float for a continuum's thousands of points.
         log_assign = float(np.sum(np.log(point_ranges(model)[1].astype(float))))
         self.global_search = (global_search and self.exact is not None

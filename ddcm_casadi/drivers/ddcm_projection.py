@@ -78,6 +78,10 @@ class Projection:
                 sol = retry
             else:
                 sol.iterations += retry.iterations
+        if getattr(self.built, "closed_form", False):
+            # the reduced projection without pairs: the unique solution of an equality-constrained
+            # QP in closed form, the enumeration's only branch (docs/maths.md, section 16)
+            return sol, bool(sol.converged), 0.0
         if self.exact is None:
             return sol, None, float("nan")
         xe, pe, obj = self.exact_projection(params)

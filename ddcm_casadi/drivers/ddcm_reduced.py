@@ -42,6 +42,9 @@ class ReducedProjection(BuiltFormulation):
         self.reduction, self.inner = reduction, inner
         self.penalty_stiffness = None if inner is None else inner.penalty_stiffness
         self.path = REDUCED.format(factors=reduction.factorizations, nc=reduction.nc)
+        #: Without contact pairs the projection is the closed form of the exact one (no branch to
+        #: enumerate): the driver skips the enumeration's check.
+        self.closed_form = inner is None
 
     def reset(self) -> None:
         """Forget the condensed formulation's caches (the reduction's factor is the model's: kept)."""
