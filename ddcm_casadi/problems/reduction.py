@@ -202,9 +202,7 @@ class Reduction:
                 self.D_p = self.R_p.T @ self.Z_p
             self.D_u = self.G @ self.Z_u
             self.D_u, self.D_p = 0.5 * (self.D_u + self.D_u.T), 0.5 * (self.D_p + self.D_p.T)
-            self._D_p = sla.cho_factor(self.D_p)
-            GGt = (self.G @ self.G.T).toarray()
-            self._GGt = sla.cho_factor(GGt)
+            self._D_p, self._D_u = sla.cho_factor(self.D_p), sla.cho_factor(self.D_u)
         else:
             self.Z_u = self.Z_p = np.zeros((n, 0))
             self._p_scale = None
@@ -276,12 +274,13 @@ class Reduction:
         return self.condensed.parameters.pack(gap_offset=gap_offset, pressure_offset=t)
 
     def condensed_start(self, u0: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """``lambda`` of a projection start ``x``: the least-squares solution of
-        ``G^T lambda = K_u (u - u_0)`` (exact where ``u`` is a solution's)."""
+        """``lambda`` of a projection start ``x``: the one whose gaps are those of ``x``'s
+        displacements, ``D_u lambda = G (u - u_0)`` (so a formulation sees the same pairs at the
+        start, and picks the same pieces, as on the full problem)."""
         if not self.nc:
             return np.zeros(0)
         u = np.asarray(x, float)[:self.n]
-        return sla.cho_solve(self._GGt, self.G @ (self.K_u @ (u - u0)))
+        return sla.cho_solve(self._D_u, self.G @ (u - u0))
 
     def recover(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray, lam: np.ndarray,
                 p: np.ndarray) -> np.ndarray:
