@@ -258,9 +258,13 @@ class _DenseFactor:
     """LAPACK's LU with partial pivoting of a small, dense-ish matrix."""
 
     def __init__(self, A: sp.csc_matrix) -> None:
+        import warnings
+
         import scipy.linalg as sla
 
-        self._lu = sla.lu_factor(A.toarray(), check_finite=False)
+        with warnings.catch_warnings():  # an exactly singular matrix raises below instead
+            warnings.simplefilter("ignore", sla.LinAlgWarning)
+            self._lu = sla.lu_factor(A.toarray(), check_finite=False)
         if not np.all(np.diag(self._lu[0])):
             raise SingularMatrix("Factor is exactly singular")
         self.nnz = A.shape[0] ** 2
