@@ -159,3 +159,14 @@ def test_finite_kinematics_keep_the_full_path():
     built = build_projection(formulations.get("fischer_burmeister"), problems)
     assert not isinstance(built, ReducedProjection)
     assert path_description(built).startswith("full saddle point (the projection is not affine")
+
+
+def test_a_body_held_only_by_its_contacts_keeps_the_full_path():
+    """The 2-D patch test's punch floats on its contacts: ``K_C`` is singular, the Delassus
+    matrix's condition number near ``1 / eps``; the full path is kept, and says why."""
+    from ddcm_casadi.validation.two_body_rungs import patch_model
+
+    problems = build_problems(patch_model(2, data=True))
+    built = build_projection(formulations.get("fischer_burmeister"), problems)
+    assert not isinstance(built, ReducedProjection)
+    assert "a Delassus matrix is singular or nearly" in path_description(built)

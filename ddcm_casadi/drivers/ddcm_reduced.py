@@ -15,7 +15,7 @@ import numpy as np
 from ddcm_casadi.formulations.base import BuiltFormulation, LocalSolution
 from ddcm_casadi.problems.build import ProblemPair
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.problems.reduction import Reduction, refusal
+from ddcm_casadi.problems.reduction import NotReducible, Reduction, refusal
 
 #: How a path's projection was solved (``PathResult.projection_path``).
 REDUCED = "reduced (Kirchdoerfer-Ortiz: {factors} factorisation(s) of K_C, {nc} condensed contact pairs)"
@@ -82,15 +82,26 @@ def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True)
     problem = problems.projection
     formulation.check_supports(problem)
     why = refusal(problem) if reduce else "reduction off"
+    reduction = None
+    if not why:
+        reduction = problem.shared(("reduction",), lambda: _reduction(problem))
+        why = reduction if isinstance(reduction, str) else ""
     if why:
         built = formulation.build(problem)
         built.projection_path = FULL.format(why=why)
         return built
-    reduction = problem.shared(("reduction",), lambda: Reduction(problem))
     inner = formulation.build(reduction.condensed) if reduction.nc else None
     built = ReducedProjection(problem, reduction, inner)
     built.projection_path = built.path
     return built
+
+
+def _reduction(problem: ComplementarityProblem) -> Reduction | str:
+    """The reduction of ``problem``, or why it does not apply (a singular Delassus matrix)."""
+    try:
+        return Reduction(problem)
+    except NotReducible as exc:
+        return str(exc)
 
 
 def path_description(built) -> str:

@@ -47,12 +47,20 @@ from ddcm_casadi.problems.parameters import Parameters
 MAX_PAIRS = 500
 #: Relative size (Frobenius) of ``K_s - alpha K_u`` up to which the two share one factor.
 PROPORTIONAL = 1e-12
+#: Largest condition number of a Delassus matrix: a body held only by its contacts makes ``K_C``
+#: singular (a rigid mode, ``B r = 0``), and its computed inverse shows as a condition near
+#: ``1 / eps`` (4e14 on the 2-D patch test's punch); then the full path is kept.
+MAX_CONDITION = 1.0 / (1e5 * np.finfo(float).eps)
 #: Right-hand sides per back-solve: SuperLU's solve with many columns is slower per column than
 #: with a few (measured on K_C of 23 436 dofs: 109 columns at once 14.7 s, by 16 4.4 s, by 4 0.74 s,
 #: one by one 1.5 s).
 SOLVE_BLOCK = 4
 #: Largest dense ``n x nc`` block kept (bytes); above, the full path is kept.
 MAX_DENSE_BYTES = 2 * 1024**3
+
+
+class NotReducible(ValueError):
+    """The reduction does not apply to a problem (the message says why, one line)."""
 
 
 def _rows(A: sp.csr_matrix, columns: slice) -> np.ndarray:
@@ -134,7 +142,8 @@ class Reduction:
     Parameters
     ----------
     problem : ComplementarityProblem
-        The projection (kind ``"mpcc"``, :func:`refusal` empty).
+        The projection (kind ``"mpcc"``, :func:`refusal` empty; else, or with a singular
+        Delassus matrix, :class:`NotReducible`).
 
     Attributes
     ----------
@@ -149,7 +158,7 @@ class Reduction:
     def __init__(self, problem: ComplementarityProblem) -> None:
         why = refusal(problem, max_pairs=np.iinfo(np.int64).max)
         if why:
-            raise ValueError(f"the reduction does not apply: {why}")
+            raise NotReducible(why)
         self.problem = problem
         n, mk = (size for _, size in problem.unknowns)
         nc = problem.n_pairs
@@ -202,6 +211,11 @@ class Reduction:
                 self.D_p = self.R_p.T @ self.Z_p
             self.D_u = self.G @ self.Z_u
             self.D_u, self.D_p = 0.5 * (self.D_u + self.D_u.T), 0.5 * (self.D_p + self.D_p.T)
+            for D in (self.D_u, self.D_p):
+                eig = np.linalg.eigvalsh(D)
+                if not eig[0] > eig[-1] / MAX_CONDITION:
+                    raise NotReducible(f"a Delassus matrix is singular or nearly (condition {eig[-1] / max(eig[0], 1e-300):.1e}:"
+                                       " a body held only by its contacts, or dependent contact rows)")
             self._D_p, self._D_u = sla.cho_factor(self.D_p), sla.cho_factor(self.D_u)
         else:
             self.Z_u = self.Z_p = np.zeros((n, 0))
