@@ -4,7 +4,10 @@ Each load step alternates
 
 1. the projection onto ``Z_E`` (:class:`~ddcm_casadi.drivers.ddcm_projection.Projection`: the
    chosen formulation, warm-started, checked against the exact branch enumeration where the
-   problem is affine with few contact pairs), and
+   problem is affine with few contact pairs; built by
+   :func:`~ddcm_casadi.drivers.ddcm_reduced.build_projection`, it is by default the
+   Kirchdoerfer-Ortiz reduction where that applies: one factor of ``K_C`` for the whole path and
+   the formulation on the contact pairs alone, ``PathResult.projection_path``), and
 2. the material update of the scheme (:mod:`ddcm_casadi.drivers.scheme`): the nearest datum
    (plain DDCM, with the data search of ``search``), LCDD or max-ent (``variant``),
 
@@ -67,7 +70,8 @@ class DDCMSolver:
     problems : ProblemPair
         Needs the projection (a material data set).
     built
-        The projection formulation, built.
+        The projection formulation, built (on the full projection, or reduced by
+        :func:`~ddcm_casadi.drivers.ddcm_reduced.build_projection`).
     options : DDCMOptions, optional
         Iterations, data search, starts, restarts, improvement, certificates, scheme (default
         ``DDCMOptions()``).
