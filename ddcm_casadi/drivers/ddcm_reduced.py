@@ -59,18 +59,18 @@ class ReducedProjection(BuiltFormulation):
 
     def solve(self, params: np.ndarray, x0: np.ndarray, p0: np.ndarray, state: dict | None = None) -> LocalSolution:
         """The projection at ``params`` from ``(x0, p0)`` (scaled): the condensed problem from
-        ``lambda`` of ``x0`` (:meth:`Reduction.condensed_start`) and ``p0``, then ``x`` recovered."""
+        the gaps of ``x0`` (:meth:`Reduction.condensed_start`) and ``p0``, then ``x`` recovered."""
         red = self.reduction
         params = np.asarray(params, float)
         u0, eta0 = red.particular(params)
         if self.inner is None:
-            lam, p, converged, iterations, outer, state, message = np.zeros(0), np.zeros(0), True, 1, 0, None, ""
+            w, p, converged, iterations, outer, state, message = np.zeros(0), np.zeros(0), True, 1, 0, None, ""
         else:
-            sol = self.inner.solve(red.condensed_params(params, u0, eta0), red.condensed_start(u0, x0),
+            sol = self.inner.solve(red.condensed_params(params, u0, eta0), red.condensed_start(params, x0),
                                    np.asarray(p0, float), state)
-            lam, p, converged, iterations = sol.x, sol.p, sol.converged, sol.iterations
+            w, p, converged, iterations = sol.x, sol.p, sol.converged, sol.iterations
             outer, state, message = sol.outer_iterations, sol.state, sol.message
-        x = red.recover(params, u0, eta0, lam, p)
+        x = red.recover(params, u0, eta0, w, p)
         return self._finish(x, p, params, converged=converged, iterations=iterations, outer=outer, state=state,
                             message=message)
 

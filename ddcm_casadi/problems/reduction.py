@@ -98,10 +98,11 @@ def block_inverse(M: sp.spmatrix) -> sp.csr_matrix:
 ROUND_OFF = 64 * np.finfo(float).eps
 
 
-def _significant(v: np.ndarray) -> np.ndarray:
-    """The indices of the entries of ``v`` above :data:`ROUND_OFF` times its largest."""
+def _significant(v: np.ndarray, condition: float = 1.0) -> np.ndarray:
+    """The indices of the entries of ``v`` above :data:`ROUND_OFF` times its largest (times the
+    ``condition`` number of the system ``v`` was solved from: its round-off)."""
     a = np.abs(v)
-    return np.flatnonzero(a > ROUND_OFF * np.max(a, initial=0.0))
+    return np.flatnonzero(a > ROUND_OFF * condition * np.max(a, initial=0.0))
 
 
 def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) -> str:
@@ -211,11 +212,14 @@ class Reduction:
                 self.D_p = self.R_p.T @ self.Z_p
             self.D_u = self.G @ self.Z_u
             self.D_u, self.D_p = 0.5 * (self.D_u + self.D_u.T), 0.5 * (self.D_p + self.D_p.T)
+            conditions = []
             for D in (self.D_u, self.D_p):
                 eig = np.linalg.eigvalsh(D)
                 if not eig[0] > eig[-1] / MAX_CONDITION:
                     raise NotReducible(f"a Delassus matrix is singular or nearly (condition {eig[-1] / max(eig[0], 1e-300):.1e}:"
                                        " a body held only by its contacts, or dependent contact rows)")
+                conditions.append(eig[-1] / eig[0])
+            self._condition_u = conditions[0]
             self._D_p, self._D_u = sla.cho_factor(self.D_p), sla.cho_factor(self.D_u)
         else:
             self.Z_u = self.Z_p = np.zeros((n, 0))
@@ -250,20 +254,23 @@ class Reduction:
     # ------------------------------------------------------------------ the condensed problem
     @cached_property
     def condensed(self) -> ComplementarityProblem:
-        """The condensed problem (module docstring): unknowns ``lambda`` (the gap multipliers)
-        and the pressures ``p``; parameters ``gap_offset = g_c`` and ``pressure_offset = t``;
-        no equality constraint. Scales, contact law and Fischer-Burmeister scalings are the
-        projection's."""
+        """The condensed problem (module docstring), in the gaps ``w = D_u lambda + g_c``: unknowns
+        ``w`` and the pressures ``p``, gaps ``w`` (one entry per pair, so that a pair switching
+        piece changes few rows of a formulation's system, and its factor is updated, not
+        remade), objective ``1/2 (w - g_c)^T D_u^-1 (w - g_c) + 1/2 (p + t)^T D_p (p + t)``;
+        parameters ``gap_offset = g_c`` and ``pressure_offset = t``; no equality constraint.
+        Scales, contact law and Fischer-Burmeister scalings are the projection's."""
         nc, full = self.nc, self.problem
         P = Parameters(gap_offset=nc, pressure_offset=nc)
         I, Z = sp.identity(nc, format="csr"), sp.csr_matrix((nc, nc))
-        gap = Affine(sp.hstack([sp.csr_matrix(self.D_u), Z]), sp.hstack([I, Z]))
-        d = Affine(sp.bmat([[I, None], [None, I]], format="csr"), sp.bmat([[Z, None], [None, I]], format="csr"))
-        weight = sp.csr_matrix(sp.bmat([[sp.csr_matrix(self.D_u), None], [None, sp.csr_matrix(self.D_p)]]))
+        gap = Affine(sp.hstack([I, Z]), sp.csr_matrix((nc, P.size)))
+        d = Affine(sp.bmat([[I, None], [None, I]], format="csr"), sp.bmat([[-I, None], [None, I]], format="csr"))
+        D_u_inv = sla.cho_solve(self._D_u, np.eye(nc)) if nc else np.zeros((0, 0))
+        weight = sp.bmat([[sp.csr_matrix(0.5 * (D_u_inv + D_u_inv.T)), None], [None, sp.csr_matrix(self.D_p)]])
         return ComplementarityProblem(
-            kind="mpcc", parameters=P, unknowns=(("lambda", nc),),
+            kind="mpcc", parameters=P, unknowns=(("gap", nc),),
             residual_map=Affine(sp.csr_matrix((0, 2 * nc)), sp.csr_matrix((0, P.size))), gap_map=gap,
-            distance=Distance(d, weight), gap_ref=full.gap_ref, pressure_ref=full.pressure_ref,
+            distance=Distance(d, sp.csr_matrix(weight)), gap_ref=full.gap_ref, pressure_ref=full.pressure_ref,
             contact_stiffness=full.contact_stiffness, fb_alpha=full.fb_alpha, fb_beta=full.fb_beta,
             contact_law=full.contact_law, kinematics=full.kinematics)
 
@@ -287,24 +294,23 @@ class Reduction:
         t = sla.cho_solve(self._D_p, self.R_p.T @ eta0)
         return self.condensed.parameters.pack(gap_offset=gap_offset, pressure_offset=t)
 
-    def condensed_start(self, u0: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """``lambda`` of a projection start ``x``: the one whose gaps are those of ``x``'s
-        displacements, ``D_u lambda = G (u - u_0)`` (so a formulation sees the same pairs at the
-        start, and picks the same pieces, as on the full problem)."""
+    def condensed_start(self, params: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The condensed start of a projection start ``x``: its gaps ``G u + g`` (a formulation
+        sees the same pairs at the start, and picks the same pieces, as on the full problem)."""
         if not self.nc:
             return np.zeros(0)
-        u = np.asarray(x, float)[:self.n]
-        return sla.cho_solve(self._D_u, self.G @ (u - u0))
+        return self.G @ np.asarray(x, float)[:self.n] + self._g @ np.asarray(params, float)
 
-    def recover(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray, lam: np.ndarray,
+    def recover(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray, w: np.ndarray,
                 p: np.ndarray) -> np.ndarray:
-        """The projection's ``x = [u; sigma]`` from the condensed ``(lambda, p)``:
-        ``u = u_0 + K_u^-1 G^T lambda`` and ``eta = eta_0 + K_s^-1 R_p p`` from the kept columns
-        (only those of the nonzero ``lambda`` and ``p``: the closed pairs), then
-        ``sigma = sigma_0 - M^-1 R_sigma^T eta``."""
+        """The projection's ``x = [u; sigma]`` from the condensed ``(w, p)``: the gap multipliers
+        ``lambda = D_u^-1 (w - g_c)``, ``u = u_0 + K_u^-1 G^T lambda`` and
+        ``eta = eta_0 + K_s^-1 R_p p`` from the kept columns (only those of the nonzero ``lambda``
+        and ``p``: the closed pairs), then ``sigma = sigma_0 - M^-1 R_sigma^T eta``."""
         u, eta = u0, eta0
         if self.nc:
-            on = _significant(lam)
+            lam = sla.cho_solve(self._D_u, w - self.G @ u0 - self._g @ np.asarray(params, float))
+            on = _significant(lam, self._condition_u)
             u = u0 + self.Z_u[:, on] @ lam[on]
             on = _significant(p)
             if self._p_scale is not None:
