@@ -24,8 +24,11 @@ whole load path. What is left is a problem on the contact pairs alone (the conde
 
 ``g_c = G K_u^-1 b + g`` the gaps at ``lambda = 0`` and ``D_p t = R_p^T K_s^-1 c``. Its objective
 differs from the projection's by a constant only, and its stationary points are the
-projection's (``lambda`` is the gap multiplier), so every formulation solves it unchanged; ``u``,
-``eta`` and ``sigma`` follow by one solve with two right-hand sides.
+projection's (``lambda`` is the gap multiplier), so every formulation solves it unchanged. It is
+posed in the gaps ``w = D_u lambda + g_c`` (objective ``1/2 (w - g_c)^T D_u^-1 (w - g_c) + ...``,
+constraint ``0 <= w _|_ p >= 0``): one row per pair, so a pair switching piece is a low-rank
+update of a formulation's factor. ``u``, ``eta`` and ``sigma`` follow from the solve pair
+``K_u^-1 [b, c]`` and the kept columns ``K_u^-1 G^T`` of the closed pairs.
 """
 
 from __future__ import annotations
