@@ -40,7 +40,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ddcm_casadi.linalg import factorize
+from ddcm_casadi.linalg import SingularMatrix, factorize
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
@@ -167,6 +167,12 @@ class Reduction:
         Sparse factorisations made (1 with a Hookean metric).
     factor : Factor
         The kept factor of ``K_u`` (:func:`~ddcm_casadi.linalg.factorize`).
+    K_u : scipy.sparse.csc_matrix
+        ``A_u^T W_e A_u`` (a multiple of ``K_C``).
+    Z_u : ndarray
+        ``K_u^-1 G^T`` (``n x nc``, column-major), the kept columns.
+    D_u, D_p : ndarray
+        The Delassus matrices ``G K_u^-1 G^T`` and ``R_p^T K_s^-1 R_p`` (``nc x nc``).
     """
 
     def __init__(self, problem: ComplementarityProblem) -> None:
@@ -202,14 +208,20 @@ class Reduction:
         self.G = Gm.z[:, :n].tocsr()
         self._g = Gm.params.tocsr()
         self.factorizations = 1
-        self.factor = factorize(self.K_u)
+        try:
+            self.factor = factorize(self.K_u)
+        except SingularMatrix:
+            raise NotReducible("K_C is singular (a body held only by its contacts)") from None
         scale = float((K_s.multiply(self.K_u)).sum()) / max(float(self.K_u.multiply(self.K_u).sum()), 1e-300)
         if _frobenius(K_s - scale * self.K_u) <= PROPORTIONAL * _frobenius(K_s):
             self.alpha = scale
             self._factor_s = None
         else:
             self.alpha = None
-            self._factor_s = factorize(K_s)
+            try:
+                self._factor_s = factorize(K_s)
+            except SingularMatrix:
+                raise NotReducible("the stress block K_s is singular") from None
             self.factorizations = 2
         if nc:
             # nc back-solves: the columns K_u^-1 G^T and K_s^-1 R_p (shared when R_p is a
