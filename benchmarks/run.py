@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -52,6 +53,7 @@ from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_at
 from ddcm_casadi.linalg import factorize, solver_name
 from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.validation.reference import ContactQP
+from ddcm_casadi.drivers.ddcm_reduced import ReducedProjection, build_projection
 from ddcm_casadi.drivers.path import DDCMSolver, solve_classical
 from ddcm_casadi.models.truss import bar_chain, warren_truss
 
@@ -92,21 +94,28 @@ def warren(panels: int, n_data: int, *, steps=TRUSS_STEPS):
 
 
 def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister", *, search: str = "kdtree",
-                   floor: bool = True) -> dict:
+                   floor: bool = True, reduce: bool = True) -> dict:
     """Seconds per DDCM iteration (projection + data search) along the model's load path, against
-    the floor: one scipy LU factorisation and solve of the FB saddle-point system at the converged
-    state, plus one KD-tree query of every material point against the data set.
+    the floor. The projection is built as the driver builds it (:func:`build_projection`: reduced
+    where the Kirchdoerfer-Ortiz reduction applies, unless ``reduce`` is False; ``projection_path``
+    says which). Full path: the floor is one scipy LU factorisation and solve of the FB
+    saddle-point system at the converged state, plus one KD-tree query of every material point
+    against the data set. Reduced path: :func:`reduced_floor` (one solve pair with the kept factor
+    plus the query: no factorisation is left to make).
 
-    ``seconds`` is the mean over every iteration of the path, the cold first step included;
-    ``first_step_seconds`` and ``later_steps_seconds`` split it. ``build_seconds`` is the one-off
-    build (problems and the formulation), ``build_ratio`` its ratio to the floor.
+    ``seconds`` is the mean over every iteration of the path (the driver's per-step checks and
+    the cold first step included); ``iteration_seconds`` the projections and data searches alone
+    per iteration. ``first_step_seconds`` and ``later_steps_seconds`` split ``seconds``.
+    ``build_seconds`` is the one-off build (problems and the formulation; with the reduction, its
+    factorisation and back-solves), ``build_ratio`` its ratio to the floor.
     """
     t0 = time.perf_counter()
     problems = build_problems(model)
     problem_build = time.perf_counter() - t0
-    built = registry.get(formulation).build(problems.projection)
+    built = build_projection(registry.get(formulation), problems, reduce=reduce)
     build = time.perf_counter() - t0
-    system = built.newton_system()
+    reduced = isinstance(built, ReducedProjection)
+    system = None if reduced else built.newton_system()
     runs = []
     for _ in range(repeats):
         built.reset()  # cold factorisation cache: every repeat measures the same work
@@ -127,9 +136,22 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
                search_share=float(sum(s.search_seconds for s in steps)) / total,
                search_seconds_per_iteration=float(sum(s.search_seconds for s in steps)) / int(its.sum()),
                newton_per_projection=float(sum(s.iterations for s in steps) / its.sum()),
-               predicted_share=stats["predicted"] / max(1, stats["predicted"] + stats["newton"]),
+               predicted_share=stats.get("predicted", 0) / max(1, stats.get("predicted", 0) + stats.get("newton", 0)),
                factorizations=stats.get("factorizations", 0), factor_updates=stats.get("updates", 0),
-               build_seconds=build, problem_build_seconds=problem_build, converged=bool(path.converged))
+               build_seconds=build, problem_build_seconds=problem_build, converged=bool(path.converged),
+               iteration_seconds=float(sum(s.projection_seconds + s.search_seconds for s in steps)) / int(its.sum()),
+               projection_path=path.projection_path)
+    if reduced:
+        rec["unknowns"] = problems.projection.n_x + problems.projection.n_pairs
+        if floor:
+            step = steps[-1]
+            low = reduced_floor(problems, built, step.step, (step.strain_star, step.stress_star),
+                                (step.strain, step.stress), repeats)
+            rec.update(low, ratio_to_cached_floor=seconds / low["cached_floor_seconds"],
+                       iteration_ratio_to_cached_floor=rec["iteration_seconds"] / low["cached_floor_seconds"],
+                       build_ratio=build / low["cached_floor_seconds"])
+            rec["ratio"] = rec["ratio_to_cached_floor"]
+        return rec
     if system is None:  # no saddle-point system to measure the floor on
         return rec
     rec["unknowns"] = int(system.unknowns.size)
@@ -141,6 +163,18 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
         rec.update(low, ratio=seconds / low["floor_seconds"], build_ratio=build / low["floor_seconds"],
                    ratio_to_cached_floor=seconds / low["cached_floor_seconds"])
     return rec
+
+
+def reduced_floor(problems, built, step: int, data, states, repeats: int) -> dict:
+    """The cached-factor floor of a reduced DDCM iteration: one solve with the kept factor of
+    ``K_C`` and two right-hand sides (:meth:`Reduction.particular` at the assigned ``data =
+    (strain*, stress*)`` of load step ``step``: a solve pair and two sparse products), plus one
+    KD-tree query of the ``states = (strain, stress)`` of every material point."""
+    params = problems.projection_params(step, *data)
+    t_solve = median_time(lambda: built.reduction.particular(params), max(5, repeats))
+    t_kd = median_time(lambda: problems.model.dataset.nearest(*states), max(5, repeats))
+    return dict(floor_seconds=t_solve + t_kd, cached_floor_seconds=t_solve + t_kd, solve_seconds=t_solve,
+                kdtree_seconds=t_kd, linear_solver=solver_name())
 
 
 def iteration_floor(problems, built, step: int, x, p, data, states, repeats: int) -> dict:
@@ -233,15 +267,16 @@ print(json.dumps(out if isinstance(out, list) else [out]))
 """
 
 
-def in_fresh_process(function: str, *args, label: str, unknowns: int) -> list[dict]:
+def in_fresh_process(function: str, *args, label: str, unknowns: int, env: dict | None = None) -> list[dict]:
     """The records of ``function(*args)`` (a function of this module) run in a fresh process: its
     peak memory its own, and a size the machine cannot hold (killed for memory, exit status -9)
-    reported as a record named ``label`` (of about ``unknowns`` unknowns) with the error, not fatal."""
+    reported as a record named ``label`` (of about ``unknowns`` unknowns) with the error, not fatal.
+    ``env``: variables added to the process's environment."""
     here = Path(__file__).resolve().parent
     cmd = [sys.executable, "-c", FRESH, str(here), function, json.dumps(args)]
     # Run from this folder: ``python -c`` puts its working directory first on sys.path, and from the
     # repository's root that would import the source tree instead of the installed package.
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=here)
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=here, env={**os.environ, **(env or {})})
     if proc.returncode == 0:
         return json.loads(proc.stdout.strip().splitlines()[-1])
     return [dict(name=label, unknowns=unknowns, data_points=0,
@@ -279,6 +314,77 @@ def continuum_record(unknowns: int, repeats: int, solver: str = "superlu") -> di
     peak = peak_memory_bytes()
     suffix = "" if solver == "superlu" else f", {solver}"
     return dict(name=f"DDCM iteration, 2-D continuum: {model.name}{suffix}", **rec, peak_memory_bytes=peak)
+
+
+def pressed_block(divisions: int):
+    """:func:`continuum_block` without contact: its top edge pushed down 40 um times the load
+    factor by a hard device (5 load steps), no contact pair."""
+    from ddcm_casadi.casefiles.base import read_document
+    from ddcm_casadi.casefiles.config import case_from_dict
+    from ddcm_casadi.validation.continuum import EXAMPLE
+
+    doc = read_document(EXAMPLE)
+    doc["mesh"]["divisions"] = [divisions, divisions]
+    doc["mesh"].pop("refine_near", None)
+    doc.pop("contact")
+    doc.pop("hertz", None)
+    doc["supports"].append({"boundary": "ymax", "fix": "y", "displacement": [0.0, -4e-5]})
+    doc["loading"] = {"load_factors": [0.25, 0.5, 0.75, 1.0, 1.25]}
+    return case_from_dict(doc, base_dir=EXAMPLE.parent, source=f"pressed block {divisions}x{divisions}, no contact").model
+
+
+def reduction_record(unknowns: int, contact: bool, repeats: int, full: bool) -> list[dict]:
+    """A reduced DDCM iteration (Kirchdoerfer-Ortiz, :func:`ddcm_iteration`) on the 2-D continuum
+    of about ``unknowns`` full-projection unknowns, with contact (:func:`continuum_block`) or
+    without (:func:`pressed_block`), against its cached-factor floor (:func:`reduced_floor`:
+    ``ratio``), with its build and peak memory; with ``full``, the same path through today's full
+    saddle-point projection in the same process (``full_seconds``, ``speedup``) and whether both
+    reach the same fixed points (``same_fixed_points``: the same data assignment at every step)."""
+    divisions = max(4, round((unknowns / 34) ** 0.5))
+    model = continuum_block(divisions) if contact else pressed_block(divisions)
+    rec = ddcm_iteration(model, repeats)
+    peak = peak_memory_bytes()
+    out = dict(name=f"reduced DDCM iteration, 2-D continuum {'with' if contact else 'without'} contact: {model.name}",
+               **rec, peak_memory_bytes=peak)
+    if full:
+        problems = build_problems(model)
+        reduced = DDCMSolver(problems, build_projection(registry.get("fischer_burmeister"), problems)).solve()
+        slow = DDCMSolver(problems, registry.get("fischer_burmeister").build(problems.projection)).solve()
+        its = sum(s.outer_iterations for s in slow.steps)
+        out.update(full_seconds=slow.solve_seconds / its, speedup=slow.solve_seconds / its / rec["seconds"],
+                   same_fixed_points=all(np.array_equal(a.data_index, b.data_index)
+                                         for a, b in zip(slow.steps, reduced.steps)),
+                   max_rel_difference_u=max(float(np.max(np.abs(a.u - b.u)) / max(np.max(np.abs(a.u)), 1e-300))
+                                            for a, b in zip(slow.steps, reduced.steps)))
+    return [out]
+
+
+def reduction_factor(unknowns: int, repeats: int) -> list[dict]:
+    """The reduction's one factorisation, ``K_C`` of the 2-D continuum (about ``unknowns``
+    full-projection unknowns), and a solve pair with it: the package's (SuperLU, minimum degree of
+    ``K + K^T``, diagonal pivots; ``floor_seconds``) against SuperLU's default (COLAMD, partial
+    pivoting) and QDLDL's LDL^T (AMD; where the optional ``qdldl`` package is installed)."""
+    model = continuum_block(max(4, round((unknowns / 34) ** 0.5)))
+    problems = build_problems(model)
+    K = build_projection(registry.get("fischer_burmeister"), problems).reduction.K_u
+    rhs = np.cos(np.arange(2 * K.shape[0])).reshape(-1, 2)
+    name = "reduction: factorisation and solve pair of K_C, 2-D continuum: {}".format
+    kept = {}
+
+    def run(label, factor, solve_pair):
+        t = median_time(lambda: kept.__setitem__(label, factor()), repeats)
+        return label, t, median_time(lambda: solve_pair(kept[label]), max(5, repeats))
+
+    runs = [run("superlu, minimum degree (default)", lambda: linalg.factorize(K), lambda f: f.solve(rhs)),
+            run("superlu, COLAMD", lambda: spla.splu(K), lambda f: f.solve(rhs))]
+    if importlib.util.find_spec("qdldl") is not None:
+        import qdldl
+
+        runs.append(run("qdldl (AMD, LDL^T)", lambda: qdldl.Solver(K),
+                        lambda f: [f.solve(np.ascontiguousarray(rhs[:, j])) for j in range(2)]))
+    floor = runs[0][1]
+    return [dict(name=name(label), unknowns=int(K.shape[0]), data_points=0, seconds=t, floor_seconds=floor,
+                 ratio=t / floor, solve_pair_seconds=ts, nnz=int(K.nnz)) for label, t, ts in runs]
 
 
 def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]:
@@ -736,6 +842,20 @@ def main(argv=None) -> int:
                 for rec in in_fresh_process("continuum_record", u, 1, solver, unknowns=u,
                                             label=f"DDCM iteration, 2-D continuum, about {u:.0e} unknowns, {solver}"):
                     log(rec)
+    # The Kirchdoerfer-Ortiz reduction: a DDCM iteration against its cached-factor floor, with
+    # and without contact, each in a fresh process; today's full path beside it up to 1e5 (at
+    # 1e6 it costs 93 s an iteration). One BLAS thread: on a shared 2-core machine OpenBLAS's
+    # threads spin, and a dense product of 1e4 entries stalled for 10-20 ms (0.3 ms alone).
+    one_thread = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    for u in ((10**4, 10**5) if quick else (10**4, 10**5, 10**6)):
+        for contact in (True, False):
+            for rec in in_fresh_process("reduction_record", u, contact, 1 if u > 10**5 else rep, u <= 10**5,
+                                        label=f"reduced DDCM iteration, 2-D continuum, about {u:.0e} unknowns",
+                                        unknowns=u, env=one_thread):
+                log(rec)
+        for rec in in_fresh_process("reduction_factor", u, 1 if u > 10**5 else rep, env=one_thread,
+                                    label=f"reduction factorisation, about {u:.0e} unknowns", unknowns=u):
+            log(rec)
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):
         log(data_set_memory(n_data))
         model = stopped_bar(3000, n_data)

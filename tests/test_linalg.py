@@ -178,6 +178,7 @@ def test_low_rank_updates_give_the_factorised_path(monkeypatch):
     tolerances (relative increment 1e-9 of the scaled unknowns), so they agree to 1e-7 of each
     field's maximum (a margin of 100 for the conditioning of the projection)."""
     from ddcm_casadi.validation.continuum import hertz_block
+    from ddcm_casadi.drivers.ddcm_options import DDCMOptions
     from ddcm_casadi.drivers.harness import compare
 
     model = hertz_block(2, degree=2, data=True)
@@ -189,10 +190,11 @@ def test_low_rank_updates_give_the_factorised_path(monkeypatch):
         return lu
 
     monkeypatch.setattr(ReferenceFactor, "update", counted)
-    with_updates = compare(model, ["fischer_burmeister"], variants=["ddcm"])["ddcm", "fischer_burmeister"]
+    full = DDCMOptions(reduce=False)  # the full saddle point's factors (the reduced path's are small)
+    with_updates = compare(model, ["fischer_burmeister"], variants=["ddcm"], ddcm=full)["ddcm", "fischer_burmeister"]
     assert sum(used) >= 10  # the comparison means something: the path did switch by updates
     monkeypatch.setattr(ReferenceFactor, "update", lambda self, A: None)
-    factorised = compare(model, ["fischer_burmeister"], variants=["ddcm"])["ddcm", "fischer_burmeister"]
+    factorised = compare(model, ["fischer_burmeister"], variants=["ddcm"], ddcm=full)["ddcm", "fischer_burmeister"]
     assert with_updates.converged and factorised.converged
     for field in ("u", "p", "stress"):
         a, b = with_updates.array(field), factorised.array(field)
@@ -278,3 +280,21 @@ def test_factors_of_the_factorising_thread_are_freed(monkeypatch):
     assert resident[-1] - resident[4] <= 25.0, resident
     linalg.factorize(A)  # the releases queued before this job are done when it is
     assert owner.made - owner.released <= 1
+
+
+def test_small_dense_matrices_are_factorised_dense():
+    """A condensed contact problem's systems (dense Delassus blocks) go to LAPACK's LU: the
+    solve is exact to the backward error of partial pivoting; an exactly singular one raises."""
+    from ddcm_casadi.linalg import DENSE_MIN, SingularMatrix, backward_error, factorize
+
+    rng = np.random.default_rng(3)
+    n = DENSE_MIN + 36
+    A = rng.standard_normal((n, n))
+    A[rng.random((n, n)) < 0.5] = 0.0
+    A = sp.csc_matrix(A + n * np.eye(n))
+    b = rng.standard_normal(n)
+    assert backward_error(A, factorize(A).solve(b), b) <= 1e-14
+    singular = A.tolil()
+    singular[:, 0] = 0.0
+    with pytest.raises(SingularMatrix):
+        factorize(sp.csc_matrix(singular))

@@ -4,7 +4,10 @@ Each load step alternates
 
 1. the projection onto ``Z_E`` (:class:`~ddcm_casadi.drivers.ddcm_projection.Projection`: the
    chosen formulation, warm-started, checked against the exact branch enumeration where the
-   problem is affine with few contact pairs), and
+   problem is affine with few contact pairs; built by
+   :func:`~ddcm_casadi.drivers.ddcm_reduced.build_projection`, it is by default the
+   Kirchdoerfer-Ortiz reduction where that applies: one factor of ``K_C`` for the whole path and
+   the formulation on the contact pairs alone, ``PathResult.projection_path``), and
 2. the material update of the scheme (:mod:`ddcm_casadi.drivers.scheme`): the nearest datum
    (plain DDCM, with the data search of ``search``), LCDD or max-ent (``variant``),
 
@@ -44,6 +47,7 @@ from ddcm_casadi.drivers import ddcm_improve
 from ddcm_casadi.drivers.checks import finish_step
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.drivers.ddcm_projection import Projection
+from ddcm_casadi.drivers.ddcm_reduced import path_description
 from ddcm_casadi.drivers.ddcm_search import point_ranges, start_assignment
 from ddcm_casadi.drivers.records import (
     MaterialStates, PathResult, Run, StepResult, check_convergence, count, new_tally,
@@ -66,7 +70,8 @@ class DDCMSolver:
     problems : ProblemPair
         Needs the projection (a material data set).
     built
-        The projection formulation, built.
+        The projection formulation, built (on the full projection, or reduced by
+        :func:`~ddcm_casadi.drivers.ddcm_reduced.build_projection`).
     options : DDCMOptions, optional
         Iterations, data search, starts, restarts, improvement, certificates, scheme (default
         ``DDCMOptions()``).
@@ -251,7 +256,7 @@ class DDCMSolver:
         solution (``warm``), or from its own start; a step that fails is bisected
         (:meth:`_bisect`); ``progress(step)`` after each."""
         problems, model = self.problems, self.problems.model
-        out = PathResult("ddcm", formulation_name, warnings=list(self.notes))
+        out = PathResult("ddcm", formulation_name, warnings=list(self.notes), projection_path=path_description(self.built))
         warm = (np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs), None)
         start, self.projection.previous = None, None
         converged = None  # the last converged step: (k, its history, material states, Z_E solution)

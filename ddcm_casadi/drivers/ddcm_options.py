@@ -131,6 +131,13 @@ class DDCMOptions:
         to concentration returns to a plain DDCM fixed point (a better one, still noisy).
     maxent_beta_growth : float
         Max-ent: the factor ``g > 1`` of ``beta`` from one annealing stage to the next.
+    reduce : bool
+        Solve each projection through the Kirchdoerfer-Ortiz reduction where it applies (an affine
+        projection with a constant metric and at most
+        :data:`~ddcm_casadi.problems.reduction.MAX_PAIRS` contact pairs): ``K_C = B^T (W (x) C) B``
+        factorised once per model, the formulation on the contact pairs' condensed problem
+        (:mod:`ddcm_casadi.drivers.ddcm_reduced`; the same projections to round-off). False: the
+        formulation on the full saddle-point problem.
     """
 
     max_outer: int = 100
@@ -152,6 +159,7 @@ class DDCMOptions:
     maxent_neighbours: int = 32
     maxent_steps: int = 1
     maxent_beta_growth: float = 2.0
+    reduce: bool = True
 
     def __post_init__(self) -> None:
         check.check_dataclass(self, "ddcm option", rules=_RULES)

@@ -85,6 +85,10 @@ class Projection:
                 sol = retry
             else:
                 sol.iterations += retry.iterations
+        if getattr(self.built, "closed_form", False):
+            # the reduced projection without pairs: the unique solution of an equality-constrained
+            # QP in closed form, the enumeration's only branch (docs/maths.md, section 17)
+            return sol, bool(sol.converged), 0.0
         if not self.check:
             return sol, (bool(sol.converged) if self._convex else None), float("nan")
         xe, pe, obj = self.exact_projection(params)

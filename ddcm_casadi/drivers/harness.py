@@ -21,6 +21,7 @@ from ddcm_casadi.formulations.base import Formulation
 from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.models.base import ContactModel
 from ddcm_casadi.parallel import map_forked, resolve_jobs
+from ddcm_casadi.drivers.ddcm_reduced import build_projection
 from ddcm_casadi.problems.build import ProblemPair, build_problems
 from ddcm_casadi.drivers.ddcm_options import KEYS, DDCMOptions
 from ddcm_casadi.drivers.path import DDCMSolver, PathResult, StepResult, solve_classical
@@ -261,6 +262,8 @@ class Comparison:
                        bisected_steps=[s.step for s in r.steps if s.bisected and s.converged],
                        substeps=[s.substeps for s in r.steps],
                        smallest_substep=[s.smallest_substep for s in r.steps])
+            if r.projection_path:  # DDCM: reduced (Kirchdoerfer-Ortiz) or the full saddle point
+                rec["projection_path"] = r.projection_path
             if err is not None and self._penalty_reference(variant, name) is not None:
                 # compared with its own (penalty) closed form above; the exact one as well here
                 ref = [self.model.closed_form(k) for k in range(self.model.n_steps)]
@@ -416,7 +419,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
             r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb,
                                 min_substep=min_substep)
         else:
-            built = form.build(problems.projection)
+            built = build_projection(form, problems, reduce=ddcm.reduce)
             solver = DDCMSolver(problems, built, options=ddcm, min_substep=min_substep)
             build = time.perf_counter() - t0
             r = solver.solve(formulation_name=form.name, raise_on_failure=raise_on_failure, progress=cb)

@@ -93,6 +93,9 @@ class PathResult:
     solve_seconds: float = 0.0
     #: What the driver left out for the whole path and why (one line each).
     warnings: list[str] = field(default_factory=list)
+    #: How the DDCM projections were solved: reduced (Kirchdoerfer-Ortiz) or the full saddle point,
+    #: and why (:func:`~ddcm_casadi.drivers.ddcm_reduced.path_description`); ``""`` for classical paths.
+    projection_path: str = ""
 
     @property
     def converged(self) -> bool:

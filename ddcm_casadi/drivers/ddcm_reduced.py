@@ -1,0 +1,109 @@
+"""The DDCM projection through the Kirchdoerfer-Ortiz reduction (:mod:`ddcm_casadi.problems.reduction`,
+``docs/maths.md`` section 17), behind the interface of a built formulation.
+
+:func:`build_projection` is how drivers build the projection's formulation: reduced where the
+reduction applies and is asked for (the default), the formulation built on the full saddle-point
+problem otherwise. A reduced projection is the chosen formulation built on the condensed problem
+(the contact pairs only; none without contact), with the displacements and stresses recovered by
+one solve with the kept factor; its solutions, residuals and objectives are the full projection's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ddcm_casadi.formulations.base import BuiltFormulation, LocalSolution
+from ddcm_casadi.problems.build import ProblemPair
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.reduction import NotReducible, Reduction, refusal
+
+#: How a path's projection was solved (``PathResult.projection_path``).
+REDUCED = "reduced (Kirchdoerfer-Ortiz: {factors} factorisation(s) of K_C, {nc} condensed contact pairs)"
+FULL = "full saddle point ({why})"
+
+
+class ReducedProjection(BuiltFormulation):
+    """A formulation solving the condensed problem of a projection, returning the projection's
+    solutions (:class:`~ddcm_casadi.formulations.base.LocalSolution` of the full unknowns).
+
+    Parameters
+    ----------
+    problem : ComplementarityProblem
+        The full projection (residuals, gaps and objectives are evaluated on it).
+    reduction : Reduction
+        Its reduction (the kept factor, the condensed problem).
+    inner : BuiltFormulation or None
+        The formulation built on :attr:`Reduction.condensed` (``None`` without contact pairs:
+        the projection is then the solve with the kept factor alone).
+    """
+
+    def __init__(self, problem: ComplementarityProblem, reduction: Reduction, inner: BuiltFormulation | None) -> None:
+        super().__init__(problem)
+        self.reduction, self.inner = reduction, inner
+        self.penalty_stiffness = None if inner is None else inner.penalty_stiffness
+        self.path = REDUCED.format(factors=reduction.factorizations, nc=reduction.nc)
+        #: Without contact pairs the projection is the closed form of the exact one (no branch to
+        #: enumerate): the driver skips the enumeration's check.
+        self.closed_form = inner is None
+
+    def reset(self) -> None:
+        """Forget the condensed formulation's caches (the reduction's factor is the model's: kept)."""
+        if self.inner is not None:
+            self.inner.reset()
+
+    @property
+    def stats(self) -> dict:
+        inner = dict(self.inner.stats) if self.inner is not None else {}
+        return {**inner, "reduced": 1, "reduction_factorizations": self.reduction.factorizations,
+                "condensed_pairs": self.reduction.nc}
+
+    def solve(self, params: np.ndarray, x0: np.ndarray, p0: np.ndarray, state: dict | None = None) -> LocalSolution:
+        """The projection at ``params`` from ``(x0, p0)`` (scaled): the condensed problem from
+        the gaps of ``x0`` (:meth:`Reduction.condensed_start`) and ``p0``, then ``x`` recovered."""
+        red = self.reduction
+        params = np.asarray(params, float)
+        u0, eta0 = red.particular(params)
+        if self.inner is None:
+            w, p, converged, iterations, outer, state, message = np.zeros(0), np.zeros(0), True, 1, 0, None, ""
+        else:
+            sol = self.inner.solve(red.condensed_params(params, u0, eta0), red.condensed_start(params, x0),
+                                   np.asarray(p0, float), state)
+            w, p, converged, iterations = sol.x, sol.p, sol.converged, sol.iterations
+            outer, state, message = sol.outer_iterations, sol.state, sol.message
+        x = red.recover(params, u0, eta0, w, p)
+        return self._finish(x, p, params, converged=converged, iterations=iterations, outer=outer, state=state,
+                            message=message)
+
+
+def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True) -> BuiltFormulation:
+    """The projection's formulation, built: reduced (:class:`ReducedProjection`) when ``reduce``
+    and the reduction applies (:func:`~ddcm_casadi.problems.reduction.refusal`), else built on the
+    full problem. ``path_description(built)`` says which and why."""
+    problem = problems.projection
+    formulation.check_supports(problem)
+    why = refusal(problem) if reduce else "reduction off"
+    reduction = None
+    if not why:
+        reduction = problem.shared(("reduction",), lambda: _reduction(problem))
+        why = reduction if isinstance(reduction, str) else ""
+    if why:
+        built = formulation.build(problem)
+        built.projection_path = FULL.format(why=why)
+        return built
+    inner = formulation.build(reduction.condensed) if reduction.nc else None
+    built = ReducedProjection(problem, reduction, inner)
+    built.projection_path = built.path
+    return built
+
+
+def _reduction(problem: ComplementarityProblem) -> Reduction | str:
+    """The reduction of ``problem``, or why it does not apply (a singular Delassus matrix)."""
+    try:
+        return Reduction(problem)
+    except NotReducible as exc:
+        return str(exc)
+
+
+def path_description(built) -> str:
+    """How ``built`` solves the projection (set by :func:`build_projection`; ``""`` if not built by it)."""
+    return getattr(built, "projection_path", "")

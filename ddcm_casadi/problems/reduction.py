@@ -1,0 +1,346 @@
+r"""The Kirchdoerfer-Ortiz reduction of an affine DDCM projection (``docs/maths.md``, section 17).
+
+The projection (:func:`~ddcm_casadi.problems.build.build_problems`, kind ``"mpcc"``) is, in the
+problem's scaled unknowns ``z = [u; sigma; p]`` and parameters ``P``,
+
+.. math::  \min\ \tfrac12 |A_u u + a|^2_{W_e} + \tfrac12 |S\sigma + s|^2_{W_s}
+           \ \text{s.t.}\ R_\sigma \sigma + R_p p + r = 0,\quad 0 \le G u + g \perp p \ge 0,
+
+``a, s, r, g`` affine in ``P``. With a constant metric (no strain-stress cross term, ``S``
+invertible) its stationarity eliminates the stresses and the displacements:
+
+- ``K_u u = b + G^T lambda``, ``K_u = A_u^T W_e A_u``, ``b = -A_u^T W_e a``;
+- ``K_s eta = c + R_p p``, ``K_s = R_sigma M^-1 R_sigma^T``, ``M = S^T W_s S``,
+  ``c = R_sigma sigma_0 + r``, ``sigma_0 = -S^-1 s``; then ``sigma = sigma_0 - M^-1 R_sigma^T eta``.
+
+A Hookean metric (``C`` on the strains, ``C^-1`` on the stresses, point by point) makes both
+matrices multiples of ``K_C = B^T (W (x) C) B``: ``K_s = alpha K_u``, one factorisation for the
+whole load path. What is left is a problem on the contact pairs alone (the condensed problem,
+:attr:`Reduction.condensed`), with the Delassus matrices ``D_u = G K_u^-1 G^T`` and
+``D_p = R_p^T K_s^-1 R_p`` (``nc x nc``, assembled by ``nc`` back-solves):
+
+.. math::  \min_{\lambda, p}\ \tfrac12 \lambda^T D_u \lambda + \tfrac12 (p + t)^T D_p (p + t)
+           \ \text{s.t.}\ 0 \le D_u \lambda + g_c \perp p \ge 0,
+
+``g_c = G K_u^-1 b + g`` the gaps at ``lambda = 0`` and ``D_p t = R_p^T K_s^-1 c``. Its objective
+differs from the projection's by a constant only, and its stationary points are the
+projection's (``lambda`` is the gap multiplier), so every formulation solves it unchanged. It is
+posed in the gaps ``w = D_u lambda + g_c`` (objective ``1/2 (w - g_c)^T D_u^-1 (w - g_c) + ...``,
+constraint ``0 <= w _|_ p >= 0``): one row per pair, so a pair switching piece is a low-rank
+update of a formulation's factor. ``u``, ``eta`` and ``sigma`` follow from the solve pair
+``K_u^-1 [b, c]`` and the kept columns ``K_u^-1 G^T`` of the closed pairs.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from ddcm_casadi.linalg import SingularMatrix, factorize
+from ddcm_casadi.problems.contract import ComplementarityProblem
+from ddcm_casadi.problems.maps import Affine, Distance
+from ddcm_casadi.problems.parameters import Parameters
+
+#: Contact pairs up to which the condensed problem is assembled (``nc`` back-solves, an ``n x nc``
+#: dense block kept); above, the projection keeps the full saddle-point path.
+MAX_PAIRS = 500
+#: Relative size (Frobenius) of ``K_s - alpha K_u`` up to which the two share one factor.
+PROPORTIONAL = 1e-12
+#: Largest condition number of a Delassus matrix: a body held only by its contacts makes ``K_C``
+#: singular (a rigid mode, ``B r = 0``), and its computed inverse shows as a condition near
+#: ``1 / eps`` (4e14 on the 2-D patch test's punch); then the full path is kept.
+MAX_CONDITION = 1.0 / (1e5 * np.finfo(float).eps)
+#: Right-hand sides per back-solve: SuperLU's solve with many columns is slower per column than
+#: with a few (measured on K_C of 23 436 dofs: 109 columns at once 14.7 s, by 16 4.4 s, by 4 0.74 s,
+#: one by one 1.5 s).
+SOLVE_BLOCK = 4
+#: Largest dense ``n x nc`` block kept (bytes); above, the full path is kept.
+MAX_DENSE_BYTES = 2 * 1024**3
+
+
+class NotReducible(ValueError):
+    """The reduction does not apply to a problem (the message says why, one line)."""
+
+
+def _rows(A: sp.csr_matrix, columns: slice) -> np.ndarray:
+    """Whether each row of ``A`` has a nonzero in ``columns``."""
+    return np.diff(sp.csr_matrix(A[:, columns]).indptr) > 0
+
+
+def _frobenius(A: sp.spmatrix) -> float:
+    return float(np.sqrt(abs(A).power(2).sum())) if A.nnz else 0.0
+
+
+def block_inverse(M: sp.spmatrix) -> sp.csr_matrix:
+    """The inverse of a block-diagonal sparse matrix (blocks: the connected components of its
+    pattern, in any order), block by block."""
+    M = sp.csr_matrix(M)
+    count, label = connected_components(abs(M) + abs(M.T), directed=False)
+    order = np.argsort(label, kind="stable")
+    sizes = np.bincount(label, minlength=count)
+    rows, cols, vals = [], [], []
+    start = np.concatenate([[0], np.cumsum(sizes)])
+    for size in np.unique(sizes):  # one batched inverse per block size
+        blocks = np.flatnonzero(sizes == size)
+        idx = order[start[blocks][:, None] + np.arange(size)]  # (nb, size)
+        r, c = np.broadcast_arrays(idx[:, :, None], idx[:, None, :])
+        inv = np.linalg.inv(np.asarray(M[r.ravel(), c.ravel()]).reshape(len(blocks), size, size))
+        rows.append(np.repeat(idx, size, axis=1).ravel())
+        cols.append(np.tile(idx, (1, size)).ravel())
+        vals.append(inv.ravel())
+    n = M.shape[0]
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+
+#: Entries of ``lambda`` or ``p`` below this fraction of the largest are round-off of an open pair
+#: (exactly zero in exact arithmetic): their kept columns are skipped in the recovery.
+ROUND_OFF = 64 * np.finfo(float).eps
+
+
+def _significant(v: np.ndarray, condition: float = 1.0) -> np.ndarray:
+    """The indices of the entries of ``v`` above :data:`ROUND_OFF` times its largest (times the
+    ``condition`` number of the system ``v`` was solved from: its round-off)."""
+    a = np.abs(v)
+    return np.flatnonzero(a > ROUND_OFF * condition * np.max(a, initial=0.0))
+
+
+def _columns_times(Z: np.ndarray, v: np.ndarray, on: np.ndarray) -> np.ndarray:
+    """``Z[:, on] @ v[on]``: the selected columns when they are few, else one product with the
+    others' entries zeroed (selecting many columns copies them: 640 MB at 1e6 unknowns)."""
+    if 8 * on.size <= v.size:
+        return Z[:, on] @ v[on]
+    kept = np.zeros_like(v)
+    kept[on] = v[on]
+    return Z @ kept
+
+
+def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) -> str:
+    """Why the reduction does not apply to ``problem`` (one line), or ``""``: it needs an affine
+    projection whose objective separates strains (of ``u``) from stresses (of ``sigma``), whose
+    equilibrium does not involve ``u``, whose gaps involve ``u`` only, and at most ``max_pairs``
+    contact pairs (default :data:`MAX_PAIRS`)."""
+    max_pairs = MAX_PAIRS if max_pairs is None else max_pairs
+    if problem.kind != "mpcc":
+        return "not a DDCM projection"
+    if not problem.affine or problem.distance is None:
+        return "the projection is not affine with a quadratic distance"
+    if problem.frictional:  # the condensed problem would need the law's blocks and parameters
+        return "Coulomb friction (the condensed problem carries Signorini pairs only, for now)"
+    if [name for name, _ in problem.unknowns] != ["u", "stress"]:
+        return "the projection's unknowns are not (u, stress)"
+    if problem.n_pairs > max_pairs:
+        return f"{problem.n_pairs} contact pairs (the condensed problem is assembled up to {max_pairs})"
+    n, mk = (size for _, size in problem.unknowns)
+    if 8 * n * problem.n_pairs > MAX_DENSE_BYTES:
+        return (f"the kept columns K_C^-1 G^T would take {8 * n * problem.n_pairs / 1024**3:.1f} GB "
+                f"(at most {MAX_DENSE_BYTES / 1024**3:.0f})")
+    h, g, d = problem.residual_map.z, problem.gap_map.z, problem.distance.d.z
+    if _rows(h, slice(0, n)).any():
+        return "the equilibrium involves the displacements"
+    if problem.n_pairs and _rows(g, slice(n, None)).any():
+        return "the gaps involve more than the displacements"
+    on_u, on_s, on_p = (_rows(d, s) for s in (slice(0, n), slice(n, n + mk), slice(n + mk, None)))
+    if on_p.any() or (on_u & on_s).any() or on_s.sum() != mk:
+        return "the distance does not separate strains and stresses"
+    W = sp.csr_matrix(problem.distance.weight)
+    if W[np.flatnonzero(~on_s)][:, np.flatnonzero(on_s)].count_nonzero():
+        return "the metric couples strains and stresses"
+    return ""
+
+
+class Reduction:
+    r"""The reduction of one affine projection (module docstring), built once per model.
+
+    Parameters
+    ----------
+    problem : ComplementarityProblem
+        The projection (kind ``"mpcc"``, :func:`refusal` empty; else, or with a singular
+        Delassus matrix, :class:`NotReducible`).
+
+    Attributes
+    ----------
+    alpha : float or None
+        ``K_s = alpha K_u`` when the metric is Hookean (one factor), else ``None`` (two).
+    factorizations : int
+        Sparse factorisations made (1 with a Hookean metric).
+    factor : Factor
+        The kept factor of ``K_u`` (:func:`~ddcm_casadi.linalg.factorize`).
+    K_u : scipy.sparse.csc_matrix
+        ``A_u^T W_e A_u`` (a multiple of ``K_C``).
+    Z_u : ndarray
+        ``K_u^-1 G^T`` (``n x nc``, column-major), the kept columns.
+    D_u, D_p : ndarray
+        The Delassus matrices ``G K_u^-1 G^T`` and ``R_p^T K_s^-1 R_p`` (``nc x nc``).
+    """
+
+    def __init__(self, problem: ComplementarityProblem) -> None:
+        why = refusal(problem, max_pairs=np.iinfo(np.int64).max)
+        if why:
+            raise NotReducible(why)
+        self.problem = problem
+        n, mk = (size for _, size in problem.unknowns)
+        nc = problem.n_pairs
+        self.n, self.mk, self.nc = n, mk, nc
+        R, Gm, dist = problem.residual_map, problem.gap_map, problem.distance
+        d, W = dist.d, sp.csr_matrix(dist.weight)
+        # the stress rows, and every other (strains; constant where no free dof moves a point)
+        on_s = _rows(d.z, slice(n, n + mk))
+        e_rows, s_rows = np.flatnonzero(~on_s), np.flatnonzero(on_s)
+        A_u = d.z[e_rows][:, :n].tocsc()
+        self._a = d.params[e_rows].tocsr()  # a = a_P P
+        W_e = W[e_rows][:, e_rows]
+        S = d.z[s_rows][:, n:n + mk].tocsr()
+        self._s = d.params[s_rows].tocsr()  # s = s_P P
+        W_s = W[s_rows][:, s_rows]
+        AtW = (A_u.T @ W_e).tocsr()
+        self.K_u = (AtW @ A_u).tocsc()
+        self._b = (-(AtW @ self._a)).tocsr()  # b = b_P P
+        S_inv = block_inverse(S)
+        self._sigma0 = (-(S_inv @ self._s)).tocsr()  # sigma_0 = -S^-1 s
+        self.M_inv = (S_inv @ block_inverse(W_s) @ S_inv.T).tocsr()  # (S^T W_s S)^-1
+        self.R_s = R.z[:, n:n + mk].tocsr()
+        self.R_p = R.z[:, n + mk:].tocsc()
+        self._c = (self.R_s @ self._sigma0 + R.params).tocsr()  # c = c_P P
+        self._MRt = (self.M_inv @ self.R_s.T).tocsr()
+        K_s = (self.R_s @ self._MRt).tocsc()
+        self.G = Gm.z[:, :n].tocsr()
+        self._g = Gm.params.tocsr()
+        self.factorizations = 1
+        try:
+            self.factor = factorize(self.K_u)
+        except SingularMatrix:
+            raise NotReducible("K_C is singular (a body held only by its contacts)") from None
+        scale = float((K_s.multiply(self.K_u)).sum()) / max(float(self.K_u.multiply(self.K_u).sum()), 1e-300)
+        if _frobenius(K_s - scale * self.K_u) <= PROPORTIONAL * _frobenius(K_s):
+            self.alpha = scale
+            self._factor_s = None
+        else:
+            self.alpha = None
+            try:
+                self._factor_s = factorize(K_s)
+            except SingularMatrix:
+                raise NotReducible("the stress block K_s is singular") from None
+            self.factorizations = 2
+        if nc:
+            # nc back-solves: the columns K_u^-1 G^T and K_s^-1 R_p (shared when R_p is a
+            # multiple of G^T column by column, as the contact forces G^T (a p) are)
+            self.Z_u = self._back_solves(self.factor.solve, self.G.T)
+            ratio = self._column_ratio()
+            if ratio is not None and self.alpha is not None:  # K_s^-1 R_p = Z_u diag(r) / alpha
+                self._p_scale, self.Z_p = ratio / self.alpha, None
+                self.D_p = (self.R_p.T @ self.Z_u) * self._p_scale
+            else:
+                self._p_scale = None
+                self.Z_p = self._back_solves(self._solve_s, self.R_p)
+                self.D_p = self.R_p.T @ self.Z_p
+            self.D_u = self.G @ self.Z_u
+            self.D_u, self.D_p = 0.5 * (self.D_u + self.D_u.T), 0.5 * (self.D_p + self.D_p.T)
+            conditions = []
+            for D in (self.D_u, self.D_p):
+                eig = np.linalg.eigvalsh(D)
+                if not eig[0] > eig[-1] / MAX_CONDITION:
+                    raise NotReducible(f"a Delassus matrix is singular or nearly (condition {eig[-1] / max(eig[0], 1e-300):.1e}:"
+                                       " a body held only by its contacts, or dependent contact rows)")
+                conditions.append(eig[-1] / eig[0])
+            self._condition_u = conditions[0]
+            self._D_p, self._D_u = sla.cho_factor(self.D_p), sla.cho_factor(self.D_u)
+        else:
+            self.Z_u = self.Z_p = np.zeros((n, 0))
+            self._p_scale = None
+            self.D_u = self.D_p = np.zeros((0, 0))
+
+    def _back_solves(self, solve, columns: sp.spmatrix) -> np.ndarray:
+        """``solve`` applied to the columns of ``columns``, :data:`SOLVE_BLOCK` at a time, into one
+        column-major ``n x nc`` array (the recovery takes whole columns)."""
+        columns = sp.csc_matrix(columns)
+        out = np.empty((self.n, columns.shape[1]), order="F")
+        for j in range(0, columns.shape[1], SOLVE_BLOCK):
+            block = columns[:, j:j + SOLVE_BLOCK].toarray()
+            out[:, j:j + block.shape[1]] = np.asarray(solve(block), float).reshape(block.shape)
+        return out
+
+    def _column_ratio(self) -> np.ndarray | None:
+        """``r`` with ``R_p = G^T diag(r)``, or ``None``."""
+        Gt = self.G.T.tocsc()
+        r = np.asarray(Gt.multiply(self.R_p).sum(axis=0)).ravel() / np.maximum(
+            np.asarray(Gt.multiply(Gt).sum(axis=0)).ravel(), 1e-300)
+        if _frobenius(self.R_p - Gt @ sp.diags(r)) <= PROPORTIONAL * max(_frobenius(self.R_p), 1e-300):
+            return r
+        return None
+
+    def _solve_s(self, rhs: np.ndarray) -> np.ndarray:
+        """``K_s^-1 rhs``."""
+        if self._factor_s is None:
+            return self.factor.solve(rhs) / self.alpha
+        return self._factor_s.solve(rhs)
+
+    # ------------------------------------------------------------------ the condensed problem
+    @cached_property
+    def condensed(self) -> ComplementarityProblem:
+        """The condensed problem (module docstring), in the gaps ``w = D_u lambda + g_c``: unknowns
+        ``w`` and the pressures ``p``, gaps ``w`` (one entry per pair, so that a pair switching
+        piece changes few rows of a formulation's system, and its factor is updated, not
+        remade), objective ``1/2 (w - g_c)^T D_u^-1 (w - g_c) + 1/2 (p + t)^T D_p (p + t)``;
+        parameters ``gap_offset = g_c`` and ``pressure_offset = t``; no equality constraint.
+        Scales, contact law and Fischer-Burmeister scalings are the projection's."""
+        nc, full = self.nc, self.problem
+        P = Parameters(gap_offset=nc, pressure_offset=nc)
+        I, Z = sp.identity(nc, format="csr"), sp.csr_matrix((nc, nc))
+        gap = Affine(sp.hstack([I, Z]), sp.csr_matrix((nc, P.size)))
+        d = Affine(sp.bmat([[I, None], [None, I]], format="csr"), sp.bmat([[-I, None], [None, I]], format="csr"))
+        D_u_inv = sla.cho_solve(self._D_u, np.eye(nc)) if nc else np.zeros((0, 0))
+        weight = sp.bmat([[sp.csr_matrix(0.5 * (D_u_inv + D_u_inv.T)), None], [None, sp.csr_matrix(self.D_p)]])
+        return ComplementarityProblem(
+            kind="mpcc", parameters=P, unknowns=(("gap", nc),),
+            residual_map=Affine(sp.csr_matrix((0, 2 * nc)), sp.csr_matrix((0, P.size))), gap_map=gap,
+            distance=Distance(d, sp.csr_matrix(weight)), gap_ref=full.gap_ref, pressure_ref=full.pressure_ref,
+            contact_stiffness=full.contact_stiffness, fb_alpha=full.fb_alpha, fb_beta=full.fb_beta,
+            contact_law=full.contact_law, kinematics=full.kinematics)
+
+    def particular(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(u_0, eta_0) = (K_u^-1 b, K_s^-1 c)`` at the projection's parameter values: the
+        projection without contact forces, by one solve with two right-hand sides (two solves
+        without a shared factor)."""
+        params = np.asarray(params, float)
+        b, c = self._b @ params, self._c @ params
+        if self._factor_s is None:
+            both = np.asarray(self.factor.solve(np.column_stack([b, c])), float).reshape(self.n, 2)
+            return both[:, 0], both[:, 1] / self.alpha
+        return self.factor.solve(b), self._factor_s.solve(c)
+
+    def condensed_params(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray) -> np.ndarray:
+        """The condensed problem's parameter vector: ``g_c = G u_0 + g`` and
+        ``t = D_p^-1 R_p^T eta_0`` (sparse products and an ``nc x nc`` solve)."""
+        if not self.nc:
+            return np.zeros(0)
+        gap_offset = self.G @ u0 + self._g @ np.asarray(params, float)
+        t = sla.cho_solve(self._D_p, self.R_p.T @ eta0)
+        return self.condensed.parameters.pack(gap_offset=gap_offset, pressure_offset=t)
+
+    def condensed_start(self, params: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The condensed start of a projection start ``x``: its gaps ``G u + g`` (a formulation
+        sees the same pairs at the start, and picks the same pieces, as on the full problem)."""
+        if not self.nc:
+            return np.zeros(0)
+        return self.G @ np.asarray(x, float)[:self.n] + self._g @ np.asarray(params, float)
+
+    def recover(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray, w: np.ndarray,
+                p: np.ndarray) -> np.ndarray:
+        """The projection's ``x = [u; sigma]`` from the condensed ``(w, p)``: the gap multipliers
+        ``lambda = D_u^-1 (w - g_c)``, ``u = u_0 + K_u^-1 G^T lambda`` and
+        ``eta = eta_0 + K_s^-1 R_p p`` from the kept columns (only those of the nonzero ``lambda``
+        and ``p``: the closed pairs), then ``sigma = sigma_0 - M^-1 R_sigma^T eta``."""
+        u, eta = u0, eta0
+        if self.nc:
+            lam = sla.cho_solve(self._D_u, w - self.G @ u0 - self._g @ np.asarray(params, float))
+            u = u0 + _columns_times(self.Z_u, lam, _significant(lam, self._condition_u))
+            on = _significant(p)
+            if self._p_scale is not None:
+                eta = eta0 + _columns_times(self.Z_u, self._p_scale * p, on)
+            else:
+                eta = eta0 + _columns_times(self.Z_p, p, on)
+        return np.concatenate([u, self._sigma0 @ np.asarray(params, float) - self._MRt @ eta])

@@ -1,0 +1,172 @@
+"""The Kirchdoerfer-Ortiz reduction of the DDCM projection (docs/maths.md, section 17): the same
+projections as the full saddle-point problem, hence the same DDCM fixed points, for every
+formulation, with and without contact; selected by default where it applies, reported."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ddcm_casadi import MaterialDataset, compare, formulations, paper_bar
+from ddcm_casadi.casefiles.base import read_document
+from ddcm_casadi.casefiles.config import case_from_dict
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+from ddcm_casadi.drivers.ddcm_reduced import ReducedProjection, build_projection, path_description
+from ddcm_casadi.models.truss import bar_chain, warren_truss
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.problems.exact import ExactEnumerator
+from ddcm_casadi.problems.reduction import Reduction, block_inverse, refusal
+from ddcm_casadi.validation.continuum import EXAMPLE
+from ddcm_casadi.validation.hard_device_rungs import stretched_block
+
+ALL = formulations.available()
+#: Round-off of a projection: the scaled unknowns are O(1), the systems well conditioned
+#: (K_C of a few hundred dofs); the brief's 1e-10.
+PROJECTION_TOL = 1e-10
+
+
+def stopped_bar():
+    data = MaterialDataset.hookean(200e9, -0.05, 0.01, 60, c=300e9)
+    return bar_chain(length=1.0, elements=6, youngs_modulus=200e9, tip_positions=[0.999, 0.997, 0.995],
+                     stops={2: 0.0006, 4: 0.0012}, dataset=data, name="stopped bar")
+
+
+def truss():
+    data = MaterialDataset.hookean(200e9, -0.01, 0.01, 60, c=200e9)
+    return warren_truss(panels=16, gap=1e-4 * (np.arange(4) % 3), contact_nodes=[2, 6, 10, 14],
+                        load_factors=[0.6, 0.8, 1.0], dataset=data, name="truss on a stepped ground")
+
+
+def hertz_block(divisions: int = 3):
+    doc = read_document(EXAMPLE)
+    doc["mesh"]["divisions"] = [divisions, divisions]
+    doc["mesh"].pop("refine_near", None)
+    doc["data"]["hookean"]["points"] = 11
+    return case_from_dict(doc, base_dir=EXAMPLE.parent, source="hertz block").model
+
+
+MODELS = {"bar": lambda: paper_bar(n_data=100), "stopped bar": stopped_bar, "truss": truss,
+          "continuum": hertz_block, "continuum without contact": lambda: stretched_block(points=11)}
+
+
+@pytest.fixture(scope="module", params=list(MODELS))
+def problems(request):
+    return build_problems(MODELS[request.param]())
+
+
+def _assigned(problems, seed: int = 0):
+    """Parameters of the last step's projection for a random data assignment."""
+    model = problems.model
+    index = np.random.default_rng(seed).integers(0, len(model.dataset), model.n_points)
+    data = model.dataset
+    strain, stress = data.strain[index], data.stress[index]
+    return problems.projection_params(model.n_steps - 1, strain, stress)
+
+
+def test_block_inverse_is_the_inverse():
+    rng = np.random.default_rng(1)
+    blocks = [rng.standard_normal((k, k)) + 4 * np.eye(k) for k in (1, 3, 2, 3)]
+    M = sp.block_diag(blocks).tocsr()
+    perm = rng.permutation(M.shape[0])
+    M = M[perm][:, perm]
+    np.testing.assert_allclose((block_inverse(M) @ M).toarray(), np.eye(M.shape[0]), atol=1e-13)
+
+
+def test_reduction_applies_to_every_small_strain_projection(problems):
+    assert refusal(problems.projection) == ""
+    reduction = Reduction(problems.projection)
+    assert reduction.factorizations == 1  # Hookean metric: K_s = alpha K_u, one factor
+    assert reduction.condensed.n_pairs == problems.projection.n_pairs
+
+
+def test_without_contact_the_projection_is_the_kkt_solution():
+    """No pairs: the reduced projection (two solves) is the equality-constrained QP's solution,
+    here from the full KKT matrix ``[H J^T; J 0]`` by a sparse direct solve."""
+    problems = build_problems(stretched_block(points=11))
+    problem = problems.projection
+    P = _assigned(problems)
+    H, H_P = problem.distance.hessian
+    nx = problem.n_x
+    J, J_P = problem.residual_map.z[:, :nx], problem.residual_map.params
+    K = sp.bmat([[H[:nx, :nx], J.T], [J, None]], format="csc")
+    x = spla.spsolve(K, -np.concatenate([H_P[:nx] @ P, J_P @ P]))[:nx]
+    sol = build_projection(formulations.get("fischer_burmeister"), problems).solve(P, np.zeros(nx), np.zeros(0))
+    assert sol.converged
+    assert np.max(np.abs(sol.x - x)) <= PROJECTION_TOL * max(1.0, np.max(np.abs(x)))
+
+
+@pytest.mark.parametrize("name", ALL)
+def test_condensed_projection_is_the_full_one(problems, name):
+    """From the exact projection (branch enumeration), every formulation on the condensed
+    problem and on the full one return the same projection (an inexact formulation its own)."""
+    problem = problems.projection
+    if not problem.n_pairs:
+        pytest.skip("no contact pairs: nothing condensed")
+    P = _assigned(problems, seed=2)
+    ex = ExactEnumerator(problem, max_pairs=problem.n_pairs).solve(P)
+    xe, pe = ex.x[:, 0], ex.p[:, 0]
+    full = formulations.get(name).build(problem).solve(P, xe, pe, {"on_branch": True})
+    reduced = build_projection(formulations.get(name), problems)
+    assert isinstance(reduced, ReducedProjection)
+    sol = reduced.solve(P, xe, pe, {"on_branch": True})
+    assert full.converged and sol.converged
+    scale = max(1.0, float(np.max(np.abs(np.concatenate([full.x, full.p])))))
+    assert np.max(np.abs(sol.x - full.x)) <= PROJECTION_TOL * scale
+    assert np.max(np.abs(sol.p - full.p)) <= PROJECTION_TOL * scale
+    if formulations.get(name).exact:
+        assert np.max(np.abs(sol.x - xe)) <= PROJECTION_TOL * scale
+        assert sol.objective == pytest.approx(float(ex.objective[0]), rel=PROJECTION_TOL, abs=PROJECTION_TOL)
+
+
+@pytest.mark.parametrize("model", list(MODELS))
+def test_ddcm_fixed_points_equal_the_full_path(model):
+    """Every formulation: the same data assignment at every step, and the same fields to the
+    formulations' own tolerance (Newton and IPOPT stop at 1e-9 relative increments)."""
+    m = MODELS[model]()
+    full = compare(m, variants=["ddcm"], ddcm=DDCMOptions(reduce=False))
+    reduced = compare(m, variants=["ddcm"], ddcm=DDCMOptions())
+    for key, a in full.results.items():
+        b = reduced.results[key]
+        assert a.projection_path.startswith("full") and b.projection_path.startswith("reduced")
+        assert a.converged and b.converged
+        for s, t in zip(a.steps, b.steps, strict=True):
+            np.testing.assert_array_equal(s.data_index, t.data_index)
+        for field in ("u", "stress", "p"):
+            x, y = a.array(field), b.array(field)
+            assert np.max(np.abs(x - y), initial=0.0) <= 1e-9 * max(np.max(np.abs(x), initial=0.0), 1e-300)
+
+
+def test_reduction_is_reported_and_can_be_switched_off():
+    m = stopped_bar()
+    on = compare(m, ["fischer_burmeister"], variants=["ddcm"])
+    row = on.summary()[0]
+    assert row["projection_path"].startswith("reduced (Kirchdoerfer-Ortiz: 1 factorisation(s) of K_C, 3 condensed")
+    problems = build_problems(m)
+    off = build_projection(formulations.get("fischer_burmeister"), problems, reduce=False)
+    assert path_description(off) == "full saddle point (reduction off)"
+    assert refusal(problems.projection, max_pairs=1) == "3 contact pairs (the condensed problem is assembled up to 1)"
+    assert refusal(problems.classical) == "not a DDCM projection"
+
+
+def test_finite_kinematics_keep_the_full_path():
+    from ddcm_casadi.models.von_mises import von_mises_truss
+
+    data = MaterialDataset.hookean(200e9, -0.05, 0.05, 41, c=200e9)
+    problems = build_problems(von_mises_truss(steps=4, dataset=data))
+    assert refusal(problems.projection) == "the projection is not affine with a quadratic distance"
+    built = build_projection(formulations.get("fischer_burmeister"), problems)
+    assert not isinstance(built, ReducedProjection)
+    assert path_description(built).startswith("full saddle point (the projection is not affine")
+
+
+def test_a_body_held_only_by_its_contacts_keeps_the_full_path():
+    """The 2-D patch test's punch floats on its contacts: ``K_C`` is singular, the Delassus
+    matrix's condition number near ``1 / eps``; the full path is kept, and says why."""
+    from ddcm_casadi.validation.two_body_rungs import patch_model
+
+    problems = build_problems(patch_model(2, data=True))
+    built = build_projection(formulations.get("fischer_burmeister"), problems)
+    assert not isinstance(built, ReducedProjection)
+    assert "a Delassus matrix is singular or nearly" in path_description(built)
