@@ -4,7 +4,7 @@ profiles (issue 26; ``docs/maths.md``, section 15).
     python benchmarks/fclib.py --data DIR [--out DIR] [--max-sweeps 3000] [--methods a,b]
 
 For every ``*.hdf5`` in ``--data`` (read by :func:`ddcm_casadi.problems.fclib.read_fclib`) and every
-method of :func:`~ddcm_casadi.problems.fclib.solve_fclib` (the default hybrid, projected
+method of :func:`~ddcm_casadi.drivers.fclib.solve_fclib` (the default hybrid, projected
 Gauss-Seidel, and every registered formulation that supports Coulomb friction, from the cold
 start): seconds, Newton iterations, sweeps, the natural-map error, and whether it is solved at
 1e-4 and at 1e-8 (the FCLIB benchmarks' levels). The methods whose work depends on the target
@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
-from ddcm_casadi.problems.fclib import frictional_methods, read_fclib, solve_fclib
+from ddcm_casadi.drivers.fclib import frictional_methods, solve_fclib
+from ddcm_casadi.problems.fclib import read_fclib
 
 #: The FCLIB benchmarks' levels of the natural-map error.
 LEVELS = (1e-8, 1e-4)

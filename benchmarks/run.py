@@ -676,11 +676,12 @@ def paper_shares(repeats: int) -> list[dict]:
 
 
 def fclib_hyperstatic(contacts: int, freedoms: int) -> dict:
-    """The default FCLIB method (:func:`~ddcm_casadi.problems.fclib.solve_fclib`) on a generated
+    """The default FCLIB method (:func:`~ddcm_casadi.drivers.fclib.solve_fclib`) on a generated
     problem: a body of ``freedoms`` freedoms (``M = I``, random ``H``) pressed onto ``contacts``
     sticking contacts, so ``W = H^T H`` is singular and the reactions are not unique (plain
     semismooth Newton stalls there); floor: projected Gauss-Seidel to the same 1e-8."""
-    from ddcm_casadi.problems.fclib import GlobalProblem, solve_fclib
+    from ddcm_casadi.drivers.fclib import solve_fclib
+    from ddcm_casadi.problems.fclib import GlobalProblem
 
     rng = np.random.default_rng(0)
     H = rng.normal(size=(freedoms, 3 * contacts))

@@ -78,7 +78,6 @@ import numpy as np
 
 from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, identify, imposes_gap, imposes_pressure, signs_hold
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.models.coulomb import blocks, flat
 from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.homotopy import scholtes_homotopy
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
@@ -432,7 +431,8 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         """``(u, r, mu)``: the scaled gaps and tractions ``(nc, b)`` at ``(x, p)`` and the friction."""
         z = np.concatenate([x, p])
         gap = self.problem.gap_map.value(z, params)
-        return blocks(gap, self._b), blocks(p, self._b), self.problem.parameters.get(params, "friction")
+        problem = self.problem
+        return problem.contact_blocks(gap), problem.contact_blocks(p), problem.parameters.get(params, "friction")
 
     def _to_nlp(self, x, p, params) -> np.ndarray:
         """``w = [x; p_N; rho]`` of ``(x, p)``: ``rho = r_T / (mu p_N)`` (0 where ``mu p_N = 0``),
@@ -442,7 +442,7 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         bound = mu * pn
         rho = r[:, 1:] / np.where(bound > 0, bound, 1.0)[:, None] * (bound > 0)[:, None]
         rho /= np.maximum(1.0, np.linalg.norm(rho, axis=1))[:, None]
-        return np.concatenate([x, pn, flat(rho)])
+        return np.concatenate([x, pn, self.problem.component_major(rho)])
 
     def _from_nlp(self, w, params) -> tuple[np.ndarray, np.ndarray]:
         """``(x, p)`` of ``w`` (the traction of :func:`~.friction.cone_traction`)."""

@@ -8,7 +8,8 @@ import pytest
 import scipy.sparse as sp
 
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.problems.fclib import (GlobalProblem, LocalProblem, natural_map_error, project_cone, read_fclib,
+from ddcm_casadi.models.coulomb import project_cone
+from ddcm_casadi.problems.fclib import (GlobalProblem, LocalProblem, natural_map_error, read_fclib,
                                         solve_projected_gauss_seidel, write_fclib)
 
 pytest.importorskip("h5py")
@@ -105,7 +106,8 @@ def test_malformed_problem_is_refused():
 
 # ------------------------------------------------------------------ solve_fclib on generated problems
 from ddcm_casadi import formulations  # noqa: E402
-from ddcm_casadi.problems.fclib import (FORMULATION_METHODS, as_complementarity_problem, solve_fclib)  # noqa: E402
+from ddcm_casadi.drivers.fclib import FORMULATION_METHODS, solve_fclib  # noqa: E402
+from ddcm_casadi.problems.fclib import as_complementarity_problem  # noqa: E402
 
 #: The natural-map error every exact method must reach (the FCLIB benchmarks' strict level).
 TOL = 1e-8

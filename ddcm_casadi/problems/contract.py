@@ -44,7 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.evaluate import NumericFunction
-from ddcm_casadi.models.coulomb import blocks, natural_map
+from ddcm_casadi.models.coulomb import blocks, flat, natural_map
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
 
@@ -169,11 +169,20 @@ class ComplementarityProblem:
         """The normal components of a vector over the pairs (the first :attr:`n_contacts`)."""
         return np.asarray(v, float).reshape(-1)[:self.n_contacts]
 
+    def contact_blocks(self, v: np.ndarray) -> np.ndarray:
+        """``(nc, block)``: a vector over the pairs (component-major), one row per contact."""
+        return blocks(v, self.block)
+
+    @staticmethod
+    def component_major(blocked: np.ndarray) -> np.ndarray:
+        """The vector over the pairs of ``(nc, block)`` rows (inverse of :meth:`contact_blocks`)."""
+        return flat(blocked)
+
     def coulomb_residual(self, gap: np.ndarray, p: np.ndarray, params: np.ndarray) -> np.ndarray:
         """``(nc, block)``: the natural-map residual of Coulomb's law per contact
         (:func:`~ddcm_casadi.models.coulomb.natural_map`), in scaled units."""
         mu = self.parameters.get(np.asarray(params, float).reshape(-1), "friction")
-        return natural_map(blocks(gap, self.block), blocks(p, self.block), mu)
+        return natural_map(self.contact_blocks(gap), self.contact_blocks(p), mu)
 
     @property
     def n_residual(self) -> int:
