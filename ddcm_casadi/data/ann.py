@@ -389,3 +389,112 @@ class StripSearch(CertifiedSearch):
 
 
 register_search(StripSearch)
+
+
+def _faiss():
+    """The faiss module, or a one-line InputError naming the extra that installs it."""
+    try:
+        import faiss
+    except ImportError:
+        raise InputError("data search 'ann' needs faiss: pip install 'ddcm-casadi[ann]' (faiss-cpu)") from None
+    return faiss
+
+
+class IVFSearch(CertifiedSearch):
+    r"""Certified inverted-file search (faiss ``IndexIVFFlat``, the optional extra ``ann``) for
+    any number of coordinates.
+
+    The data, stored in float32, are split into the Voronoi cells of ``n_c`` k-means centroids
+    ``c_i`` (faiss's exact float32 assignment); a query ``q`` scans the ``p`` cells of its
+    nearest centroids for its ``k`` nearest stored points, which are re-ranked with exact
+    distances. Lower bounds (``D_i = |q - c_i|``, ``c_a`` the nearest centroid scanned,
+    ``D_u`` the nearest not scanned):
+
+    - a datum ``y`` of a cell ``i`` not scanned is nearer ``c_i`` than ``c_a`` (up to the
+      assignment's roundoff ``E``: ``|y - c_i|^2 <= |y - c_a|^2 + 2E``), so it lies in a half-space
+      whose distance from ``q`` is ``(D_i^2 - D_a^2 - 2E) / (2 |c_i - c_a|)``; with
+      ``|c_i - c_a| <= D_i + D_a`` and that increasing in ``D_i``,
+      ``|q - y| >= (D_u - D_a) / 2 - E / (D_u + D_a)``;
+    - a datum of a scanned cell not among the ``k`` returned is at least as far (in float32) as
+      the ``k``-th: ``|q - y| >= sqrt(d_k^2 - E)``.
+
+    ``E = 2 (d + 3) u (|q| + R)^2`` bounds the float32 roundoff of a squared distance
+    (``u = 2^-24``, ``R`` the largest norm of the data and centroids; faiss may expand
+    ``|x|^2 + |y|^2 - 2 x.y``), and the float32 rounding of ``q`` and ``y``
+    (``u |q|``, ``u R``) is taken off every bound. A widening multiplies ``p`` by 4 and doubles
+    ``k``; once every cell is scanned only the second bound is left.
+    """
+
+    name = "ann"
+    #: Cells scanned and candidates returned by the first search.
+    PROBES, CANDIDATES = 8, 8
+
+    def __init__(self, points, index, centroids, radius, base=None) -> None:
+        self._points, self.index, self.centroids, self.radius, self.base = points, index, centroids, radius, base
+
+    @classmethod
+    def available(cls) -> bool:
+        try:
+            import faiss  # noqa: F401
+        except ImportError:
+            return False
+        return True
+
+    @classmethod
+    def build(cls, points: np.ndarray, *, base: NeighbourSearch | None = None) -> "IVFSearch":
+        faiss = _faiss()
+        X = points
+        if X.ndim != 2 or X.shape[0] < 1:
+            raise InputError(f"the ann search needs (N, d) coordinates, got shape {X.shape}")
+        n, d = X.shape
+        cells = int(max(1, min(math.sqrt(n), n // 40, 16384)))
+        rng = np.random.default_rng(0)
+        sample = np.ascontiguousarray(X[np.sort(rng.choice(n, min(n, 40 * cells), replace=False))], dtype=np.float32)
+        index = faiss.IndexIVFFlat(faiss.IndexFlatL2(d), d, cells)
+        index.cp.niter = 10
+        index.cp.min_points_per_centroid = 1
+        index.train(sample)
+        radius = 0.0
+        for c in range(0, n, 1 << 20):
+            block = np.ascontiguousarray(X[c:c + (1 << 20)], dtype=np.float32)
+            index.add(block)
+            radius = max(radius, float(np.sqrt(np.max(np.einsum("ij,ij->i", block, block, dtype=np.float64)))))
+        centroids = index.quantizer.reconstruct_n(0, cells).astype(np.float64)
+        radius = max(radius, float(np.sqrt(np.max(np.einsum("ij,ij->i", centroids, centroids)))))
+        return cls(X, index, centroids, radius, base if base is not None and base.points is points else None)
+
+    @property
+    def points(self) -> np.ndarray:
+        return self._points
+
+    def _search(self, q, level, reach):
+        d = q.shape[1]
+        cells = self.centroids.shape[0]
+        probes = min(cells, self.PROBES * 4 ** level)
+        k = int(min(self.points.shape[0], self.CANDIDATES * 2 ** level, 2048))
+        q32 = q.astype(np.float32)
+        qn = np.sqrt(np.einsum("ij,ij->i", q, q))
+        shift = U32 * qn + U32 * self.radius  # |q - q32| + |y - y32|
+        E = 2.0 * (d + 3) * U32 * (qn + self.radius) ** 2
+        Dc, Ic = self.index.quantizer.search(q32, min(cells, probes + 1))
+        self.index.nprobe = probes
+        D, Idx = self.index.search_preassigned(q32, k, Ic[:, :probes], Dc[:, :probes])
+        valid = Idx >= 0
+        exact = np.where(valid, self.exact_distance(q, np.where(valid, Idx, 0)), np.inf)
+        j = np.argmin(exact, axis=1)
+        rows = np.arange(q.shape[0])
+        best, index = exact[rows, j], Idx[rows, j].astype(np.intp)
+        # data of the scanned cells beyond the k returned
+        kth = np.where(valid[:, -1], np.sqrt(np.maximum(D[:, -1].astype(np.float64) - E, 0.0)) - shift, np.inf)
+        if probes >= cells:
+            return index, best, kth
+        # data of the cells not scanned (Voronoi half-spaces)
+        diff = self.centroids[Ic[:, :probes]] - q32.astype(np.float64)[:, None, :]
+        Da = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff)).min(axis=1)
+        Du = np.sqrt(np.maximum(Dc[:, probes].astype(np.float64) - E, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vor = np.where(Du > Da, 0.5 * (Du - Da) - E / (Du + Da), 0.0) - shift
+        return index, best, np.minimum(kth, np.maximum(vor, 0.0))
+
+
+register_search(IVFSearch)
