@@ -160,21 +160,23 @@ class StripSearch(CertifiedSearch):
 
     The data are cut into strips of width ``w`` along their longest axis ``a`` (strip
     ``t = floor((y_a - min y_a) / w)``) and sorted within a strip along the other axis ``b``; the
-    strips' ``a``-extents ``[lo_t, hi_t]`` are kept. A query ``q`` in strip ``s`` examines, at
-    widening level ``l``, the ``2 m`` data around ``q_b`` in each strip ``|t - s| <= r``
-    (``r = 2^l``, ``m = 4^(l + 1)``). Lower bounds on the distance of the data not examined:
+    strips' ``a``-extents ``[lo_t, hi_t]`` are kept. The first search of a query ``q`` in strip
+    ``s`` takes the ``2 m`` data around ``q_b`` in strips ``s - 1, s, s + 1``. Lower bounds on the
+    distance of the data not examined:
 
     - in an examined strip ``t``, below (above) the window, every datum has
       ``|q_a - y_a| >= g_t = dist(q_a, [lo_t, hi_t])`` and ``|q_b - y_b| >= q_b - y_b^-`` (``y_b^+ - q_b``),
       ``y_b^-`` (``y_b^+``) the datum next to the window: ``B_t = sqrt(g_t^2 + (q_b - y_b^-)^2)``;
-    - in the strips beyond ``s + r`` (before ``s - r``), ``|q_a - y_a| >= lo_{s+r+1} - q_a``
-      (``q_a - hi_{s-r-1}``: strip indices are monotone in ``y_a``) and ``|q_b - y_b|`` is at
+    - in the strips beyond ``s + 1`` (before ``s - 1``), ``|q_a - y_a| >= lo_{s+2} - q_a``
+      (``q_a - hi_{s-2}``: strip indices are monotone in ``y_a``) and ``|q_b - y_b|`` is at
       least the distance from ``q_b`` to the data's ``b``-range.
 
     ``B`` is the least of them. Keys are stored in float32 (``y`` rounded by at most
     ``delta = 2^-24 max|y|``), so every key difference is reduced by ``delta`` of its axis before
-    it bounds anything; exact distances come from the float64 coordinates. A level with ``r``
-    and ``m`` past the number of strips and the largest strip examines everything (``B = inf``).
+    it bounds anything. The window is ranked by key distances (within ``|delta|`` of the exact
+    ones), the two nearest re-ranked with exact distances and the third bounds the rest. The
+    widening (:meth:`_rings`) examines every datum nearer than the best found, strip by strip
+    outwards, and certifies every answer.
     The strip width ``w = max(sqrt(A M / N), L M / N)`` (``L``, ``A``: the data's ``a``-extent and
     bounding area, ``M = 8``) puts about ``M`` data in a ``w x w`` cell of a band of data and
     ``M`` in a strip of data along a line.
@@ -206,6 +208,8 @@ class StripSearch(CertifiedSearch):
             raise InputError(f"the strip search needs (N, 2) coordinates (one-component data), got shape {X.shape}")
         n = X.shape[0]
         lo, hi = X.min(axis=0).astype(np.float64), X.max(axis=0).astype(np.float64)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):  # NaN propagates to the extremes
+            raise InputError("the strip search's coordinates must be finite")
         extent = hi - lo
         a, b = (int(i) for i in np.argsort(extent)[::-1][:2])
         L, H = float(extent[a]), float(extent[b])
@@ -220,10 +224,10 @@ class StripSearch(CertifiedSearch):
             bits = np.where(bits >> np.uint64(31), ~bits & np.uint64(0xFFFFFFFF), bits | np.uint64(1 << 31))
             code[c:c + CHUNK] = (t << np.uint64(32)) | bits
         order = np.argsort(code, kind="stable")
-        t = (code >> np.uint64(32)).astype(np.int64)
+        counts = np.zeros(strips, dtype=np.int64)
+        for c in range(0, n, CHUNK):  # by blocks: no strip index of every datum at once
+            counts += np.bincount((code[c:c + CHUNK] >> np.uint64(32)).astype(np.intp), minlength=strips)
         del code
-        counts = np.bincount(t, minlength=strips)
-        del t
         keys = np.empty((n, 2), dtype=np.float32)
         for c in range(0, n, CHUNK):
             rows = order[c:c + CHUNK]
