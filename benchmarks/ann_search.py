@@ -7,7 +7,8 @@
 Each backend runs in a fresh process (its peak memory is its own): ``N`` points of a noisy linear
 law in the search's coordinates (:func:`law_data`; float32 for ``strips`` and ``ann``, float64
 for the KD-tree, which is float64 only), then ``--queries`` states near the data
-(:func:`states`). Measured: build seconds; seconds to answer every state exactly (the certified
+(:func:`states`). Measured (wall and CPU seconds: on a shared machine the process may get a fraction of a core,
+and CPU seconds are what it needed): build seconds; seconds to answer every state exactly (the certified
 search widened until every answer is certified); the share certified by the first search and
 its seconds; the memory of the structure (bytes a point beside the data) and the process's peak
 resident memory above the imports (Linux ``VmHWM``), data included. Prints a table and writes
@@ -93,23 +94,24 @@ def measure(backend: str, n: int, components: int, queries: int) -> dict:
     _reset_peak()
     X = law_data(n, components, dtype=np.float64 if backend == "kdtree" else np.float32)
     Q = states(X, queries)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     search = BACKENDS[backend].build(X)
-    build = time.perf_counter() - t0
+    build, build_cpu = time.perf_counter() - t0, time.process_time() - c0
     row = dict(backend=backend, points=n, components=components, coordinates=X.shape[1], queries=queries,
-               build_seconds=build, data_bytes=int(X.nbytes), structure_bytes=_structure_bytes(search))
+               build_seconds=build, build_cpu_seconds=build_cpu, data_bytes=int(X.nbytes), structure_bytes=_structure_bytes(search))
     if backend == "kdtree":
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         search.nearest(Q)
-        row.update(query_seconds=time.perf_counter() - t0, first_certified=1.0)
+        row.update(query_seconds=time.perf_counter() - t0, query_cpu_seconds=time.process_time() - c0,
+                   first_certified=1.0)
     else:
         search.certified(Q[:1000])  # first touches of the structure out of the timings
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         cert = search.certified(Q)
-        row["query_seconds"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
+        row["query_seconds"], row["query_cpu_seconds"] = time.perf_counter() - t0, time.process_time() - c0
+        t0, c0 = time.perf_counter(), time.process_time()
         first = search.certified(Q, rounds=0)
-        row["first_seconds"] = time.perf_counter() - t0
+        row["first_seconds"], row["first_cpu_seconds"] = time.perf_counter() - t0, time.process_time() - c0
         row.update(first_certified=float(first.certified.mean()),
                    certified=float(cert.certified.mean()), first_max_gap=float(first.gap.max()),
                    median_distance=float(np.median(cert.distance)))
@@ -118,7 +120,8 @@ def measure(backend: str, n: int, components: int, queries: int) -> dict:
     return row
 
 
-COLUMNS = ("backend", "points", "coordinates", "build_seconds", "query_seconds", "first_seconds",
+COLUMNS = ("backend", "points", "coordinates", "build_seconds", "build_cpu_seconds", "query_seconds",
+           "query_cpu_seconds", "first_seconds", "first_cpu_seconds",
            "first_certified", "certified", "structure_bytes_per_point", "peak_bytes")
 
 
