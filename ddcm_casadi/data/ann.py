@@ -433,9 +433,10 @@ class IVFSearch(CertifiedSearch):
     - a datum of a scanned cell not among the ``k`` returned is at least as far (in float32) as
       the ``k``-th: ``|q - y| >= sqrt(d_k^2 - E)``.
 
-    ``E = 2 (d + 3) u (|q| + R)^2`` bounds the float32 roundoff of a squared distance
-    (``u = 2^-24``, ``R`` the largest norm of the data and centroids; faiss may expand
-    ``|x|^2 + |y|^2 - 2 x.y``), and the float32 rounding of ``q`` and ``y``
+    ``E = 2 (d + 3) u (|x| + |y|)^2`` bounds the float32 roundoff of a squared distance between
+    ``x`` and ``y`` (``u = 2^-24``; faiss may expand ``|x|^2 + |y|^2 - 2 x.y``), taken with the
+    largest norm ``R`` of the data and centroids (``|q| + R`` from a query, ``2R`` for the
+    assignment), and the float32 rounding of ``q`` and ``y``
     (``u |q|``, ``u R``) is taken off every bound. A widening multiplies ``p`` by 4 and doubles
     ``k``; once every cell is scanned only the second bound is left.
     """
@@ -490,7 +491,8 @@ class IVFSearch(CertifiedSearch):
         q32 = q.astype(np.float32)
         qn = np.sqrt(np.einsum("ij,ij->i", q, q))
         shift = U32 * qn + U32 * self.radius  # |q - q32| + |y - y32|
-        E = 2.0 * (d + 3) * U32 * (qn + self.radius) ** 2
+        E = 2.0 * (d + 3) * U32 * (qn + self.radius) ** 2  # a squared distance from q
+        E_assign = 2.0 * (d + 3) * U32 * (2.0 * self.radius) ** 2  # one between a datum and a centroid
         Dc, Ic = self.index.quantizer.search(q32, min(cells, probes + 1))
         self.index.nprobe = probes
         D, Idx = self.index.search_preassigned(q32, k, Ic[:, :probes], Dc[:, :probes])
@@ -508,7 +510,7 @@ class IVFSearch(CertifiedSearch):
         Da = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff)).min(axis=1)
         Du = np.sqrt(np.maximum(Dc[:, probes].astype(np.float64) - E, 0.0))
         with np.errstate(divide="ignore", invalid="ignore"):
-            vor = np.where(Du > Da, 0.5 * (Du - Da) - E / (Du + Da), 0.0) - shift
+            vor = np.where(Du > Da, 0.5 * (Du - Da) - E_assign / (Du + Da), 0.0) - shift
         return index, best, np.minimum(kth, np.maximum(vor, 0.0))
 
 
