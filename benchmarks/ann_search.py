@@ -83,7 +83,7 @@ def _structure_bytes(search) -> int:
     if isinstance(search, IVFSearch):
         return int(search.index.ntotal * (4 * search.index.d + 8) + search.centroids.nbytes)
     if isinstance(search, KDTreeSearch):
-        return int(search.tree.size * 0 + 16 * search.tree.n)  # about 16 bytes a point (search.kd_tree)
+        return 16 * search.tree.n  # about 16 bytes a point beside the coordinates (search.kd_tree)
     return int(sum(getattr(search, a).nbytes for a in ("keys", "perm", "offsets", "lo_t", "hi_t", "right_lo",
                                                        "left_hi")))
 
