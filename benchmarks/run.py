@@ -599,6 +599,23 @@ def data_size(n_data: int, components: int, *, states: int, warm: bool) -> dict:
     return rec
 
 
+def certified_search(n_data: int, components: int) -> list[dict]:
+    """The certified searches (``benchmarks/ann_search.py``: the strip search for one component,
+    faiss's IVF for six, where installed) against the exact KD-tree, each backend in a fresh
+    process: build seconds, seconds for 1e5 states near the data answered exactly, the share
+    certified by the first search, memory. The floor is the KD-tree's search of the same states."""
+    script = Path(__file__).resolve().parent / "ann_search.py"
+    with tempfile.TemporaryDirectory() as tmp:
+        subprocess.run([sys.executable, str(script), str(n_data), "--components", str(components), "--out", tmp],
+                       capture_output=True, text=True, check=True)
+        rows = json.loads(next(Path(tmp).glob("ann_search_*.json")).read_text())
+    floor = next((r["query_seconds"] for r in rows if r["backend"] == "kdtree" and "error" not in r), float("nan"))
+    return [dict(name=f"certified search {r['backend']}, {n_data:.0e} points x {components} components, 1e5 states",
+                 unknowns=r.get("queries", 100_000), data_points=n_data, seconds=r.get("query_seconds", float("nan")),
+                 floor_seconds=floor, ratio=r.get("query_seconds", float("nan")) / floor, **r)
+            for r in rows]
+
+
 def fb_vs_qp(model, repeats: int, *, max_dofs: dict) -> list[dict]:
     """Classical path: FB Newton against the QP solvers of CasADi on the same model. Solve times
     only (each is built once beforehand); ``max_rel_difference_u`` is the distance to the FB
@@ -874,6 +891,9 @@ def main(argv=None) -> int:
     for n_data, k in (((10**6, 1), (10**6, 6)) if quick else
                       ((10**6, 1), (10**7, 1), (10**8, 1), (10**6, 6), (10**7, 6))):
         log(data_size(n_data, k, states=10**5 if k == 1 else 2 * 10**4, warm=k == 1))
+    for n_data, k in (((10**6, 1), (10**5, 6)) if quick else ((10**6, 1), (10**7, 1), (10**6, 6), (10**7, 6))):
+        for rec in certified_search(n_data, k):
+            log(rec)
     for n in ((1000, 10_000) if quick else (1000, 10_000, 100_000)):
         # qpOASES (dense internals) and OSQP take minutes per path above these sizes.
         limits = dict(qpoases=3000, osqp=3000 if quick else 20_000)

@@ -19,6 +19,7 @@ from ddcm_casadi.data import limits
 from ddcm_casadi.data.limits import searchable_coordinates
 from ddcm_casadi.data.metric import Metric
 from ddcm_casadi.data.search import CHUNK, KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
+from ddcm_casadi.data import ann  # noqa: F401  (registers the certified searches)
 
 
 #: The metric ``c`` that is fitted to the data (:meth:`Metric.estimated`) rather than given.

@@ -48,6 +48,11 @@ class NeighbourSearch(ABC):
     #: ``eps >= 0``: a returned datum is at most ``1 + eps`` times as far as the nearest (0: exact).
     approximation: ClassVar[float] = 0.0
 
+    @classmethod
+    def available(cls) -> bool:
+        """Whether the libraries the backend needs are installed (an optional extra may be missing)."""
+        return True
+
     @property
     def exact(self) -> bool:
         """Whether :meth:`nearest` returns a nearest datum (ties may go either way)."""

@@ -22,6 +22,7 @@ from typing import Any, Literal, Mapping, get_args
 from ddcm_casadi import inputs as check
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.search import search_name
+from ddcm_casadi.data import ann  # noqa: F401  (registers the certified searches)
 
 #: The initial data assignment of a load step (see :class:`DDCMOptions`).
 Start = Literal["origin", "elastic", "random"]
@@ -61,8 +62,10 @@ class DDCMOptions:
         fixed point).
     search : str
         The data search backend (:data:`ddcm_casadi.data.search.SEARCHES`): ``"kdtree"``, a cold
-        KD-tree query, or ``"graph"`` (alias ``"warm"``), the exact walk on the data's
-        neighbour graph from the previous assignment. Both are exact: the path is the same.
+        KD-tree query, ``"graph"`` (alias ``"warm"``), the exact walk on the data's
+        neighbour graph from the previous assignment, ``"strips"`` (one-component data at
+        scale) or ``"ann"`` (faiss, the extra ``ann``), certified partition searches
+        (:mod:`ddcm_casadi.data.ann`). All are exact: the path is the same.
     start : {"origin", "elastic", "random"}
         The data assignment the first load step starts from (and every step when ``warm`` is
         False). ``origin``: every point at the datum nearest the zero state (the historical

@@ -1,0 +1,519 @@
+r"""Certified partition searches for large data sets: every answer carries a lower bound.
+
+Both backends here split the data into cells, search the cells nearest a query, re-rank the
+candidates with exact distances and prove (or fail to prove) that nothing outside is nearer
+(the maths: ``docs/maths.md``, "Certified approximate search"). For a query ``q`` with best
+candidate ``j`` at the exact distance ``d_j = |q - y_j|`` and a lower bound ``B(q)`` on the
+distance of every datum *not examined*,
+
+.. math::  d_j \le B(q) \;\Rightarrow\; d_j = \min_l |q - y_l| ,
+
+and otherwise ``min_l |q - y_l| >= min(d_j, B)``: the returned datum is at most ``d_j - B``
+farther than the nearest (:class:`Certificate`). :meth:`CertifiedSearch.nearest` widens the
+search of uncertified queries until every one is certified, so it is exact; ``certified(q,
+rounds=...)`` stops early and reports the bound.
+
+- ``strips`` (:class:`StripSearch`, numpy only): for one-component data (2 coordinates). The data
+  are cut into strips along their longest axis and sorted within a strip along the other; a query
+  scans a window of each nearby strip. Stored in float32 (12 bytes a point with the permutation)
+  beside the exact coordinates, float32 rounding counted in the bound.
+- ``ann`` (:class:`IVFSearch`, the optional ``faiss-cpu``, ``pip install ddcm-casadi[ann]``): an
+  inverted file (k-means cells) for any dimension, the bound from the Voronoi cells (faiss's float32
+  arithmetic counted).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from ddcm_casadi.data.search import CHUNK, NeighbourSearch, _count, register_search
+from ddcm_casadi.errors import InputError
+
+#: Unit roundoff of float32 and float64 (round to nearest).
+U32 = 2.0 ** -24
+U64 = 2.0 ** -53
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """The answer of a certified search, per query.
+
+    Attributes
+    ----------
+    index : (n,) intp
+        The returned datum: the nearest among those examined (exact distances).
+    distance : (n,) float64
+        Its exact distance ``d_j`` (the metric's, in the search's coordinates).
+    bound : (n,) float64
+        ``B``: every datum not examined is at least this far (``inf`` when all were examined).
+    certified : (n,) bool
+        ``d_j <= B`` (with a margin for float64 roundoff): ``index`` is a nearest datum. Where it
+        is False, the nearest datum is at least ``min(d_j, B)`` away, so ``index`` is at most
+        ``d_j - B`` (:attr:`gap`) farther than the nearest.
+    """
+
+    index: np.ndarray
+    distance: np.ndarray
+    bound: np.ndarray
+    certified: np.ndarray
+
+    @property
+    def gap(self) -> np.ndarray:
+        """``max(d_j - B, 0)``: how much farther than the nearest the returned datum may be."""
+        return np.maximum(self.distance - self.bound, 0.0)
+
+
+def _is_certified(distance: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    # exact distances are float64 sums: a relative 8 eps covers their roundoff
+    return distance * (1.0 + 8.0 * U64) <= bound
+
+
+class CertifiedSearch(NeighbourSearch):
+    """A search whose answers carry a :class:`Certificate`; :meth:`nearest` is exact (it widens
+    the search of uncertified queries until all are certified)."""
+
+    #: Rounds of widening before :meth:`certified` reports the remaining queries uncertified.
+    MAX_ROUNDS: ClassVar[int] = 64
+
+    def certified(self, queries: np.ndarray, *, rounds: int | None = None) -> Certificate:
+        """The nearest examined datum of each query with its certificate, after at most
+        ``rounds`` widenings of the first search (default: until every query is certified)."""
+        q = np.ascontiguousarray(queries, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != self.points.shape[1]:
+            raise InputError(f"queries must be (n, {self.points.shape[1]}) coordinates, got shape {q.shape}")
+        n = q.shape[0]
+        index = np.zeros(n, dtype=np.intp)
+        dist = np.full(n, np.inf)
+        bound = np.zeros(n)
+        todo = np.arange(n)
+        last = self.MAX_ROUNDS if rounds is None else int(rounds)
+        for level in range(last + 1):
+            if todo.size == 0:
+                break
+            for a in range(0, todo.size, CHUNK):
+                rows = todo[a:a + CHUNK]
+                found = self._search(q[rows], level, dist[rows])
+                better = found[1] <= dist[rows]  # a widened search keeps the best seen
+                index[rows[better]], dist[rows[better]] = found[0][better], found[1][better]
+                bound[rows] = found[2]
+            todo = todo[~_is_certified(dist[todo], bound[todo])]
+        return Certificate(index, dist, bound, _is_certified(dist, bound))
+
+    def _search(self, q: np.ndarray, level: int, reach: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Best examined index, its exact distance and the bound on the rest, at widening
+        ``level`` (0: the first search; each level examines more), ``reach`` the best distance
+        found so far (``inf`` at level 0)."""
+        raise NotImplementedError
+
+    def nearest(self, queries, *, previous=None, stats=None) -> np.ndarray:
+        """Exact: the certified search, then a pass over all data for any query still uncertified
+        (``stats``: ``fallbacks`` counts them)."""
+        cert = self.certified(queries)
+        left = np.flatnonzero(~cert.certified)
+        index = cert.index
+        if left.size:
+            index = index.copy()
+            index[left] = self.brute_force(np.asarray(queries, dtype=np.float64)[left]).index
+        _count(stats, index.size, left.size)
+        return index
+
+    def exact_distance(self, q: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """``|q - y_idx|`` in float64 from the exact coordinates (``idx`` any shape ``(n, ...)``)."""
+        y = self.points[idx]
+        diff = y - q.reshape((q.shape[0],) + (1,) * (idx.ndim - 1) + (q.shape[1],))
+        return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+
+    def brute_force(self, q: np.ndarray) -> Certificate:
+        """The exact nearest of each query by a pass over all data in float64 (for the rare
+        queries the widest search leaves uncertified: ties within float32 roundoff)."""
+        n, d = q.shape
+        index = np.zeros(n, dtype=np.intp)
+        best = np.full(n, np.inf)
+        rows = max(1, (1 << 22) // max(1, n * d))
+        for a in range(0, self.points.shape[0], rows):
+            y = np.asarray(self.points[a:a + rows], dtype=np.float64)
+            diff = y[None, :, :] - q[:, None, :]
+            d2 = np.einsum("qjd,qjd->qj", diff, diff)
+            j = np.argmin(d2, axis=1)
+            dist = np.sqrt(d2[np.arange(n), j])
+            better = dist < best
+            index[better], best[better] = j[better] + a, dist[better]
+        return Certificate(index, best, np.full(n, np.inf), np.ones(n, dtype=bool))
+
+    def k_nearest(self, queries, k: int) -> np.ndarray:
+        if self.base is None:
+            raise InputError(f"the {self.name} search answers k_nearest through an exact search given at build")
+        return self.base.k_nearest(queries, k)
+
+
+def _rounding(values_max: float, dtype) -> float:
+    """The largest ``|x - fl32(x)|`` of values up to ``values_max`` in magnitude (0 if already float32)."""
+    return 0.0 if np.dtype(dtype) == np.float32 else U32 * values_max + 2.0 ** -149  # (+ the subnormal step)
+
+
+class StripSearch(CertifiedSearch):
+    r"""Exact certified search for one-component data (2 coordinates), numpy only.
+
+    The data are cut into strips of width ``w`` along their longest axis ``a`` (strip
+    ``t = floor((y_a - min y_a) / w)``) and sorted within a strip along the other axis ``b``; the
+    strips' ``a``-extents ``[lo_t, hi_t]`` are kept. The first search of a query ``q`` in strip
+    ``s`` takes the ``2 m`` data around ``q_b`` in strips ``s - 1, s, s + 1``. Lower bounds on the
+    distance of the data not examined:
+
+    - in an examined strip ``t``, below (above) the window, every datum has
+      ``|q_a - y_a| >= g_t = dist(q_a, [lo_t, hi_t])`` and ``|q_b - y_b| >= q_b - y_b^-`` (``y_b^+ - q_b``),
+      ``y_b^-`` (``y_b^+``) the datum next to the window: ``B_t = sqrt(g_t^2 + (q_b - y_b^-)^2)``;
+    - in the strips beyond ``s + 1`` (before ``s - 1``), ``|q_a - y_a| >= lo_{s+2} - q_a``
+      (``q_a - hi_{s-2}``: strip indices are monotone in ``y_a``) and ``|q_b - y_b|`` is at
+      least the distance from ``q_b`` to the data's ``b``-range.
+
+    ``B`` is the least of them. Keys are stored in float32 (``y`` rounded by at most
+    ``delta = 2^-24 max|y|``), so every key difference is reduced by ``delta`` of its axis before
+    it bounds anything. The window is ranked by key distances (within ``|delta|`` of the exact
+    ones), the two nearest re-ranked with exact distances and the third bounds the rest. The
+    widening (:meth:`_rings`) examines every datum nearer than the best found, strip by strip
+    outwards, and certifies every answer.
+    The strip width ``w = max(sqrt(A M / N), L M / N)`` (``L``, ``A``: the data's ``a``-extent and
+    bounding area, ``M = 8``) puts about ``M`` data in a ``w x w`` cell of a band of data and
+    ``M`` in a strip of data along a line.
+
+    Memory: 12 bytes a datum (two float32 keys and an int32 permutation up to ``2^31`` data)
+    beside the coordinates it is given (kept, not copied).
+    """
+
+    name = "strips"
+    #: Data per ``w x w`` cell the strip width aims at.
+    PER_CELL = 8
+    #: Half-width ``m`` of the first search's window in each strip.
+    WINDOW = 8
+
+    def __init__(self, points, keys, perm, offsets, axes, width, low, lo_t, hi_t, right_lo, left_hi,
+                 b_range, delta, base=None) -> None:
+        self._points, self.keys, self.perm, self.offsets = points, keys, perm, offsets
+        self.axes, self.width, self.low = axes, width, low
+        self.lo_t, self.hi_t, self.right_lo, self.left_hi = lo_t, hi_t, right_lo, left_hi
+        self.b_range, self.delta, self.base = b_range, delta, base
+        self.largest = int(np.max(np.diff(offsets)))
+        #: The keys are the coordinates themselves (two float32 columns): key distances are exact.
+        self.exact_keys = points.shape[1] == 2 and delta == (0.0, 0.0)
+
+    @classmethod
+    def build(cls, points: np.ndarray, *, base: NeighbourSearch | None = None) -> "StripSearch":
+        X = points
+        if X.ndim != 2 or X.shape[1] < 2 or X.shape[0] < 1:
+            raise InputError(f"the strip search needs (N, 2) coordinates (one-component data), got shape {X.shape}")
+        n = X.shape[0]
+        lo, hi = X.min(axis=0).astype(np.float64), X.max(axis=0).astype(np.float64)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):  # NaN propagates to the extremes
+            raise InputError("the strip search's coordinates must be finite")
+        extent = hi - lo
+        a, b = (int(i) for i in np.argsort(extent)[::-1][:2])
+        L, H = float(extent[a]), float(extent[b])
+        width = max(math.sqrt(L * H * cls.PER_CELL / n), L * cls.PER_CELL / n) if L > 0 else 1.0
+        strips = min(int(L / width) + 1, n)
+        # one sort of a composite key (strip, then key b as float32 bits in a monotone code): 3x
+        # faster than numpy's lexsort of the two (measured at 1e7)
+        code = np.empty(n, dtype=np.uint64)
+        for c in range(0, n, CHUNK):
+            t = np.clip(np.floor((X[c:c + CHUNK, a] - lo[a]) / width), 0, strips - 1).astype(np.uint64)
+            bits = X[c:c + CHUNK, b].astype(np.float32).view(np.uint32).astype(np.uint64)
+            bits = np.where(bits >> np.uint64(31), ~bits & np.uint64(0xFFFFFFFF), bits | np.uint64(1 << 31))
+            code[c:c + CHUNK] = (t << np.uint64(32)) | bits
+        order = np.argsort(code, kind="stable")
+        counts = np.zeros(strips, dtype=np.int64)
+        for c in range(0, n, CHUNK):  # by blocks: no strip index of every datum at once
+            counts += np.bincount((code[c:c + CHUNK] >> np.uint64(32)).astype(np.intp), minlength=strips)
+        del code
+        keys = np.empty((2, n), dtype=np.float32)  # rows a and b, each contiguous (fast gathers)
+        for c in range(0, n, CHUNK):
+            rows = order[c:c + CHUNK]
+            keys[0, c:c + CHUNK] = X[rows, a]
+            keys[1, c:c + CHUNK] = X[rows, b]
+        perm = order.astype(np.int32) if n < 2**31 else order
+        del order
+        offsets = np.zeros(strips + 1, dtype=np.int64)
+        np.cumsum(counts, out=offsets[1:])
+        full = counts > 0
+        lo_t, hi_t = np.full(strips, np.inf), np.full(strips, -np.inf)
+        lo_t[full] = np.minimum.reduceat(keys[0], offsets[:-1][full])
+        hi_t[full] = np.maximum.reduceat(keys[0], offsets[:-1][full])
+        right_lo = np.minimum.accumulate(lo_t[::-1])[::-1]  # least key a of strips >= t
+        left_hi = np.maximum.accumulate(hi_t)  # largest key a of strips <= t
+        reach = np.maximum(np.abs(lo), np.abs(hi))
+        delta = (_rounding(reach[a], X.dtype), _rounding(reach[b], X.dtype))
+        return cls(X, keys, perm, offsets, (a, b), width, lo[a], lo_t, hi_t, right_lo, left_hi,
+                   (lo[b], hi[b]), delta, base if base is not None and base.points is points else None)
+
+    @property
+    def points(self) -> np.ndarray:
+        return self._points
+
+    #: Queries per block of the first search: its temporaries (48 candidates a query) stay in cache
+    #: (blocks of 65 536 queries took 2-3x longer, measured at 1e6 data on a loaded machine).
+    BLOCK = 4096
+
+    def _search(self, q, level, reach):
+        if level == 0:
+            parts = [self._window(q[c:c + self.BLOCK]) for c in range(0, q.shape[0], self.BLOCK)]
+            return tuple(np.concatenate(p) for p in zip(*parts))
+        first = self._window(q)
+        far = ~np.isfinite(first[1])
+        if far.any():  # nothing in the first window: start from a datum of the nearest filled strip
+            first[0][far], first[1][far] = self._some_datum(q[far])
+        return self._rings(q, first[0], first[1])
+
+    def _some_datum(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A datum of the filled strip nearest each query's and its distance (an upper bound on
+        the nearest distance where the first window found nothing)."""
+        filled = np.flatnonzero(np.diff(self.offsets))
+        s = np.clip(np.floor((q[:, self.axes[0]] - self.low) / self.width), 0, self.lo_t.size - 1)
+        k = np.clip(np.searchsorted(filled, s), 0, filled.size - 1)
+        j = self.perm[self.offsets[filled[k]]].astype(np.intp)
+        return j, self.exact_distance(q, j)
+
+    def _position(self, t: np.ndarray, value: np.ndarray, right: bool) -> np.ndarray:
+        """The insertion point of ``value`` among the sorted keys ``b`` of strip ``t`` (bisection,
+        vectorised; ``right``: after equal keys)."""
+        lo, hi = self.offsets[t].copy(), self.offsets[t + 1].copy()
+        keys = self.keys[1]
+        while True:
+            active = lo < hi
+            if not active.any():
+                return lo
+            mid = (lo + hi) // 2
+            k = keys[np.where(active, mid, 0)]
+            go = active & ((k <= value) if right else (k < value))
+            lo = np.where(go, mid + 1, lo)
+            hi = np.where(active & ~go, mid, hi)
+
+    def _strip_gap(self, t: np.ndarray, qa: np.ndarray) -> np.ndarray:
+        """``dist(q_a, [lo_t, hi_t])`` less the keys' rounding (``inf`` for an empty strip)."""
+        with np.errstate(invalid="ignore"):  # inf - inf of empty strips
+            g = np.maximum(self.lo_t[t] - qa, qa - self.hi_t[t]) - self.delta[0]
+        return np.where(np.isnan(g), np.inf, np.maximum(g, 0.0))
+
+    def _rings(self, q: np.ndarray, index: np.ndarray, radius: np.ndarray):
+        """Examine every datum nearer than the best so far, strip by strip outwards from the
+        query's (ring ``k``: strips ``s - k`` and ``s + k``): in strip ``t`` the keys ``b`` within
+        ``sqrt(radius^2 - g_t^2)`` of ``q_b``; the radius shrinks to the best distance found. A
+        query stops when the strips beyond its ring are farther than its radius, so what is left
+        is farther than the answer: certified, ``B = radius`` (enlarged by a relative ``1e-9``
+        so that the float64 distances of the examined data stay below it)."""
+        a, b = self.axes
+        strips = self.lo_t.size
+        grow = 1.0 + 1e-9
+        index, best = index.copy(), radius.copy()
+        radius = radius * grow
+        qa, qb = q[:, a], q[:, b]
+        s = np.clip(np.floor((qa - self.low) / self.width), 0, strips - 1).astype(np.int64)
+        todo = np.arange(q.shape[0])
+        k = 0
+        while todo.size:
+            for side in ((0,) if k == 0 else (-1, 1)):
+                t = s[todo] + side * k
+                keep = (t >= 0) & (t < strips)
+                rows, t = todo[keep], t[keep]
+                g = self._strip_gap(t, qa[rows])
+                near = g <= radius[rows]
+                rows, t, g = rows[near], t[near], g[near]
+                h = np.sqrt(radius[rows] ** 2 - g ** 2) + self.delta[1]
+                p0 = self._position(t, qb[rows] - h, right=False)
+                counts = self._position(t, qb[rows] + h, right=True) - p0
+                flat = np.repeat(p0 - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+                if not flat.size:
+                    continue
+                owner = np.repeat(rows, counts)
+                diff = np.asarray(self.points[self.perm[flat]], dtype=np.float64) - q[owner]
+                dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+                order = np.lexsort((dist, owner))
+                first = np.ones(order.size, dtype=bool)
+                first[1:] = owner[order][1:] != owner[order][:-1]
+                win = order[first]
+                better = dist[win] < best[owner[win]]
+                win = win[better]
+                index[owner[win]], best[owner[win]] = self.perm[flat[win]], dist[win]
+                radius[owner[win]] = dist[win] * grow
+            # strips beyond ring k: at least this far along a
+            right_t, left_t = s[todo] + k + 1, s[todo] - k - 1
+            ga = np.minimum(
+                np.where(right_t < strips, self.right_lo[np.minimum(right_t, strips - 1)] - qa[todo], np.inf),
+                np.where(left_t >= 0, qa[todo] - self.left_hi[np.maximum(left_t, 0)], np.inf)) - self.delta[0]
+            todo = todo[ga <= radius[todo]]
+            k += 1
+        return index, best, radius
+
+    def _window(self, q):
+        """The first search: ``2 m`` data around ``q_b`` in the query's strip and its two neighbours."""
+        r, m = 1, min(self.WINDOW, self.largest)
+        a, b = self.axes
+        da, db = self.delta
+        (ka, kb), off = self.keys, self.offsets
+        strips = self.lo_t.size
+        qa, qb = q[:, a], q[:, b]
+        s = np.clip(np.floor((qa - self.low) / self.width), 0, strips - 1).astype(np.int64)
+        T = s[:, None] + np.arange(-r, r + 1)
+        inside = (T >= 0) & (T < strips)
+        Tc = np.clip(T, 0, strips - 1)
+        seg_lo = off[Tc]
+        seg_hi = np.where(inside, off[Tc + 1], seg_lo)
+        lo = np.where(inside, self._position(Tc, np.broadcast_to(qb[:, None], Tc.shape), right=False), seg_lo)
+        w_lo, w_hi = np.maximum(seg_lo, lo - m), np.minimum(seg_hi, lo + m)
+        # an empty or short window repeats a datum (clipped into range): a datum examined twice, or
+        # one more examined, changes no minimum and no bound
+        small = ka.size < 2**31
+        pos = np.minimum(w_lo[..., None] + np.arange(2 * m), np.maximum(w_hi - 1, w_lo)[..., None])
+        pos = np.minimum(pos, ka.size - 1).astype(np.int32 if small else np.intp)
+        n = q.shape[0]
+        rows = np.arange(n)
+        # squared distances of the keys (the coordinates a, b rounded to float32): their roots are at
+        # most |delta| from the exact distances (and below them in more than 2 coordinates); the
+        # two nearest are re-ranked exactly
+        da_ = ka[pos] - qa[:, None, None]
+        kd2 = da_ * da_
+        da_ = kb[pos] - qb[:, None, None]
+        kd2 += da_ * da_
+        kd2, pos = kd2.reshape(n, -1), pos.reshape(n, -1)
+        if self.exact_keys:
+            j = np.argmin(kd2, axis=1)
+            best_pos, best, rest = pos[rows, j], np.sqrt(kd2[rows, j]), np.full(n, np.inf)
+        else:
+            two = np.argpartition(kd2, 1, axis=1)[:, :2] if kd2.shape[1] > 2 else np.argsort(kd2, axis=1)[:, :2]
+            rest = (np.sqrt(np.partition(kd2, 2, axis=1)[:, 2]) - math.hypot(da, db) if kd2.shape[1] > 2
+                    else np.full(n, np.inf))
+            cand = pos[rows[:, None], two]
+            exact = self.exact_distance(q, self.perm[cand])
+            j = np.argmin(exact, axis=1)
+            best_pos, best = cand[rows, j], exact[rows, j]
+        # bounds of the data left in the examined strips ...
+        gap = self._strip_gap(Tc, qa[:, None])
+        under = np.where(w_lo > seg_lo, np.maximum(qb[:, None] - kb[np.maximum(w_lo - 1, 0)] - db, 0.0), np.inf)
+        over = np.where(w_hi < seg_hi, np.maximum(kb[np.minimum(w_hi, kb.size - 1)] - qb[:, None] - db, 0.0), np.inf)
+        left = np.where(inside, np.hypot(gap, np.minimum(under, over)), np.inf)
+        bound = np.minimum(left.min(axis=1), rest)
+        # ... and of the strips not examined
+        right_t, left_t = s + r + 1, s - r - 1
+        ga = np.minimum(np.where(right_t < strips, self.right_lo[np.minimum(right_t, strips - 1)] - qa - da, np.inf),
+                        np.where(left_t >= 0, qa - self.left_hi[np.maximum(left_t, 0)] - da, np.inf))
+        gb = np.maximum(np.maximum(self.b_range[0] - qb, qb - self.b_range[1]), 0.0)
+        bound = np.minimum(bound, np.hypot(np.maximum(ga, 0.0), gb))
+        return self.perm[best_pos].astype(np.intp), best, bound
+
+
+register_search(StripSearch)
+
+
+def _faiss():
+    """The faiss module, or a one-line InputError naming the extra that installs it."""
+    try:
+        import faiss
+    except ImportError:
+        raise InputError("data search 'ann' needs faiss: pip install 'ddcm-casadi[ann]' (faiss-cpu)") from None
+    return faiss
+
+
+class IVFSearch(CertifiedSearch):
+    r"""Certified inverted-file search (faiss ``IndexIVFFlat``, the optional extra ``ann``) for
+    any number of coordinates.
+
+    The data, stored in float32, are split into the Voronoi cells of ``n_c`` k-means centroids
+    ``c_i`` (faiss's exact float32 assignment); a query ``q`` scans the ``p`` cells of its
+    nearest centroids for its ``k`` nearest stored points, which are re-ranked with exact
+    distances. Lower bounds (``D_i = |q - c_i|``, ``c_a`` the nearest centroid scanned,
+    ``D_u`` the nearest not scanned):
+
+    - a datum ``y`` of a cell ``i`` not scanned is nearer ``c_i`` than ``c_a`` (up to the
+      assignment's roundoff ``E``: ``|y - c_i|^2 <= |y - c_a|^2 + 2E``), so it lies in a half-space
+      whose distance from ``q`` is ``(D_i^2 - D_a^2 - 2E) / (2 |c_i - c_a|)``; with
+      ``|c_i - c_a| <= D_i + D_a`` and that increasing in ``D_i``,
+      ``|q - y| >= (D_u - D_a) / 2 - E / (D_u + D_a)``;
+    - a datum of a scanned cell not among the ``k`` returned is at least as far (in float32) as
+      the ``k``-th: ``|q - y| >= sqrt(d_k^2 - E)``.
+
+    ``E = 2 (d + 3) u (|x| + |y|)^2`` bounds the float32 roundoff of a squared distance between
+    ``x`` and ``y`` (``u = 2^-24``; faiss may expand ``|x|^2 + |y|^2 - 2 x.y``), taken with the
+    largest norm ``R`` of the data and centroids (``|q| + R`` from a query, ``2R`` for the
+    assignment), and the float32 rounding of ``q`` and ``y``
+    (``u |q|``, ``u R``) is taken off every bound. A widening multiplies ``p`` by 4 and doubles
+    ``k``; once every cell is scanned only the second bound is left.
+    """
+
+    name = "ann"
+    #: Cells scanned and candidates returned by the first search.
+    PROBES, CANDIDATES = 8, 8
+
+    def __init__(self, points, index, centroids, radius, base=None) -> None:
+        self._points, self.index, self.centroids, self.radius, self.base = points, index, centroids, radius, base
+
+    @classmethod
+    def available(cls) -> bool:
+        try:
+            import faiss  # noqa: F401
+        except ImportError:
+            return False
+        return True
+
+    @classmethod
+    def build(cls, points: np.ndarray, *, base: NeighbourSearch | None = None) -> "IVFSearch":
+        faiss = _faiss()
+        X = points
+        if X.ndim != 2 or X.shape[0] < 1:
+            raise InputError(f"the ann search needs (N, d) coordinates, got shape {X.shape}")
+        n, d = X.shape
+        # 2 sqrt(N) cells: 20 % less CPU than sqrt(N) or 4 sqrt(N) for exact answers (1e6 data, 12
+        # coordinates); at most 16 384, as the assignment costs N x cells distances
+        cells = int(max(1, min(2.0 * math.sqrt(n), n // 40, 16384)))
+        rng = np.random.default_rng(0)
+        sample = np.ascontiguousarray(X[np.sort(rng.choice(n, min(n, 40 * cells), replace=False))], dtype=np.float32)
+        index = faiss.IndexIVFFlat(faiss.IndexFlatL2(d), d, cells)
+        index.cp.niter = 10
+        index.cp.min_points_per_centroid = 1
+        index.train(sample)
+        radius = 0.0
+        for c in range(0, n, 1 << 20):
+            block = np.ascontiguousarray(X[c:c + (1 << 20)], dtype=np.float32)
+            index.add(block)
+            radius = max(radius, float(np.sqrt(np.max(np.einsum("ij,ij->i", block, block, dtype=np.float64)))))
+        centroids = index.quantizer.reconstruct_n(0, cells).astype(np.float64)
+        radius = max(radius, float(np.sqrt(np.max(np.einsum("ij,ij->i", centroids, centroids)))))
+        return cls(X, index, centroids, radius, base if base is not None and base.points is points else None)
+
+    @property
+    def points(self) -> np.ndarray:
+        return self._points
+
+    def _search(self, q, level, reach):
+        d = q.shape[1]
+        cells = self.centroids.shape[0]
+        probes = min(cells, self.PROBES * 4 ** level)
+        k = int(min(self.points.shape[0], self.CANDIDATES * 2 ** level, 2048))
+        q32 = q.astype(np.float32)
+        qn = np.sqrt(np.einsum("ij,ij->i", q, q))
+        shift = U32 * qn + U32 * self.radius  # |q - q32| + |y - y32|
+        E = 2.0 * (d + 3) * U32 * (qn + self.radius) ** 2  # a squared distance from q
+        E_assign = 2.0 * (d + 3) * U32 * (2.0 * self.radius) ** 2  # one between a datum and a centroid
+        Dc, Ic = self.index.quantizer.search(q32, min(cells, probes + 1))
+        self.index.nprobe = probes
+        D, Idx = self.index.search_preassigned(q32, k, Ic[:, :probes], Dc[:, :probes])
+        valid = Idx >= 0
+        exact = np.where(valid, self.exact_distance(q, np.where(valid, Idx, 0)), np.inf)
+        j = np.argmin(exact, axis=1)
+        rows = np.arange(q.shape[0])
+        best, index = exact[rows, j], Idx[rows, j].astype(np.intp)
+        # data of the scanned cells beyond the k returned
+        kth = np.where(valid[:, -1], np.sqrt(np.maximum(D[:, -1].astype(np.float64) - E, 0.0)) - shift, np.inf)
+        if probes >= cells:
+            return index, best, kth
+        # data of the cells not scanned (Voronoi half-spaces)
+        diff = self.centroids[Ic[:, :probes]] - q32.astype(np.float64)[:, None, :]
+        Da = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff)).min(axis=1)
+        Du = np.sqrt(np.maximum(Dc[:, probes].astype(np.float64) - E, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vor = np.where(Du > Da, 0.5 * (Du - Da) - E_assign / (Du + Da), 0.0) - shift
+        return index, best, np.minimum(kth, np.maximum(vor, 0.0))
+
+
+register_search(IVFSearch)

@@ -1,0 +1,146 @@
+"""The certified searches (:mod:`ddcm_casadi.data.ann`): their certificates against brute force,
+their selection and errors, and DDCM fixed points equal to the exact KD-tree's."""
+
+from __future__ import annotations
+
+import builtins
+
+import numpy as np
+import pytest
+
+from ddcm_casadi import formulations
+from ddcm_casadi.data.ann import U64, IVFSearch, StripSearch
+from ddcm_casadi.data.dataset import MaterialDataset
+from ddcm_casadi.data.search import SEARCHES, search_class
+from ddcm_casadi.drivers.ddcm import DDCMSolver
+from ddcm_casadi.drivers.ddcm_options import DDCMOptions
+from ddcm_casadi.errors import InputError
+from ddcm_casadi.models.truss import bar_chain
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.validation.quality_rungs import noisy_dataset
+
+RNG = np.random.default_rng(28)
+
+
+def _brute(X: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """Exact nearest distances by direct differences in float64."""
+    X = X.astype(np.float64)
+    return np.array([np.sqrt(np.min(np.einsum("ij,ij->i", X - q, X - q))) for q in Q])
+
+
+def _tolerance(d: int) -> float:
+    """Relative roundoff of a float64 distance over ``d`` coordinates: ``d`` squares summed, the
+    differences and the square root each rounded (``(d + 3) u``), for two distances."""
+    return 2.0 * (d + 3) * U64
+
+
+def _clouds():
+    """Data with exact ties (duplicates, a grid with queries at cell centres), a noisy band, a
+    line, and float32 data whose rounding the strip keys do not add to."""
+    band_e = RNG.uniform(-1.0, 1.0, 3000)
+    band = np.column_stack([band_e, 0.02 * RNG.normal(size=3000)])
+    line = np.column_stack([np.linspace(-1, 1, 2001), np.zeros(2001)])
+    g = np.arange(-10, 11, dtype=float)
+    grid = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    dup = np.repeat(RNG.normal(size=(200, 2)), 3, axis=0)
+    return {
+        "band": (band, np.column_stack([RNG.uniform(-1.5, 1.5, 800), RNG.normal(0, 0.3, 800)])),
+        "line": (line, RNG.normal(0, 0.5, (800, 2))),
+        "grid ties": (grid, (RNG.integers(-11, 11, (800, 2)) + 0.5)),
+        "duplicates": (dup, RNG.normal(size=(800, 2))),
+        "float32": (band.astype(np.float32), RNG.normal(0, 0.5, (800, 2))),
+        "float64 rounded": (band * (1 + 2.0 ** -30), RNG.normal(0, 0.5, (800, 2))),  # keys differ from coords
+        "12 coordinates": (RNG.normal(size=(4000, 12)) * np.linspace(1, 0.01, 12), RNG.normal(size=(300, 12))),
+    }
+
+
+def _searches():
+    out = [StripSearch]
+    if IVFSearch.available():
+        out.append(IVFSearch)
+    return out
+
+
+@pytest.mark.parametrize("cloud", list(_clouds()))
+@pytest.mark.parametrize("backend", _searches(), ids=lambda b: b.name)
+def test_certificate_is_sound_and_the_search_exact(cloud, backend):
+    """At every widening level: a certified answer is at the brute-force distance, and the
+    nearest distance is never below ``min(d_j, B)`` (the reported bound); the widest search
+    (:meth:`nearest`) is exact."""
+    X, Q = _clouds()[cloud]
+    search = backend.build(X)
+    truth = _brute(X, Q)
+    tol = _tolerance(X.shape[1])
+    for rounds in (0, 1, None):
+        cert = search.certified(Q, rounds=rounds)
+        np.testing.assert_allclose(cert.distance[cert.certified], truth[cert.certified], rtol=tol, atol=0)
+        assert np.all(truth >= np.minimum(cert.distance, cert.bound) * (1 - tol)), rounds
+        assert np.all(cert.gap[cert.certified] == 0)
+    exact = search.nearest(Q)
+    found = np.sqrt(np.einsum("ij,ij->i", X[exact] - Q, X[exact] - Q))
+    np.testing.assert_allclose(found, truth, rtol=tol, atol=0)
+
+
+def test_strips_first_search_certifies_most_states_near_the_data():
+    """Near a band of data the first window certifies most answers (the certificate is not
+    vacuous), and all of those at the exact distance."""
+    X, _ = _clouds()["band"]
+    Q = X[RNG.integers(0, len(X), 2000)] + RNG.normal(0, 0.005, (2000, 2))
+    cert = StripSearch.build(X).certified(Q, rounds=0)
+    assert cert.certified.mean() > 0.8
+
+
+def test_backends_are_registered_and_selected_by_name():
+    assert search_class("strips") is StripSearch and search_class("ann") is IVFSearch
+    data = MaterialDataset(*noisy_pair(500), 200e9)
+    e, s = noisy_pair(100)
+    reference = data.distance2(e, s, data.nearest(e, s))
+    assert np.array_equal(data.distance2(e, s, data.nearest(e, s, search="strips")), reference)
+    with pytest.raises(InputError, match="unknown data search 'hnsw'; known: kdtree, graph, strips, ann"):
+        DDCMOptions(search="hnsw")
+
+
+def noisy_pair(n):
+    e = RNG.uniform(-0.01, 0.01, n)
+    return e, 200e9 * e + RNG.normal(0, 1e7, n)
+
+
+def test_missing_faiss_is_one_line_naming_the_extra(monkeypatch):
+    real = builtins.__import__
+
+    def no_faiss(name, *args, **kwargs):
+        if name == "faiss":
+            raise ImportError("No module named 'faiss'")
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_faiss)
+    assert not IVFSearch.available()
+    with pytest.raises(InputError) as err:
+        IVFSearch.build(np.zeros((10, 2)))
+    assert str(err.value) == "data search 'ann' needs faiss: pip install 'ddcm-casadi[ann]' (faiss-cpu)"
+
+
+def test_bad_input_is_one_line():
+    with pytest.raises(InputError, match=r"^the strip search needs \(N, 2\) coordinates"):
+        StripSearch.build(np.zeros((5, 1)))
+    with pytest.raises(InputError, match=r"^queries must be \(n, 2\) coordinates"):
+        StripSearch.build(np.zeros((5, 2))).certified(np.zeros((3, 3)))
+    with pytest.raises(InputError, match="k_nearest through an exact search"):
+        StripSearch.build(np.zeros((5, 2))).k_nearest(np.zeros((1, 2)), 2)
+
+
+@pytest.mark.parametrize("search", [b.name for b in _searches()])
+def test_ddcm_fixed_points_equal_the_kd_tree_s(search):
+    """A noisy bar chain on stops: the whole DDCM path (data assignment, displacements,
+    pressures, distances, iterations) is the KD-tree's."""
+    model = bar_chain(length=1.0, elements=12, youngs_modulus=200e9, tip_positions=np.linspace(1.002, 0.99, 5),
+                      stops={3: 0.002, 8: 0.006}, dataset=noisy_dataset(0.05, 1, n_data=3000), name="noisy chain")
+    paths = {}
+    for name in ("kdtree", search):
+        problems = build_problems(model)
+        solver = DDCMSolver(problems, formulations.get("fischer_burmeister").build(problems.projection),
+                            options=DDCMOptions(search=name))
+        paths[name] = solver.solve()
+    for field in ("data_index", "outer_iterations", "u", "p", "distance"):
+        np.testing.assert_array_equal(paths[search].array(field), paths["kdtree"].array(field), err_msg=field)
+    assert search in model.dataset._searches  # the backend was used
