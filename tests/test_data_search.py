@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ddcm_casadi.casefiles.base import load_case
+from ddcm_casadi.casefiles.config import load_case
 from ddcm_casadi.data.dataset import MaterialDataset, PointData
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.data.metric import isotropic_elasticity
