@@ -441,6 +441,9 @@ class CoulombPieces:
         return out
 
 
+#: The functions whose Jacobian is piecewise constant for a linear model.
+PIECEWISE_CONSTANT = frozenset({"alart_curnier", "natural_map"})
+
 #: Functions whose failed solves are finished on :func:`natural_map` (same roots): the SOC FB
 #: function's second derivatives grow without bound where a spectral value of ``x o x + y o y``
 #: vanishes (a contact at the cone's apex or a sticking contact with zero traction), so that the
@@ -512,9 +515,12 @@ class BuiltCoulomb(BuiltFormulation):
         system = self.system
         built = system._built
         P = system.parameters
-        # the Jacobians of successive Newton steps differ in the contacts' rows only (and between
-        # steps of a path in those of the contacts that changed piece): low-rank updates
-        kw = dict(jacobian=built.jacobian, factors=self._factors, **self.newton)
+        # Alart-Curnier's and the natural map's Jacobians are piecewise constant: successive Newton
+        # steps differ in a few contacts' rows, solved by low-rank updates; the SOC FB function's
+        # change in every closed contact's rows at every step (measured on the 3-D sphere: the
+        # updates cost it more than they saved)
+        factors = self._factors if self.function in PIECEWISE_CONSTANT else None
+        kw = dict(jacobian=built.jacobian, factors=factors, **self.newton)
         z0 = system.start(x0, p0, state)
         if self.pieces is not None:
             pieces = self.pieces
