@@ -342,7 +342,10 @@ def test_hertz_metrics_reach_sweep_csv_and_an_empty_figure_is_not_written(tmp_pa
     assert code == 0, err
     rows = read_csv(out / "sweep.csv")
     assert len(rows) == 2 and all(float(r["hertz_force"]) > 0 for r in rows)
-    assert all(0 < float(r[k]) < 1 for r in rows for k in ("hertz_error_p0", "hertz_error_a", "hertz_error_l2"))
+    # relative errors of coarse meshes: on the 4 x 4 mesh one node touches, so the measured a is 0
+    # and its error exactly 1 (or just below, with a grazing neighbour's roundoff pressure)
+    assert all(0 <= float(r[k]) <= 1 for r in rows for k in ("hertz_error_p0", "hertz_error_a", "hertz_error_l2"))
+    assert any(float(r["hertz_error_p0"]) > 0 for r in rows)
     # a bar has no Hertz reference: its figure of hertz_error_p0 is skipped with a note, not written empty
     bar = ('base = "base.toml"\nformulations = ["fischer_burmeister"]\n[grid]\n"ddcm.c" = [3e11, 4e11]\n'
            '[[figures]]\nkind = "rate"\nx = "ddcm.c"\ny = "hertz_error_p0"\nfile = "p0.png"\n')
