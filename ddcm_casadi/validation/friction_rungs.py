@@ -19,7 +19,6 @@ r"""Coulomb friction against closed forms: the models, their measures and the ``
 
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 
@@ -182,7 +181,7 @@ def rung_block_stick_slip() -> list[Check]:
         if variant != "classical":
             continue
         out.append(Check.make(label, "partial-slip steps (stick -> slip)", float(len(mixed) > 0), 1.0, 0,
-                              note=f"statuses per step (stick/slip): "
+                              note="statuses per step (stick/slip): "
                                    + ", ".join(f"{np.sum(st == 'stick')}/{np.sum(st == 'slip')}" for st in status)))
         stuck = [i for i, st in enumerate(status) if np.all(st == "stick")]
         # the penalty's stick spring lets a sticking contact slip by r_T / gamma: O(1/gamma)
