@@ -42,6 +42,12 @@ def _example(name: str) -> tuple[str, ...]:
     return (sys.executable, "-c", code, "{out}")
 
 
+def _case(name: str, formulations: str) -> tuple:
+    """``ddcm-compare`` on ``examples/cases/<name>.toml`` with ``formulations``, quietly."""
+    return ("ddcm-compare", "--config", str(ROOT / "examples" / "cases" / f"{name}.toml"),
+            "--formulations", formulations, "--out", "{out}", "-q")
+
+
 FIGURES = (
     Figure("fig2a_tip_displacement.png", ("ddcm-compare", "--out", "{out}", "-q"), "fig2a_tip_displacement.png", True),
     Figure("fig2b_contact_pressure.png", ("ddcm-compare", "--out", "{out}", "-q"), "fig2b_contact_pressure.png", True),
@@ -52,12 +58,8 @@ FIGURES = (
     Figure("von_mises_contact_history.png", _example("von_mises_snap"), "contact_history.png", True),
     Figure("sweep_data_size.png", ("ddcm-sweep", str(ROOT / "examples/sweeps/data_size.toml"), "--out", "{out}"),
            "error_vs_data_size.png", True),
-    Figure("hertz2d_pressure_profile.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/hertz2d.toml"),
-                                            "--formulations", "fischer_burmeister", "--out", "{out}", "-q"),
-           "pressure_profile.png", False),
-    Figure("hertz2d_deformed.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/hertz2d.toml"),
-                                    "--formulations", "fischer_burmeister", "--out", "{out}", "-q"),
-           "deformed_classical.png", False),
+    Figure("hertz2d_pressure_profile.png", _case("hertz2d", "fischer_burmeister"), "pressure_profile.png", False),
+    Figure("hertz2d_deformed.png", _case("hertz2d", "fischer_burmeister"), "deformed_classical.png", False),
     Figure("sweep_noise.png", ("ddcm-sweep", str(ROOT / "examples/sweeps/noise.toml"), "--out", "{out}"),
            "error_vs_noise.png", False),
     Figure("seal2d_force_indentation.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/seal2d_finite.toml"),
@@ -69,12 +71,9 @@ FIGURES = (
                                                    str(ROOT / "examples/cases/indentation3d_finite.toml"),
                                                    "--formulations", "fischer_burmeister", "--out", "{out}", "-q"),
            "force_indentation.png", False),
-    Figure("nafems1_pressure_profile.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/nafems1.toml"),
-                                            "--formulations", "fischer_burmeister,penalty", "--out", "{out}", "-q"),
-           "pressure_profile.png", False),
-    Figure("nafems1_deformed.png", ("ddcm-compare", "--config", str(ROOT / "examples/cases/nafems1.toml"),
-                                    "--formulations", "fischer_burmeister", "--out", "{out}", "-q"),
-           "deformed_classical.png", False),
+    Figure("nafems1_pressure_profile.png", _case("nafems1", "fischer_burmeister,penalty"), "pressure_profile.png",
+           False),
+    Figure("nafems1_deformed.png", _case("nafems1", "fischer_burmeister"), "deformed_classical.png", False),
 )
 
 
