@@ -138,7 +138,7 @@ def select_formulations(names: Sequence[str] | None, contact_law: str = "signori
     """
     available = registry.available()
     if names is None:
-        return [n for n in available if contact_law in type(registry.get(n)).supported_contact_laws]
+        return registry.enforcing(contact_law)
     for name in names:
         if name not in available:
             raise InputError(f"unknown formulation {name!r}; available: {', '.join(available)}")

@@ -8,7 +8,7 @@
 
 from .base import BuiltFormulation, Formulation, LocalSolution
 from .pairs import NewtonSystem
-from .registry import available, get, register
+from .registry import available, enforcing, get, register
 from . import penalty, augmented_lagrangian, fischer_burmeister, mpcc  # noqa: F401,E402  (registration)
 
-__all__ = ["BuiltFormulation", "Formulation", "LocalSolution", "NewtonSystem", "available", "get", "register"]
+__all__ = ["BuiltFormulation", "Formulation", "LocalSolution", "NewtonSystem", "available", "enforcing", "get", "register"]

@@ -19,6 +19,12 @@ def available() -> list[str]:
     return _REGISTRY.names()
 
 
+def enforcing(contact_law: str) -> list[str]:
+    """Names of the registered formulations whose ``supported_contact_laws`` include
+    ``contact_law`` (a frictional case's default), in registration order."""
+    return [name for name in available() if contact_law in _REGISTRY[name].supported_contact_laws]
+
+
 def get(name: str, **options: Any):
     """A new formulation instance by name, with keyword options (copied, validated)."""
     return _REGISTRY[name](**options)

@@ -31,8 +31,7 @@ def frictional_methods() -> tuple[str, ...]:
     any other registered formulation that supports the ``coulomb`` contact law."""
     from ddcm_casadi import formulations
 
-    others = [name for name in formulations.available() if name not in FORMULATION_METHODS
-              and "coulomb" in formulations.get(name).supported_contact_laws]
+    others = [name for name in formulations.enforcing("coulomb") if name not in FORMULATION_METHODS]
     return ("default", "pgs", *FORMULATION_METHODS, *others)
 
 #: The default method's projected Gauss-Seidel target before Newton (the FCLIB benchmarks' loose level).

@@ -42,8 +42,7 @@ def resolve_formulations(formulations: Iterable[str | Formulation] | Mapping[str
     """Formulation instances from names, instances, or ``{name: options}`` (options are copied);
     ``None``: every registered one that enforces ``contact_law``."""
     if formulations is None:
-        forms = [registry.get(name) for name in registry.available()]
-        return [f for f in forms if contact_law in f.supported_contact_laws]
+        return [registry.get(name) for name in registry.enforcing(contact_law)]
     if isinstance(formulations, Mapping):
         return [registry.get(name, **dict(opts or {})) for name, opts in formulations.items()]
     out = []

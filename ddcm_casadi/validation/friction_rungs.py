@@ -45,7 +45,7 @@ AGREEMENT = 10 * SOLVER_TOL
 
 def frictional_formulations(law: str = "coulomb") -> list[str]:
     """The registered formulations that enforce ``law``."""
-    return [n for n in formulations.available() if law in type(formulations.get(n)).supported_contact_laws]
+    return formulations.enforcing(law)
 
 
 def hookean_data(dimension: int, youngs_modulus: float, poisson_ratio: float, strain: float,
