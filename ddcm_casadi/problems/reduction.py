@@ -50,10 +50,16 @@ from ddcm_casadi.problems.parameters import Parameters
 MAX_PAIRS = 500
 #: Relative size (Frobenius) of ``K_s - alpha K_u`` up to which the two share one factor.
 PROPORTIONAL = 1e-12
-#: Largest condition number of a Delassus matrix: a body held only by its contacts makes ``K_C``
-#: singular (a rigid mode, ``B r = 0``), and its computed inverse shows as a condition near
-#: ``1 / eps`` (4e14 on the 2-D patch test's punch); then the full path is kept.
-MAX_CONDITION = 1.0 / (1e5 * np.finfo(float).eps)
+#: The formulations' Newton tolerance (relative increment and scaled residual, their default).
+NEWTON_TOL = 1e-9
+#: Largest condition number of a Delassus matrix. The condensed solve's roundoff floor is about
+#: ``cond(D_u) eps`` relative (backward-stable solves of the ``D_u^-1`` block), and Newton must
+#: resolve ``NEWTON_TOL`` above it: ``cond <= 0.1 NEWTON_TOL / eps`` (4.5e5). Measured: the
+#: 1000-panel Warren truss (cond 1.2e9) stalls its piece solves at 2.5e-7 (``cond eps`` = 2.6e-7)
+#: and Newton took 219 steps where the full path takes 2; the 100-panel one (1.2e5) and the
+#: continua (1e2-3e2) converge as on the full path. A body held only by its contacts (a rigid
+#: mode, ``B r = 0``) shows as ``1 / eps``. Above the limit the full path is kept.
+MAX_CONDITION = 0.1 * NEWTON_TOL / np.finfo(float).eps
 #: Right-hand sides per back-solve: SuperLU's solve with many columns is slower per column than
 #: with a few (measured on K_C of 23 436 dofs: 109 columns at once 14.7 s, by 16 4.4 s, by 4 0.74 s,
 #: one by one 1.5 s).
@@ -243,8 +249,10 @@ class Reduction:
             for D in (self.D_u, self.D_p):
                 eig = np.linalg.eigvalsh(D)
                 if not eig[0] > eig[-1] / MAX_CONDITION:
-                    raise NotReducible(f"a Delassus matrix is singular or nearly (condition {eig[-1] / max(eig[0], 1e-300):.1e}:"
-                                       " a body held only by its contacts, or dependent contact rows)")
+                    raise NotReducible(
+                        f"a Delassus matrix's condition {eig[-1] / max(eig[0], 1e-300):.1e} is above"
+                        f" {MAX_CONDITION:.1e}: the condensed solve's roundoff would exceed Newton's tolerance"
+                        " (a slender structure, a body held only by its contacts, or dependent contact rows)")
                 conditions.append(eig[-1] / eig[0])
             self._condition_u = conditions[0]
             self._D_p, self._D_u = sla.cho_factor(self.D_p), sla.cho_factor(self.D_u)
