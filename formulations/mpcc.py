@@ -80,13 +80,30 @@ from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, ident
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.homotopy import scholtes_homotopy
+from ddcm_casadi.loops.active_set import ActiveSetSolver
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
 
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
+from .ncp import FBSystem
 from .friction import cone_traction, coulomb_branch, coulomb_constraints
 from .registry import register
 
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
+#: Branch NLPs of an affine classical problem's active-set rounds (:meth:`_BuiltMPCC._active_set`).
+#: From the predictor's branch one ends a step; from the start's branch the Hertz examples take 1-5.
+ACTIVE_SET_ROUNDS = 8
+
+
+@dataclass(frozen=True)
+class _PieceTolerances:
+    """The predictor's piece solves (linear: one step, then roundoff refinement)."""
+
+    tol: float = 1e-9
+    residual_tol: float = 1e-10
+    max_iter: int = 3
+
+
+_PIECE_TOLERANCES = _PieceTolerances()
 
 
 @register
@@ -132,6 +149,12 @@ class MPCC(Formulation):
             From a warm start that is a converged solution, first solve the branch NLP of the
             branch identified there (``g_i = 0`` where ``g_i <= p_i``, else ``p_i = 0``), accepted
             under the same tests as above; the homotopy runs only when that fails.
+        predict_branch : bool
+            Classical problems with small kinematics (one solution): identify the branch first
+            by the active-set predictor (Fischer-Burmeister's piece solves with kept factors),
+            then solve that branch's NLP with IPOPT, accepted under the same tests; off, the
+            branch NLPs start from the branch identified at the start. Either way the homotopy
+            runs only when the branch NLPs fail.
         ipopt : dict
             Extra IPOPT options passed through unchanged (copied).
         """
@@ -145,6 +168,7 @@ class MPCC(Formulation):
         max_homotopy: int = 30
         early_branch: int = 30
         warm_branch: bool = True
+        predict_branch: bool = True
         ipopt: dict = field(default_factory=dict)
 
     def _validate(self) -> None:
@@ -221,6 +245,12 @@ class _BuiltMPCC(BuiltFormulation):
         # then selects the one nearest the start (``anchor``, the previous converged step), the
         # path a quasi-static loading follows. An affine problem's solution is unique: no objective.
         self._anchored = problem.kind == "mcp" and not problem.affine
+        # An affine classical problem has one solution: a branch NLP solution whose signs hold is it.
+        # Its branch is identified by the active-set predictor's piece solves (kept factors, as
+        # Fischer-Burmeister's; pairs compared as g <= p in scaled units, as the MPCC's branches).
+        self._unique = problem.kind == "mcp" and problem.affine
+        self._predictor = (ActiveSetSolver(FBSystem(problem, 1.0, 1.0), predictor=True)
+                           if self._unique and opts.predict_branch else None)
         base = problem.parameters.extend(anchor=nx) if self._anchored else problem.parameters
         self._base = base
         self.parameters = base.extend(tau=1)
@@ -267,6 +297,11 @@ class _BuiltMPCC(BuiltFormulation):
                                     outer=1, message="converged (branch NLP from the start's branch)",
                                     state=self._next_state(True, polished, params))
 
+        if self._unique:
+            polished, iters, rounds, message = self._active_set(w, params, values)
+            if message:
+                return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
+                                    outer=rounds, message=message, state=self._next_state(True, polished, params))
         relaxed = _relaxed(self._solver, self.parameters, values, dict(lbx=self._lbx, lbg=self._lbg, ubg=self._ubg))
 
         def measure(w):
@@ -294,6 +329,59 @@ class _BuiltMPCC(BuiltFormulation):
     def _branch_of(self, w: np.ndarray, params: np.ndarray) -> np.ndarray:
         """The side of every pair at ``w``: gap (``g_i <= p_i``) or pressure."""
         return np.asarray(self._gap(w, params), float).ravel() <= w[self._nx:]
+
+    def _active_set(self, w, params, values) -> tuple[np.ndarray, int, int, str]:
+        """Branch NLPs of an affine classical problem from ``w``: ``(w, iterations, branch NLPs,
+        message)``, ``iterations`` the predictor's linear solves and IPOPT's iterations,
+        ``message`` empty unless a branch NLP solution was accepted.
+
+        The first branch is that of the active-set predictor's solution (``predict_branch``: a
+        primal-dual active-set iteration on the piece systems ``F = 0, g_i = 0 or p_i = 0``, each
+        a solve with a kept or updated factor), else the one identified at ``w``. A branch
+        solution whose signs fail identifies the next branch there (``g_i = 0`` where ``g_i <=
+        p_i``, else ``p_i = 0``: a penetrating free pair closes, a pulling contact opens), as a
+        primal-dual active-set method does, at most :data:`ACTIVE_SET_ROUNDS` branch NLPs and
+        never one twice. An accepted branch NLP solution (IPOPT's, one iteration on these linear
+        constraints) satisfies every sign, the complementarity and the residual test, so it is
+        the problem's one solution; the homotopy runs when the rounds fail. On the Hertz example a
+        step then costs one branch NLP, where the homotopy took 2-4 relaxed solves of 8-21
+        iterations and 1-7 branch NLPs (docs/performance.md)."""
+        nx = self._nx
+        on_gap, tried, iters, source = self._branch_of(w, params), set(), 0, "the start's branch"
+        if self._predictor is not None:
+            system = self._predictor.system
+            predicted, iters = self._predictor.branch_finish((system.start(w[:nx], w[nx:], None),), params,
+                                                             _PIECE_TOLERANCES)
+            if predicted is not None:
+                on_gap, source = self._branch_of(predicted.z[:nx + self._nc], params), "the predicted branch"
+        while len(tried) < ACTIVE_SET_ROUNDS and on_gap.tobytes() not in tried:
+            tried.add(on_gap.tobytes())
+            status, w_new, _, its, ok = self._solve_branch(w, params, values, on_gap, ~on_gap)
+            iters += its
+            if status:
+                break
+            if ok:
+                return w_new, iters, len(tried), f"converged (branch NLP, active set from {source})"
+            on_gap = self._branch_of(w_new, params)
+        return w, iters, len(tried), ""
+
+    def _solve_branch(self, w, params, values, fix_gap, fix_p) -> tuple[str, np.ndarray, np.ndarray | None, int, bool]:
+        """The branch NLP imposing ``g = 0`` on ``fix_gap`` and ``p = 0`` on ``fix_p`` from ``w``:
+        ``(status, w, lam_g, iterations, signs)``, ``signs`` whether every sign, the
+        complementarity and the residual tests hold at the solution (B-stationarity is the
+        caller's)."""
+        nc, ne, nx = self._nc, self._ne, self._nx
+        inf = np.full(nc, np.inf)
+        lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
+        ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
+        status, w_new, warm, its = _run(self._bnlp, dict(x0=w, p=values, lbg=lbg, ubg=ubg))
+        if status:
+            return status, w_new, None, its, False
+        residual, comp, _, _ = self.metrics(w_new[:nx], w_new[nx:], params)
+        gap_new = np.asarray(self._gap(w_new, params), float).ravel()
+        signs = (signs_hold(gap_new, w_new[nx:], self.opts.comp_tol) and comp <= self.opts.comp_tol
+                 and residual <= self.opts.residual_tol)
+        return "", w_new, warm[1], its, signs
 
     def _near_corner(self, w, params, tau) -> bool:
         """Is some pair within the branch NLP's biactive identification ``10 sqrt(tau)`` of a corner?"""
@@ -331,20 +419,13 @@ class _BuiltMPCC(BuiltFormulation):
             tried.add(key)
             if ne + fix_gap.sum() + fix_p.sum() > nx + nc:
                 continue  # over-determined (e.g. a biactive pair of the classical problem)
-            inf = np.full(nc, np.inf)
-            lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
-            ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
-            status, w_new, warm, its = _run(self._bnlp, dict(x0=w, p=values, lbg=lbg, ubg=ubg))
+            status, w_new, lam, its, signs = self._solve_branch(w, params, values, fix_gap, fix_p)
             iters += its
             if status:
                 continue
-            lam = warm[1]
             # CasADi's lam_g is the multiplier of f + lam^T g: the convention of b_stationarity.
             wrong_gap, wrong_p = b_stationarity(lam[ne:ne + nc], lam[ne + nc:], fix_gap & fix_p)
-            residual, comp, pen, _ = self.metrics(w_new[:nx], w_new[nx:], params)
-            gap_new = np.asarray(self._gap(w_new, params), float).ravel()
-            ok = (not (wrong_gap.any() or wrong_p.any()) and signs_hold(gap_new, w_new[nx:], self.opts.comp_tol)
-                  and comp <= self.opts.comp_tol and residual <= self.opts.residual_tol)
+            ok = not (wrong_gap.any() or wrong_p.any()) and signs
             if ok:
                 return w_new, iters, True
             if wrong_gap.any() or wrong_p.any():
