@@ -149,12 +149,12 @@ class MPCC(Formulation):
             From a warm start that is a converged solution, first solve the branch NLP of the
             branch identified there (``g_i = 0`` where ``g_i <= p_i``, else ``p_i = 0``), accepted
             under the same tests as above; the homotopy runs only when that fails.
-        predict_branch : bool
-            Classical problems with small kinematics (one solution): identify the branch first
-            by the active-set predictor (Fischer-Burmeister's piece solves with kept factors),
-            then solve that branch's NLP with IPOPT, accepted under the same tests; off, the
-            branch NLPs start from the branch identified at the start. Either way the homotopy
-            runs only when the branch NLPs fail.
+        active_set : bool
+            Classical problems with small kinematics (one solution): before the homotopy, solve
+            the branch NLP of the branch the active-set predictor identifies (Fischer-Burmeister's
+            piece solves with kept factors), then, while the signs fail, of the branch identified
+            at its solution (a primal-dual active-set iteration of branch NLPs); accepted under
+            the same tests as above. The homotopy runs only when these fail.
         ipopt : dict
             Extra IPOPT options passed through unchanged (copied).
         """
@@ -168,7 +168,7 @@ class MPCC(Formulation):
         max_homotopy: int = 30
         early_branch: int = 30
         warm_branch: bool = True
-        predict_branch: bool = True
+        active_set: bool = True
         ipopt: dict = field(default_factory=dict)
 
     def _validate(self) -> None:
@@ -248,9 +248,9 @@ class _BuiltMPCC(BuiltFormulation):
         # An affine classical problem has one solution: a branch NLP solution whose signs hold is it.
         # Its branch is identified by the active-set predictor's piece solves (kept factors, as
         # Fischer-Burmeister's; pairs compared as g <= p in scaled units, as the MPCC's branches).
-        self._unique = problem.kind == "mcp" and problem.affine
+        unique = problem.kind == "mcp" and problem.affine
         self._predictor = (ActiveSetSolver(FBSystem(problem, 1.0, 1.0), predictor=True)
-                           if self._unique and opts.predict_branch else None)
+                           if unique and opts.active_set else None)
         base = problem.parameters.extend(anchor=nx) if self._anchored else problem.parameters
         self._base = base
         self.parameters = base.extend(tau=1)
@@ -297,7 +297,7 @@ class _BuiltMPCC(BuiltFormulation):
                                     outer=1, message="converged (branch NLP from the start's branch)",
                                     state=self._next_state(True, polished, params))
 
-        if self._unique:
+        if self._predictor is not None:
             polished, iters, rounds, message = self._active_set(w, params, values)
             if message:
                 return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
@@ -335,9 +335,9 @@ class _BuiltMPCC(BuiltFormulation):
         message)``, ``iterations`` the predictor's linear solves and IPOPT's iterations,
         ``message`` empty unless a branch NLP solution was accepted.
 
-        The first branch is that of the active-set predictor's solution (``predict_branch``: a
-        primal-dual active-set iteration on the piece systems ``F = 0, g_i = 0 or p_i = 0``, each
-        a solve with a kept or updated factor), else the one identified at ``w``. A branch
+        The first branch is that of the active-set predictor's solution (a primal-dual
+        active-set iteration on the piece systems ``F = 0, g_i = 0 or p_i = 0``, each a solve with
+        a kept or updated factor), else (no prediction) the one identified at ``w``. A branch
         solution whose signs fail identifies the next branch there (``g_i = 0`` where ``g_i <=
         p_i``, else ``p_i = 0``: a penetrating free pair closes, a pulling contact opens), as a
         primal-dual active-set method does, at most :data:`ACTIVE_SET_ROUNDS` branch NLPs and
@@ -346,14 +346,12 @@ class _BuiltMPCC(BuiltFormulation):
         the problem's one solution; the homotopy runs when the rounds fail. On the Hertz example a
         step then costs one branch NLP, where the homotopy took 2-4 relaxed solves of 8-21
         iterations and 1-7 branch NLPs (docs/performance.md)."""
-        nx = self._nx
-        on_gap, tried, iters, source = self._branch_of(w, params), set(), 0, "the start's branch"
-        if self._predictor is not None:
-            system = self._predictor.system
-            predicted, iters = self._predictor.branch_finish((system.start(w[:nx], w[nx:], None),), params,
-                                                             _PIECE_TOLERANCES)
-            if predicted is not None:
-                on_gap, source = self._branch_of(predicted.z[:nx + self._nc], params), "the predicted branch"
+        nx, system = self._nx, self._predictor.system
+        on_gap, tried, source = self._branch_of(w, params), set(), "the start's branch"
+        predicted, iters = self._predictor.branch_finish((system.start(w[:nx], w[nx:], None),), params,
+                                                         _PIECE_TOLERANCES)
+        if predicted is not None:
+            on_gap, source = self._branch_of(predicted.z[:nx + self._nc], params), "the predicted branch"
         while len(tried) < ACTIVE_SET_ROUNDS and on_gap.tobytes() not in tried:
             tried.add(on_gap.tobytes())
             status, w_new, _, its, ok = self._solve_branch(w, params, values, on_gap, ~on_gap)
