@@ -255,15 +255,19 @@ class _BuiltMPCC(BuiltFormulation):
         self._base = base
         self.parameters = base.extend(tau=1)
         ipopt = _ipopt_options(problem, opts)
-        # SX throughout, local terms (finite strain) written out element by element: IPOPT's
-        # Hessians of MX maps cost more than the expansion (measured on the 822-dof indentation:
-        # 12 s to build and 302 s to solve in MX, 52 s and 17 s in SX).
+        # Finite strain in SX, local terms written out element by element: IPOPT's Hessians of MX
+        # maps cost more than the expansion (measured on the 822-dof indentation: 12 s to build and
+        # 302 s to solve in MX, 52 s and 17 s in SX). Affine maps in MX, sparse matrices kept whole:
+        # SX's symbolic Jacobian of K z cost 17 s per NLP at 8 406 unknowns (the two spheres),
+        # MX 0.04 s, same iterations and solutions (docs/performance.md).
+        sym = ca.SX if not problem.affine else ca.MX
+
         def nlp(parameters, rows):
-            x, p, P = ca.SX.sym("x", nx), ca.SX.sym("p", nc), ca.SX.sym("P", parameters.size)
-            z, own = ca.vertcat(x, p), P[:problem.parameters.size]
+            z, P = sym.sym("z", nx + nc), sym.sym("P", parameters.size)
+            x, p, own = z[:nx], z[nx:], P[:problem.parameters.size]
             residual, gap = problem.residual_map.render(z, own), problem.gap_map.render(z, own)
             objective = (problem.distance.render(z, own) if problem.kind == "mpcc" else
-                         0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else ca.SX.zeros(1, 1))
+                         0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else sym.zeros(1, 1))
             return {"x": z, "p": P, "f": objective, "g": ca.vertcat(residual, gap, rows(p, gap, P))}
 
         self._solver = ca.nlpsol("mpcc", "ipopt", nlp(self.parameters, lambda p, gap, P: gap * p - P[self.parameters.slice("tau")]),
