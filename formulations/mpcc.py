@@ -290,6 +290,11 @@ class _BuiltMPCC(BuiltFormulation):
         w = np.concatenate([x0, np.maximum(p0, 0.0)])
         values = self._base.pack(params, anchor=x0) if self._anchored else params  # the NLPs' parameters
         state = state or {}
+        if self._predictor is not None:
+            polished, iters, rounds, message = self._active_set(w, params, values)
+            if message:
+                return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
+                                    outer=rounds, message=message, state=self._next_state(True, polished, params))
         same_branch = "branch" in state and np.array_equal(state["branch"], self._branch_of(w, params))
         if state.get("on_branch") or same_branch:
             # The start is a branch solution (e.g. the exact global branch of a projection):
@@ -300,12 +305,6 @@ class _BuiltMPCC(BuiltFormulation):
                 return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
                                     outer=1, message="converged (branch NLP from the start's branch)",
                                     state=self._next_state(True, polished, params))
-
-        if self._predictor is not None:
-            polished, iters, rounds, message = self._active_set(w, params, values)
-            if message:
-                return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
-                                    outer=rounds, message=message, state=self._next_state(True, polished, params))
         relaxed = _relaxed(self._solver, self.parameters, values, dict(lbx=self._lbx, lbg=self._lbg, ubg=self._ubg))
 
         def measure(w):
@@ -351,6 +350,8 @@ class _BuiltMPCC(BuiltFormulation):
         step then costs one branch NLP, where the homotopy took 2-4 relaxed solves of 8-21
         iterations and 1-7 branch NLPs (docs/performance.md)."""
         nx, system = self._nx, self._predictor.system
+        if self._solves(w, params):
+            return w, 0, 0, "converged (the start solves the problem)"
         on_gap, tried, source = self._branch_of(w, params), set(), "the start's branch"
         predicted, iters = self._predictor.branch_finish((system.start(w[:nx], w[nx:], None),), params,
                                                          _PIECE_TOLERANCES)
@@ -367,23 +368,28 @@ class _BuiltMPCC(BuiltFormulation):
             on_gap = self._branch_of(w_new, params)
         return w, iters, len(tried), ""
 
+    def _solves(self, w, params) -> bool:
+        """Does ``w`` pass the tests of an accepted solution: every sign, the complementarity and
+        the residual (an unloaded step's start)?"""
+        nx = self._nx
+        residual, comp, _, _ = self.metrics(w[:nx], w[nx:], params)
+        gap = np.asarray(self._gap(w, params), float).ravel()
+        return (signs_hold(gap, w[nx:], self.opts.comp_tol) and comp <= self.opts.comp_tol
+                and residual <= self.opts.residual_tol)
+
     def _solve_branch(self, w, params, values, fix_gap, fix_p) -> tuple[str, np.ndarray, np.ndarray | None, int, bool]:
         """The branch NLP imposing ``g = 0`` on ``fix_gap`` and ``p = 0`` on ``fix_p`` from ``w``:
         ``(status, w, lam_g, iterations, signs)``, ``signs`` whether every sign, the
         complementarity and the residual tests hold at the solution (B-stationarity is the
         caller's)."""
-        nc, ne, nx = self._nc, self._ne, self._nx
+        nc, ne = self._nc, self._ne
         inf = np.full(nc, np.inf)
         lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
         ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
         status, w_new, warm, its = _run(self._bnlp, dict(x0=w, p=values, lbg=lbg, ubg=ubg))
         if status:
             return status, w_new, None, its, False
-        residual, comp, _, _ = self.metrics(w_new[:nx], w_new[nx:], params)
-        gap_new = np.asarray(self._gap(w_new, params), float).ravel()
-        signs = (signs_hold(gap_new, w_new[nx:], self.opts.comp_tol) and comp <= self.opts.comp_tol
-                 and residual <= self.opts.residual_tol)
-        return "", w_new, warm[1], its, signs
+        return "", w_new, warm[1], its, self._solves(w_new, params)
 
     def _near_corner(self, w, params, tau) -> bool:
         """Is some pair within the branch NLP's biactive identification ``10 sqrt(tau)`` of a corner?"""
