@@ -83,9 +83,10 @@ from ddcm_casadi.loops.homotopy import scholtes_homotopy
 from ddcm_casadi.loops.active_set import ActiveSetSolver
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
 
+from .augmented_lagrangian import AugmentedLagrangian
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
 from .ncp import FBSystem
-from .friction import cone_traction, coulomb_branch, coulomb_constraints
+from .friction import BuiltCoulomb, cone_traction, coulomb_branch, coulomb_constraints
 from .registry import register
 
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
@@ -150,11 +151,14 @@ class MPCC(Formulation):
             branch identified there (``g_i = 0`` where ``g_i <= p_i``, else ``p_i = 0``), accepted
             under the same tests as above; the homotopy runs only when that fails.
         active_set : bool
-            Classical problems with small kinematics (one solution): before the homotopy, solve
-            the branch NLP of the branch the active-set predictor identifies (Fischer-Burmeister's
-            piece solves with kept factors), then, while the signs fail, of the branch identified
-            at its solution (a primal-dual active-set iteration of branch NLPs); accepted under
-            the same tests as above. The homotopy runs only when these fail.
+            Classical problems with small kinematics: before the homotopy, solve the branch NLP
+            of the branch a cheap classical solve identifies, accepted under the same tests as
+            above; the homotopy runs only when that fails. Without friction (one solution) the
+            branch is the active-set predictor's (Fischer-Burmeister's piece solves with kept
+            factors) and, while the signs fail, the one identified at the branch solution (a
+            primal-dual active-set iteration of branch NLPs); with Coulomb friction, the statuses
+            of Alart-Curnier's semismooth Newton solution (the augmented Lagrangian's), then the
+            branch NLP's own active-set rounds. IPOPT solves the branch NLPs from the start.
         ipopt : dict
             Extra IPOPT options passed through unchanged (copied).
         """
@@ -471,7 +475,7 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         self._nx, self._nc, self._b = nx, nc, b
         base = problem.parameters
         self.parameters = base.extend(tau=1)
-        P = ca.SX.sym("P", self.parameters.size)
+        P = ca.MX.sym("P", self.parameters.size)
         own, tau = P[:base.size], P[self.parameters.slice("tau")]
         mu = own[base.slice("friction")]
 
@@ -479,10 +483,10 @@ class _BuiltCoulombMPCC(BuiltFormulation):
             return [v[start + j * nc:start + (j + 1) * nc] for j in range(count)]
 
         def objective(z, P):
-            return problem.distance.render(z, P) if problem.kind == "mpcc" else ca.SX.zeros(1, 1)
+            return problem.distance.render(z, P) if problem.kind == "mpcc" else ca.MX.zeros(1, 1)
 
         # Relaxed NLP: the traction r = (p_N, mu p_N rho) is in the cone by construction.
-        w = ca.SX.sym("w", nx + b * nc)
+        w = ca.MX.sym("w", nx + b * nc)
         pn, direction = w[nx:nx + nc], split(w, nx + nc, b - 1)
         r = cone_traction(pn, direction, mu)
         z = ca.vertcat(w[:nx], *r)
@@ -501,19 +505,34 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         # Branch NLP in z = [x; p]: the residual, b equations per contact and one more row (p_N at
         # a corner, the cone's surface mu^2 p_N^2 - |r_T|^2 at an edge; free elsewhere), the
         # statuses parameters (a square system for the classical problem).
-        zb = ca.SX.sym("z", nx + b * nc)
-        Pb = ca.SX.sym("P", base.size + 4 * nc)
-        own, (is_open, is_stick, is_corner, is_edge) = Pb[:base.size], split(Pb, base.size, 4)
-        ab, rb = split(problem.gap_map.render(zb, own), 0, b), split(zb, nx, b)
-        mu_b = own[base.slice("friction")]
-        surface = mu_b**2 * rb[0]**2 - sum(v**2 for v in rb[1:])
+        # The per-contact rows are one SX Function of the contacts' vectors (MX's if_else takes
+        # only a scalar condition), called on the MX maps.
+        a_s, r_s, mu_s, flags = (ca.SX.sym(n, k * nc) for n, k in (("a", b), ("r", b), ("mu", 1), ("flags", 4)))
+        is_open, is_stick, is_corner, is_edge = split(flags, 0, 4)
+        rs = split(r_s, 0, b)
+        surface = mu_s**2 * rs[0]**2 - sum(v**2 for v in rs[1:])
+        contact_rows = ca.Function("branch_rows", [a_s, r_s, mu_s, flags], [ca.vertcat(
+            *coulomb_branch(split(a_s, 0, b), rs, mu_s, is_open, is_stick + is_edge, is_corner),
+            ca.if_else(is_corner, rs[0], surface, True))])
+        zb = ca.MX.sym("z", nx + b * nc)
+        Pb = ca.MX.sym("P", base.size + 4 * nc)
+        own = Pb[:base.size]
         self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
             "x": zb, "p": Pb, "f": objective(zb, own),
             "g": ca.vertcat(problem.residual_map.render(zb, own),
-                            *coulomb_branch(ab, rb, mu_b, is_open, is_stick + is_edge, is_corner),
-                            ca.if_else(is_corner, rb[0], surface, True))},
+                            contact_rows(problem.gap_map.render(zb, own), zb[nx:], own[base.slice("friction")],
+                                         Pb[base.size:]))},
             {"ipopt": {**_ipopt_options(problem, opts), "max_iter": BRANCH_MAX_ITER}, **_NLPSOL})
         self._ne = ne
+        # Classical problems: the statuses of Alart-Curnier's semismooth Newton solution (as the
+        # augmented Lagrangian's, with its default penalty) start the branch NLPs.
+        self._predictor = None
+        if problem.kind == "mcp" and problem.affine and opts.active_set:
+            al = AugmentedLagrangian.Options()
+            gamma = problem.scaled_penalty(AugmentedLagrangian.DEFAULT_GAMMA_FACTOR * problem.contact_stiffness)
+            self._predictor = BuiltCoulomb(problem, "alart_curnier", gamma, 1.0, tol=al.newton_tol,
+                                           residual_tol=al.residual_tol, max_iter=al.max_iter,
+                                           comp_tol=max(al.tol, 1e-9), predictor=True)
 
     # ------------------------------------------------------------------ variables
     def _blocks(self, x, p, params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -562,6 +581,15 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         params = np.asarray(params, float)
         x0, p0 = np.asarray(x0, float), np.asarray(p0, float)
         state = state or {}
+        if self._predictor is not None:
+            predicted = self._predictor.solve(params, x0, p0)
+            if predicted.converged:
+                # IPOPT solves the branch NLP of the predicted statuses from the start
+                (x, p), iters, ok, status = self._branch_nlp(x0, p0, params, 0.0,
+                                                             self._status(predicted.x, predicted.p, params))
+                if ok:
+                    return self._done(x, p, params, True, predicted.iterations + iters, 1,
+                                      "converged (branch NLP of the predicted statuses)", status)
         last = state.get("status")
         if last is not None and np.array_equal(np.where(last < CORNER, last, -1),
                                                 np.where(last < CORNER, self._status(x0, p0, params), -1)):
