@@ -25,7 +25,10 @@ formulation's CasADi Functions) is measured against the same floor, for bars, tr
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
 Issue 28: ``DDCM search cost`` records, restarts + greedy against plain DDCM on the quality
 benchmark's noisy truss, their time ratio measured in this run (:func:`search_cost`), and ``first
-DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`).
+DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`);
+``solve / FB solve`` records, the augmented Lagrangian's and MPCC's solve time over
+Fischer-Burmeister's on the continuum examples, classical and DDCM (``hertz2d`` with ``--quick``,
+:data:`CONTINUUM_CASES` in the full run; :func:`formulation_ratios`).
 """
 
 from __future__ import annotations
@@ -820,6 +823,26 @@ def markdown(records: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: The continuum examples of the full run's formulation records (benchmarks/continuum_timings.py).
+CONTINUUM_CASES = ("hertz2d", "hertz3d", "nafems1", "two_spheres", "gmsh_cylinder_on_block", "sphere_shear3d")
+
+
+def formulation_ratios(case: str) -> list[dict]:
+    """Per variant and formulation on the example ``case``: the solve seconds (``seconds``) over
+    Fischer-Burmeister's in the same variant (``floor_seconds``), issue 28's targets: the augmented
+    Lagrangian at most 3, MPCC at most 10 (:func:`continuum_timings.case_timings`)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is a folder of scripts
+    from continuum_timings import case_timings
+
+    rows = case_timings([case], ("classical", "ddcm"), ("augmented_lagrangian", "fischer_burmeister", "mpcc"))
+    fb = {r["variant"]: r["solve_seconds"] for r in rows if r["formulation"] == "fischer_burmeister"}
+    return [dict(name=f"solve / FB solve, {case}, {r['variant']} {r['formulation']}", unknowns=r["unknowns"],
+                 data_points=0, seconds=r["solve_seconds"], floor_seconds=fb[r["variant"]], ratio=r["ratio_to_fb"],
+                 build_seconds=r["build_seconds"], cpu_seconds=r["cpu_seconds"], converged=r["converged"],
+                 steps=r["steps"], iterations_per_step=r["iterations_per_step"])
+            for r in rows if r["formulation"] != "fischer_burmeister"]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="smaller sizes and fewer repeats (about 5 minutes)")
@@ -914,6 +937,12 @@ def main(argv=None) -> int:
         for rec in in_fresh_process("first_solve_record", family, 2 * 10**4,
                                     label=f"first DDCM solve, 2-D continuum {family}, about 2e4 points",
                                     unknowns=0):
+            log(rec)
+    # Issue 28, item 2: every formulation's solve time over Fischer-Burmeister's on the continuum
+    # examples, classical and DDCM (one BLAS thread, a fresh process per case).
+    for case in (("hertz2d",) if quick else CONTINUUM_CASES):
+        for rec in in_fresh_process("formulation_ratios", case, label=f"formulations on {case}", unknowns=0,
+                                    env={"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}):
             log(rec)
     write_json_atomic(out / "benchmarks.json", records)
     write_bytes_atomic(out / "benchmarks.md", markdown(records).encode())
