@@ -475,7 +475,12 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         self._nx, self._nc, self._b = nx, nc, b
         base = problem.parameters
         self.parameters = base.extend(tau=1)
-        P = ca.MX.sym("P", self.parameters.size)
+        # Classical problems in MX (the sparse maps kept whole: the build took 9.4 s CPU in SX on
+        # sphere_shear3d, about 1 s in MX, same solutions); projections in SX as before: onto the
+        # frictional set they are nonconvex, and MX's other roundoff led IPOPT to other local KKT
+        # points on the friction rungs' block (docs/performance.md).
+        sym = ca.MX if problem.kind == "mcp" else ca.SX
+        P = sym.sym("P", self.parameters.size)
         own, tau = P[:base.size], P[self.parameters.slice("tau")]
         mu = own[base.slice("friction")]
 
@@ -483,10 +488,10 @@ class _BuiltCoulombMPCC(BuiltFormulation):
             return [v[start + j * nc:start + (j + 1) * nc] for j in range(count)]
 
         def objective(z, P):
-            return problem.distance.render(z, P) if problem.kind == "mpcc" else ca.MX.zeros(1, 1)
+            return problem.distance.render(z, P) if problem.kind == "mpcc" else sym.zeros(1, 1)
 
         # Relaxed NLP: the traction r = (p_N, mu p_N rho) is in the cone by construction.
-        w = ca.MX.sym("w", nx + b * nc)
+        w = sym.sym("w", nx + b * nc)
         pn, direction = w[nx:nx + nc], split(w, nx + nc, b - 1)
         r = cone_traction(pn, direction, mu)
         z = ca.vertcat(w[:nx], *r)
@@ -514,8 +519,8 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         contact_rows = ca.Function("branch_rows", [a_s, r_s, mu_s, flags], [ca.vertcat(
             *coulomb_branch(split(a_s, 0, b), rs, mu_s, is_open, is_stick + is_edge, is_corner),
             ca.if_else(is_corner, rs[0], surface, True))])
-        zb = ca.MX.sym("z", nx + b * nc)
-        Pb = ca.MX.sym("P", base.size + 4 * nc)
+        zb = sym.sym("z", nx + b * nc)
+        Pb = sym.sym("P", base.size + 4 * nc)
         own = Pb[:base.size]
         self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
             "x": zb, "p": Pb, "f": objective(zb, own),
