@@ -832,9 +832,10 @@ def formulation_ratios(case: str) -> list[dict]:
     Fischer-Burmeister's in the same variant (``floor_seconds``), issue 28's targets: the augmented
     Lagrangian at most 3, MPCC at most 10 (:func:`continuum_timings.case_timings`)."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is a folder of scripts
-    from continuum_timings import case_timings
+    from continuum_timings import CLASSICAL_ONLY, case_timings
 
-    rows = case_timings([case], ("classical", "ddcm"), ("augmented_lagrangian", "fischer_burmeister", "mpcc"))
+    variants = ("classical",) if case in CLASSICAL_ONLY else ("classical", "ddcm")
+    rows = case_timings([case], variants, ("augmented_lagrangian", "fischer_burmeister", "mpcc"))
     fb = {r["variant"]: r["solve_seconds"] for r in rows if r["formulation"] == "fischer_burmeister"}
     return [dict(name=f"solve / FB solve, {case}, {r['variant']} {r['formulation']}", unknowns=r["unknowns"],
                  data_points=0, seconds=r["solve_seconds"], floor_seconds=fb[r["variant"]], ratio=r["ratio_to_fb"],
