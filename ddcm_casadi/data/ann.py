@@ -123,9 +123,12 @@ class CertifiedSearch(NeighbourSearch):
 
     def exact_distance(self, q: np.ndarray, idx: np.ndarray) -> np.ndarray:
         """``|q - y_idx|`` in float64 from the exact coordinates (``idx`` any shape ``(n, ...)``)."""
-        y = self.points[idx]
-        diff = y - q.reshape((q.shape[0],) + (1,) * (idx.ndim - 1) + (q.shape[1],))
-        return np.sqrt(np.einsum("...i,...i->...", diff, diff))
+        return _distances(q, np.asarray(self.points[idx], dtype=np.float64))
+
+    def _rows(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The float64 coordinates of the stored rows ``a:b`` and their data indices (``None``:
+        ``a + arange``), for :meth:`brute_force`."""
+        return np.asarray(self.points[a:b], dtype=np.float64), None
 
     def brute_force(self, q: np.ndarray) -> Certificate:
         """The exact nearest of each query by a pass over all data in float64 (for the rare
@@ -135,19 +138,25 @@ class CertifiedSearch(NeighbourSearch):
         best = np.full(n, np.inf)
         rows = max(1, (1 << 22) // max(1, n * d))
         for a in range(0, self.points.shape[0], rows):
-            y = np.asarray(self.points[a:a + rows], dtype=np.float64)
+            y, which = self._rows(a, a + rows)
             diff = y[None, :, :] - q[:, None, :]
             d2 = np.einsum("qjd,qjd->qj", diff, diff)
             j = np.argmin(d2, axis=1)
             dist = np.sqrt(d2[np.arange(n), j])
             better = dist < best
-            index[better], best[better] = j[better] + a, dist[better]
+            index[better], best[better] = (j[better] + a if which is None else which[j[better]]), dist[better]
         return Certificate(index, best, np.full(n, np.inf), np.ones(n, dtype=bool))
 
     def k_nearest(self, queries, k: int) -> np.ndarray:
         if self.base is None:
             raise InputError(f"the {self.name} search answers k_nearest through an exact search given at build")
         return self.base.k_nearest(queries, k)
+
+
+def _distances(q: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``|q_i - y_i...|`` in float64, ``y`` of shape ``(n, ..., d)``."""
+    diff = y - q.reshape((q.shape[0],) + (1,) * (y.ndim - 2) + (q.shape[1],))
+    return np.sqrt(np.einsum("...i,...i->...", diff, diff))
 
 
 def _rounding(values_max: float, dtype) -> float:
@@ -206,8 +215,44 @@ class StripSearch(CertifiedSearch):
         X = points
         if X.ndim != 2 or X.shape[1] < 2 or X.shape[0] < 1:
             raise InputError(f"the strip search needs (N, 2) coordinates (one-component data), got shape {X.shape}")
-        n = X.shape[0]
-        lo, hi = X.min(axis=0).astype(np.float64), X.max(axis=0).astype(np.float64)
+        return cls._built(X, lambda a, b: X[a:b], base if base is not None and base.points is points else None)
+
+    @classmethod
+    def from_npy(cls, path) -> "StripSearch":
+        """The search over the ``(N, 2)`` coordinates of a ``.npy`` file larger than memory: the
+        file is read in blocks by plain reads (its pages stay in the operating system's page
+        cache, outside the process) and kept memory-mapped as :attr:`points`, which a float32
+        file never needs again (its keys are its values)."""
+        X = np.load(path, mmap_mode="r")
+        if X.ndim != 2 or X.shape[1] < 2 or X.shape[0] < 1 or X.dtype.kind != "f" or not X.flags.c_contiguous:
+            raise InputError(f"the strip search needs an (N, 2) float array in C order in {path}, got "
+                             f"{X.dtype} {X.shape}")
+        row = X.dtype.itemsize * X.shape[1]
+
+        def read(a: int, b: int) -> np.ndarray:
+            with open(path, "rb") as fh:
+                fh.seek(X.offset + a * row)
+                return np.fromfile(fh, dtype=X.dtype, count=(b - a) * X.shape[1]).reshape(b - a, X.shape[1])
+        return cls._built(X, read, None)
+
+    #: Rows read per block by the build's passes over the data.
+    READ = 1 << 22
+    #: Data per group of strips sorted at once by the build (one packed 64-bit key a datum).
+    GROUP = 1 << 20
+    #: Bits of the packed key left to a group's strip and position (32 go to the key ``b``).
+    PACK = 32
+
+    @classmethod
+    def _built(cls, X, read, base) -> "StripSearch":
+        """The build: one pass for the extremes, one for the strip counts, one that deals the
+        data to groups of consecutive strips (a counting sort, O(N)), and a sort within each
+        group of at most :attr:`GROUP` data (strip, then key ``b``). Beside the result (12 bytes
+        a datum) it holds one block of :attr:`READ` rows and one group."""
+        n, dim = X.shape
+        lo, hi = np.full(dim, np.inf), np.full(dim, -np.inf)
+        for c in range(0, n, cls.READ):
+            block = read(c, min(n, c + cls.READ))
+            lo, hi = np.minimum(lo, block.min(axis=0)), np.maximum(hi, block.max(axis=0))
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):  # NaN propagates to the extremes
             raise InputError("the strip search's coordinates must be finite")
         extent = hi - lo
@@ -215,30 +260,44 @@ class StripSearch(CertifiedSearch):
         L, H = float(extent[a]), float(extent[b])
         width = max(math.sqrt(L * H * cls.PER_CELL / n), L * cls.PER_CELL / n) if L > 0 else 1.0
         strips = min(int(L / width) + 1, n)
-        # one sort of a composite key (strip, then key b as float32 bits in a monotone code): 3x
-        # faster than numpy's lexsort of the two (measured at 1e7)
-        code = np.empty(n, dtype=np.uint64)
-        for c in range(0, n, CHUNK):
-            t = np.clip(np.floor((X[c:c + CHUNK, a] - lo[a]) / width), 0, strips - 1).astype(np.uint64)
-            bits = X[c:c + CHUNK, b].astype(np.float32).view(np.uint32).astype(np.uint64)
-            bits = np.where(bits >> np.uint64(31), ~bits & np.uint64(0xFFFFFFFF), bits | np.uint64(1 << 31))
-            code[c:c + CHUNK] = (t << np.uint64(32)) | bits
-        order = np.argsort(code, kind="stable")
+
+        def strip(key_a: np.ndarray) -> np.ndarray:
+            # from the float32 key, so that every pass (and the sort) puts a datum in one strip
+            return np.clip(np.floor((key_a.astype(np.float64) - lo[a]) / width), 0, strips - 1).astype(np.int64)
+
         counts = np.zeros(strips, dtype=np.int64)
-        for c in range(0, n, CHUNK):  # by blocks: no strip index of every datum at once
-            counts += np.bincount((code[c:c + CHUNK] >> np.uint64(32)).astype(np.intp), minlength=strips)
-        del code
-        keys = np.empty((2, n), dtype=np.float32)  # rows a and b, each contiguous (fast gathers)
-        for c in range(0, n, CHUNK):
-            rows = order[c:c + CHUNK]
-            keys[0, c:c + CHUNK] = X[rows, a]
-            keys[1, c:c + CHUNK] = X[rows, b]
-        perm = order.astype(np.int32) if n < 2**31 else order
-        del order
+        for c in range(0, n, cls.READ):
+            counts += np.bincount(strip(read(c, min(n, c + cls.READ))[:, a].astype(np.float32)), minlength=strips)
         offsets = np.zeros(strips + 1, dtype=np.int64)
         np.cumsum(counts, out=offsets[1:])
-        full = counts > 0
+        # groups of consecutive strips: at most GROUP data (or one strip) and 2^12 strips, so that
+        # strip (12 bits), key b (32) and position (20) pack into one uint64 of the group's sort
+        span = 1 << 12
+        first = np.flatnonzero(np.diff(np.minimum(offsets[:-1] // cls.GROUP, n) * (strips // span + 1)
+                                       + np.arange(strips) // span, prepend=-1))
+        group = np.zeros(strips, dtype=np.int64)
+        group[first[1:]] = 1
+        group = np.cumsum(group).astype(np.uint16 if first.size < 2**16 else np.int64)
+        starts = np.append(offsets[first], n)
+        keys = np.empty((2, n), dtype=np.float32)  # rows a and b, each contiguous (fast gathers)
+        perm = np.empty(n, dtype=np.int32 if n < 2**31 else np.int64)
+        fill = starts[:-1].copy()
+        for c in range(0, n, cls.READ):  # deal the data to their groups
+            block = read(c, min(n, c + cls.READ))
+            ka, kb = block[:, a].astype(np.float32), block[:, b].astype(np.float32)
+            g = group[strip(ka)]
+            order = np.argsort(g, kind="stable")  # a radix sort for up to 2^16 groups
+            g = g[order].astype(np.int64)
+            per = np.bincount(g, minlength=first.size)
+            head = np.cumsum(per) - per  # where each group starts in the block's order
+            dest = fill[g] + np.arange(g.size) - head[g]
+            keys[0, dest], keys[1, dest], perm[dest] = ka[order], kb[order], order + c
+            fill += per
+        for s0, s1 in zip(starts[:-1], starts[1:]):  # each group sorted by (strip, key b)
+            if s1 - s0 > 1:
+                cls._sort_group(keys[:, s0:s1], perm[s0:s1], strip(keys[0, s0:s1]))
         lo_t, hi_t = np.full(strips, np.inf), np.full(strips, -np.inf)
+        full = counts > 0
         lo_t[full] = np.minimum.reduceat(keys[0], offsets[:-1][full])
         hi_t[full] = np.maximum.reduceat(keys[0], offsets[:-1][full])
         right_lo = np.minimum.accumulate(lo_t[::-1])[::-1]  # least key a of strips >= t
@@ -246,11 +305,46 @@ class StripSearch(CertifiedSearch):
         reach = np.maximum(np.abs(lo), np.abs(hi))
         delta = (_rounding(reach[a], X.dtype), _rounding(reach[b], X.dtype))
         return cls(X, keys, perm, offsets, (a, b), width, lo[a], lo_t, hi_t, right_lo, left_hi,
-                   (lo[b], hi[b]), delta, base if base is not None and base.points is points else None)
+                   (lo[b], hi[b]), delta, base)
+
+    @staticmethod
+    def _sort_group(keys: np.ndarray, perm: np.ndarray, t: np.ndarray) -> None:
+        """Sort one group's ``keys`` (2, m) and ``perm`` in place by strip ``t``, then key ``b``:
+        one ``uint64`` a datum (strip, the key's order-preserving bits, position) when they fit,
+        else an argsort of (strip, key bits)."""
+        m = perm.size
+        bits = keys[1].view(np.uint32).astype(np.uint64)
+        code = np.where(bits >> np.uint64(31), ~bits & np.uint64(0xFFFFFFFF), bits | np.uint64(1 << 31))
+        t = (t - t.min()).astype(np.uint64)  # the group's strips are consecutive
+        place = max(int(m - 1).bit_length(), 0)
+        if place + int(t.max()).bit_length() <= StripSearch.PACK:
+            code |= t << np.uint64(32)
+            code <<= np.uint64(place)
+            code |= np.arange(m, dtype=np.uint64)
+            code.sort()
+            order = (code & np.uint64((1 << place) - 1)).astype(np.intp)
+        else:
+            order = np.argsort(code | (t << np.uint64(32)), kind="stable")
+        keys[0], keys[1], perm[:] = keys[0][order], keys[1][order], perm[order]
 
     @property
     def points(self) -> np.ndarray:
         return self._points
+
+    def _coordinates(self, pos: np.ndarray) -> np.ndarray:
+        """The float64 coordinates of the data at sorted positions ``pos`` (any shape): the keys
+        where they are the coordinates (float32 data; the points are then never read), else the
+        exact points."""
+        if not self.exact_keys:
+            return np.asarray(self.points[self.perm[pos]], dtype=np.float64)
+        y = np.empty(pos.shape + (2,))
+        y[..., self.axes[0]], y[..., self.axes[1]] = self.keys[0][pos], self.keys[1][pos]
+        return y
+
+    def _rows(self, a, b):
+        if not self.exact_keys:
+            return super()._rows(a, b)
+        return self._coordinates(np.arange(a, min(b, self.perm.size))), self.perm[a:b]
 
     #: Queries per block of the first search: its temporaries (48 candidates a query) stay in cache
     #: (blocks of 65 536 queries took 2-3x longer, measured at 1e6 data on a loaded machine).
@@ -272,8 +366,8 @@ class StripSearch(CertifiedSearch):
         filled = np.flatnonzero(np.diff(self.offsets))
         s = np.clip(np.floor((q[:, self.axes[0]] - self.low) / self.width), 0, self.lo_t.size - 1)
         k = np.clip(np.searchsorted(filled, s), 0, filled.size - 1)
-        j = self.perm[self.offsets[filled[k]]].astype(np.intp)
-        return j, self.exact_distance(q, j)
+        p = self.offsets[filled[k]]
+        return self.perm[p].astype(np.intp), _distances(q, self._coordinates(p))
 
     def _position(self, t: np.ndarray, value: np.ndarray, right: bool) -> np.ndarray:
         """The insertion point of ``value`` among the sorted keys ``b`` of strip ``t`` (bisection,
@@ -327,7 +421,7 @@ class StripSearch(CertifiedSearch):
                 if not flat.size:
                     continue
                 owner = np.repeat(rows, counts)
-                diff = np.asarray(self.points[self.perm[flat]], dtype=np.float64) - q[owner]
+                diff = self._coordinates(flat) - q[owner]
                 dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
                 order = np.lexsort((dist, owner))
                 first = np.ones(order.size, dtype=bool)
@@ -385,7 +479,7 @@ class StripSearch(CertifiedSearch):
             rest = (np.sqrt(np.partition(kd2, 2, axis=1)[:, 2]) - math.hypot(da, db) if kd2.shape[1] > 2
                     else np.full(n, np.inf))
             cand = pos[rows[:, None], two]
-            exact = self.exact_distance(q, self.perm[cand])
+            exact = _distances(q, self._coordinates(cand))
             j = np.argmin(exact, axis=1)
             best_pos, best = cand[rows, j], exact[rows, j]
         # bounds of the data left in the examined strips ...
