@@ -193,3 +193,18 @@ def test_strips_over_a_float32_file_never_read_the_points_again(tmp_path, monkey
     cert = search.certified(Q)
     np.testing.assert_allclose(cert.distance, _brute(X, Q), rtol=_tolerance(2), atol=0)
     assert np.array_equal(search.brute_force(Q).distance, cert.distance)
+
+
+def test_float32_storage_of_float64_data_costs_at_most_twice_its_rounding():
+    """Exact for the data as stored in float32; against the float64 data they were rounded from,
+    each datum moved by at most ``2^-24 R``, so the answer is at most ``2^-23 R`` (with the
+    distances' float64 roundoff) farther than the nearest."""
+    base = _clouds()["band"][0] * 1e3 + 7.0
+    X = np.vstack([base, base + RNG.normal(0, 1e-6, base.shape)])  # pairs that float32 (ulp 6e-5) merges
+    Q = X[RNG.integers(0, len(X), 500)] + RNG.normal(0, 1e-4, (500, 2))
+    found = StripSearch.build(X.astype(np.float32)).nearest(Q)
+    R = float(np.max(np.linalg.norm(X, axis=1)))
+    d = np.sqrt(np.einsum("ij,ij->i", X[found] - Q, X[found] - Q))
+    truth = _brute(X, Q)
+    assert np.all(d <= truth * (1 + _tolerance(2)) + 2.0 ** -23 * R)
+    assert np.any(d > truth * (1 + _tolerance(2)))  # the rounding does change answers here
