@@ -218,6 +218,10 @@ class StripSearch(CertifiedSearch):
         self.lo_t, self.hi_t, self.right_lo, self.left_hi = lo_t, hi_t, right_lo, left_hi
         self.b_range, self.delta, self.base = b_range, delta, base
         self.largest = int(np.max(np.diff(offsets)))
+        # each strip's key-b extent (its first and last key): a strip's box bounds all its data
+        full = np.diff(offsets) > 0
+        self.b_lo_t, self.b_hi_t = np.full(full.size, np.inf), np.full(full.size, -np.inf)
+        self.b_lo_t[full], self.b_hi_t[full] = keys[1][offsets[:-1][full]], keys[1][offsets[1:][full] - 1]
         #: The keys are the coordinates themselves (two float32 columns): key distances are exact.
         self.exact_keys = points.shape[1] == 2 and delta == (0.0, 0.0)
 
@@ -419,11 +423,13 @@ class StripSearch(CertifiedSearch):
 
     def _rings(self, q: np.ndarray, index: np.ndarray, radius: np.ndarray):
         """Examine every datum nearer than the best so far, strips outwards from the query's
-        (ring ``k``: strips ``s - k`` and ``s + k``; several rings a pass, :attr:`RING_STEP`): in
-        strip ``t`` the keys ``b`` within ``sqrt(radius^2 - g_t^2)`` of ``q_b``; the radius shrinks
+        (ring ``k``: strips ``s - k`` and ``s + k``; several rings a pass, :attr:`RING_STEP`):
+        in strip ``t``, unless its box ``[lo_t, hi_t] x [b_lo_t, b_hi_t]`` is farther than the
+        radius, the keys ``b`` within ``sqrt(radius^2 - g_t^2)`` of ``q_b``; the radius shrinks
         to the best distance found. A query stops when the strips beyond its ring are farther
-        than its radius, so what is left is farther than the answer: certified, ``B = radius`` (enlarged by a relative ``1e-9``
-        so that the float64 distances of the examined data stay below it)."""
+        than its radius, so what is left is farther than the answer: certified, ``B = radius``
+        (enlarged by a relative ``1e-9`` so that the float64 distances of the examined data stay
+        below it)."""
         a, b = self.axes
         strips = self.lo_t.size
         grow = 1.0 + 1e-9
@@ -442,20 +448,22 @@ class StripSearch(CertifiedSearch):
             keep = (t >= 0) & (t < strips)
             rows, t = np.repeat(todo, ks.size)[keep], t[keep]
             g = self._strip_gap(t, qa[rows])
-            near = g <= radius[rows]
+            with np.errstate(invalid="ignore"):  # empty strips: inf - inf, and g = inf
+                gb = np.maximum(self.b_lo_t[t] - qb[rows], qb[rows] - self.b_hi_t[t]) - self.delta[1]
+            near = np.hypot(g, np.maximum(gb, 0.0)) <= radius[rows]  # the strip's box within the radius
             rows, t, g = rows[near], t[near], g[near]
             h = np.sqrt(radius[rows] ** 2 - g ** 2) + self.delta[1]
             p0 = self._position(t, qb[rows] - h, right=False)
             counts = self._position(t, qb[rows] + h, right=True) - p0
             flat = np.repeat(p0 - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
             if flat.size:
-                owner = np.repeat(rows, counts)
+                owner = np.repeat(rows, counts)  # in runs, one a query (rows are by query)
                 diff = self._coordinates(flat) - q[owner]
                 dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-                order = np.lexsort((dist, owner))
-                first = np.ones(order.size, dtype=bool)
-                first[1:] = owner[order][1:] != owner[order][:-1]
-                win = order[first]
+                starts = np.flatnonzero(np.diff(owner, prepend=-1))
+                low = np.repeat(np.minimum.reduceat(dist, starts), np.diff(starts, append=dist.size))
+                win = np.flatnonzero(dist == low)  # each run's nearest (ties: the first of the run)
+                win = win[np.diff(owner[win], prepend=-1) != 0]
                 better = dist[win] < best[owner[win]]
                 win = win[better]
                 index[owner[win]], best[owner[win]] = self.perm[flat[win]], dist[win]
