@@ -113,14 +113,15 @@ def slab_check(path: Path, Q: np.ndarray, distance: np.ndarray) -> np.ndarray:
     n, offset = X.shape[0], X.offset
     with open(path, "rb") as fh:
         fh.seek(offset)
-        for a in range(0, n, 1 << 22):
-            y = np.fromfile(fh, dtype=np.float32, count=2 * min(1 << 22, n - a)).reshape(-1, 2).astype(np.float64)
+        for a in range(0, n, 1 << 18):  # small blocks: their temporaries stay in malloc's heap
+            y = np.fromfile(fh, dtype=np.float32, count=2 * min(1 << 18, n - a)).reshape(-1, 2)
+            y0 = y[:, 0].astype(np.float64)
             for layer in layers:
-                k = np.searchsorted(lo[layer], y[:, 0], side="right") - 1
-                inside = (k >= 0) & (y[:, 0] <= hi[layer][np.maximum(k, 0)])
+                k = np.searchsorted(lo[layer], y0, side="right") - 1
+                inside = np.flatnonzero((k >= 0) & (y0 <= hi[layer][np.maximum(k, 0)]))
                 owner = layer[k[inside]]
-                d = np.sqrt(np.einsum("ij,ij->i", y[inside] - Q[owner], y[inside] - Q[owner]))
-                np.minimum.at(best, owner, d)
+                diff = y[inside].astype(np.float64) - Q[owner]
+                np.minimum.at(best, owner, np.sqrt(np.einsum("ij,ij->i", diff, diff)))
     return best
 
 
