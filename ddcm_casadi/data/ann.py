@@ -404,18 +404,18 @@ class StripSearch(CertifiedSearch):
 
     def _position(self, t: np.ndarray, value: np.ndarray, right: bool) -> np.ndarray:
         """The insertion point of ``value`` among the sorted keys ``b`` of strip ``t`` (bisection,
-        vectorised; ``right``: after equal keys)."""
-        lo, hi = self.offsets[t].copy(), self.offsets[t + 1].copy()
-        keys = self.keys[1]
-        while True:
-            active = lo < hi
-            if not active.any():
-                return lo
-            mid = (lo + hi) // 2
-            k = keys[np.where(active, mid, 0)]
-            go = active & ((k <= value) if right else (k < value))
-            lo = np.where(go, mid + 1, lo)
-            hi = np.where(active & ~go, mid, hi)
+        vectorised and branch-free: the answer stays in ``[base, base + length]``, each level
+        halves ``length``; ``right``: after equal keys)."""
+        base = self.offsets[t].copy()
+        length = self.offsets[t + 1] - base
+        keys, last = self.keys[1], self.keys[1].size - 1
+        below = np.less_equal if right else np.less
+        for _ in range(int(length.max(initial=0)).bit_length()):
+            half = length >> 1
+            mid = base + half
+            base = np.where(below(keys[np.minimum(mid, last)], value), mid, base)
+            length -= half
+        return base + ((length > 0) & below(keys[np.minimum(base, last)], value))
 
     def _strip_gap(self, t: np.ndarray, qa: np.ndarray) -> np.ndarray:
         """``dist(q_a, [lo_t, hi_t])`` less the keys' rounding (``inf`` for an empty strip)."""
