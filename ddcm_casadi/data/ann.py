@@ -208,8 +208,10 @@ class StripSearch(CertifiedSearch):
     name = "strips"
     #: Data per ``w x w`` cell the strip width aims at.
     PER_CELL = 8
-    #: Half-width ``m`` of the first search's window in each strip.
-    WINDOW = 8
+    #: Half-width ``m`` of the first search's window in each strip: 6 answered 1e5 states of 1e8
+    #: data, all certified, in 0.36 s CPU (5: 0.37, 8: 0.40, 10: 0.50; the first search certifies
+    #: 91 % at 6, 97 % at 8, and the widening is cheap).
+    WINDOW = 6
 
     def __init__(self, points, keys, perm, offsets, axes, width, low, lo_t, hi_t, right_lo, left_hi,
                  b_range, delta, base=None) -> None:
