@@ -208,3 +208,20 @@ def test_float32_storage_of_float64_data_costs_at_most_twice_its_rounding():
     truth = _brute(X, Q)
     assert np.all(d <= truth * (1 + _tolerance(2)) + 2.0 ** -23 * R)
     assert np.any(d > truth * (1 + _tolerance(2)))  # the rounding does change answers here
+
+
+def test_strip_build_with_more_groups_than_sixteen_bits(monkeypatch):
+    """More than 2^16 groups of strips (their ids int64, the deal's argsort no longer a radix
+    sort of uint16): the strips are still sorted and the answers exact."""
+    monkeypatch.setattr(StripSearch, "GROUP", 1)
+    n = 540_000  # n / 8 strips of a line, one group each
+    X = np.column_stack([np.linspace(-1.0, 1.0, n), 1e-9 * RNG.normal(size=n)]).astype(np.float32)  # a line
+    search = StripSearch.build(X)
+    assert np.count_nonzero(np.diff(search.offsets)) > 2**16
+    strip = np.repeat(np.arange(search.lo_t.size), np.diff(search.offsets))
+    assert np.all((np.diff(search.keys[1]) >= 0) | (np.diff(strip) > 0))
+    assert np.array_equal(np.sort(search.perm), np.arange(n))
+    Q = X[RNG.integers(0, n, 300)].astype(np.float64) + RNG.normal(0, 1e-5, (300, 2))
+    found = search.nearest(Q)
+    d = np.sqrt(np.einsum("ij,ij->i", X[found] - Q, X[found] - Q))
+    np.testing.assert_allclose(d, _brute(X, Q), rtol=_tolerance(2), atol=0)
