@@ -12,9 +12,9 @@ in a temporary folder (``--tmp``, default ``/tmp``) by another process (:func:`l
 set larger than memory would be: the file's pages stay in the page cache, outside the measured
 process. Its answers on a sample of 200 states are checked against an exact search that shares
 nothing with it (:func:`slab_check`). Measured (wall and CPU seconds: on a shared machine the
-process may get a fraction of a core, and CPU seconds are what it needed): build seconds; seconds to answer every state exactly (the certified
-search widened until every answer is certified); the share certified by the first search and
-its seconds; the memory of the structure (bytes a point beside the data) and the process's peak
+process may get a fraction of a core, and CPU seconds are what it needed): build seconds;
+seconds to answer every state exactly (the certified search widened until every answer is
+certified); the share certified by the first search and its seconds; the memory of the structure (bytes a point beside the data) and the process's peak
 resident memory above the imports (Linux ``VmHWM``), data included. Prints a table and writes
 ``DIR/ann_search_N_k.json`` (atomically).
 """
