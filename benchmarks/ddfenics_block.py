@@ -119,6 +119,21 @@ def run_pair(divisions: int, peer_python: str | None) -> dict:
         return rec
 
 
+def peer_record(divisions: int, peer_python: str) -> dict:
+    """:func:`run_pair` as a record of ``benchmarks/run.py``: ``seconds`` ours per iteration,
+    ``floor_seconds`` ddfenics', ``ratio`` theirs (issue 28's target: at most 0.5)."""
+    r = run_pair(divisions, peer_python)
+    o, p = r["ours"], r["ddfenics"]
+    return dict(name=f"DDCM iteration against ddfenics, 2-D block {divisions}x{divisions}, P1, no contact",
+                unknowns=o["dofs"], data_points=o["data_points"], seconds=o["seconds_per_iteration"],
+                floor_seconds=p["seconds_per_iteration"], ratio=r["time_ratio"], memory_ratio=r["memory_ratio"],
+                peak_memory_bytes=o["peak_memory_bytes"], peer_peak_memory_bytes=p["peak_memory_bytes"],
+                setup_seconds=o["setup_seconds"], peer_setup_seconds=p["setup_seconds"],
+                iterations=o["iterations"], peer_iterations=p["iterations"], same_datum_share=r["same_datum_share"],
+                distance_relative_difference=r["distance_relative_difference"],
+                note="seconds: ddcm-casadi per iteration; floor: ddfenics per iteration; target ratio <= 0.5")
+
+
 def markdown(records: list[dict]) -> str:
     rows = ["| points | dofs | iterations (ours / ddfenics) | s / iteration, ours (projection + search) | "
             "s / iteration, ddfenics (whole loop) | ratio | set-up s (ours / ddfenics) | peak GB (ours / ddfenics) | "

@@ -25,7 +25,9 @@ formulation's CasADi Functions) is measured against the same floor, for bars, tr
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
 Issue 28: ``DDCM search cost`` records, restarts + greedy against plain DDCM on the quality
 benchmark's noisy truss, their time ratio measured in this run (:func:`search_cost`), and ``first
-DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`).
+DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`);
+with ``$DDFENICS_PYTHON`` set, ``DDCM iteration against ddfenics`` records (``benchmarks/ddfenics_block.py``:
+5e3 points, and 1e5 in the full run; ratio = our seconds per iteration over ddfenics').
 """
 
 from __future__ import annotations
@@ -915,6 +917,16 @@ def main(argv=None) -> int:
                                     label=f"first DDCM solve, 2-D continuum {family}, about 2e4 points",
                                     unknowns=0):
             log(rec)
+    # Issue 28: plain DDCM without contact against ddfenics on the same block, where a Python with
+    # DOLFINx and ddfenicsx is given ($DDFENICS_PYTHON; benchmarks/ddfenics_block.py).
+    from ddfenics_block import peer_record
+
+    peer = os.environ.get("DDFENICS_PYTHON")
+    if peer is None:
+        print("no $DDFENICS_PYTHON: the ddfenics comparison is left out", file=sys.stderr)
+    else:
+        for n in ((50,) if quick else (50, 224)):
+            log(peer_record(n, peer))
     write_json_atomic(out / "benchmarks.json", records)
     write_bytes_atomic(out / "benchmarks.md", markdown(records).encode())
     print(f"wrote benchmarks.json and benchmarks.md to {out}", file=sys.stderr)
