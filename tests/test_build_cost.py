@@ -9,19 +9,9 @@ import numpy as np
 import scipy.sparse as sp
 
 import ddcm_casadi.models.scales as scales
-from ddcm_casadi.casefiles.base import read_document
-from ddcm_casadi.casefiles.config import case_from_dict
 from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.problems.reduction import Reduction
-from ddcm_casadi.validation.continuum import EXAMPLE
-
-
-def hertz_block(divisions: int = 4):
-    doc = read_document(EXAMPLE)
-    doc["mesh"]["divisions"] = [divisions, divisions]
-    doc["mesh"].pop("refine_near", None)
-    doc["data"]["hookean"]["points"] = 11
-    return case_from_dict(doc, base_dir=EXAMPLE.parent, source="hertz block").model
+from tests.test_reduction import hertz_block
 
 
 def _counting(monkeypatch) -> list:
@@ -37,14 +27,14 @@ def _counting(monkeypatch) -> list:
 
 
 def test_proportional_kinds_share_one_factorisation(monkeypatch):
-    model = hertz_block()
+    model = hertz_block(4)
     D_c, D_d = (np.broadcast_to(model.point_stiffness(k), (model.n_points,)) for k in ("classical", "ddcm"))
     assert np.allclose(D_d, D_d[0] / D_c[0] * D_c, rtol=4 * np.finfo(float).eps, atol=0)  # the case under test
     calls = _counting(monkeypatch)
     shared = {k: model.scales_for(k) for k in ("classical", "ddcm")}
     assert len(calls) == 1
     # the long way: the data-driven kind alone, on a fresh model (its own factorisation)
-    alone = hertz_block().scales_for("ddcm")
+    alone = hertz_block(4).scales_for("ddcm")
     assert len(calls) == 2
     # Both are backward-stable solves of one system (up to the factor beta), so the solutions,
     # and the maxima the scales are, agree to cond(A) eps, A the stiffness with the pair springs.
@@ -57,7 +47,7 @@ def test_proportional_kinds_share_one_factorisation(monkeypatch):
 
 
 def test_model_with_one_kind_factorises_once(monkeypatch):
-    model = hertz_block()
+    model = hertz_block(4)
     calls = _counting(monkeypatch)
     model.scales_for("classical")
     model.scales_for("classical")  # cached
