@@ -19,7 +19,9 @@ import pytest
 from ddcm_casadi import ConvergenceError, InputError, compare
 from ddcm_casadi.commands.compare import main
 from ddcm_casadi.outputs.save import save_figures
-from ddcm_casadi.parallel import map_forked, resolve_jobs
+from ddcm_casadi.drivers.ddcm_reduced import build_projection
+from ddcm_casadi.drivers.path import DDCMSolver, solve_classical
+from ddcm_casadi.parallel import blas_thread_limit, blas_threads, map_forked, resolve_jobs
 
 from .interrupt import interrupt_at
 from .test_first_run import FIELDS
@@ -198,3 +200,30 @@ def test_map_forked_forks_beside_the_factorising_thread():
     reference = factorize(A).solve(np.ones(n))[0]
     assert [v for v, _ in out] == pytest.approx([i * reference for i in range(4)])
     assert len({pid for _, pid in out}) > 1
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+def test_the_solves_run_with_the_blas_threads_of_ddcm_blas_threads(monkeypatch):
+    """One BLAS thread by default inside the solves (their dense products are too small to share),
+    the library's own setting with 0, and a one-line error for anything else."""
+    monkeypatch.delenv("DDCM_BLAS_THREADS", raising=False)
+    assert blas_thread_limit() == 1
+    np.ones(3) @ np.ones(3)  # BLAS loaded
+    outside = _blas_threads()
+    assert outside
+    with blas_threads():
+        assert set(_blas_threads()) == {1}
+    assert _blas_threads() == outside
+    monkeypatch.setenv("DDCM_BLAS_THREADS", "0")
+    with blas_threads():
+        assert _blas_threads() == outside
+    monkeypatch.setenv("DDCM_BLAS_THREADS", "two")
+    with pytest.raises(InputError, match="DDCM_BLAS_THREADS must be an integer"):
+        blas_thread_limit()
+    for entry in (DDCMSolver.solve, solve_classical, build_projection):
+        assert hasattr(entry, "__wrapped__"), entry

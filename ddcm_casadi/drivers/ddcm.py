@@ -40,6 +40,7 @@ from typing import Callable
 import numpy as np
 
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.parallel import limited_blas
 from ddcm_casadi.problems.exact import ExactEnumerator
 from ddcm_casadi.data.extrapolation import DataCoverage, coarse_data
 from ddcm_casadi.problems.build import ProblemPair
@@ -250,6 +251,7 @@ class DDCMSolver:
             self.projection.certify(k, step)
         return step, best, best_warm
 
+    @limited_blas
     def solve(self, *, formulation_name: str = "", raise_on_failure: bool = False,
               progress: Callable[[StepResult], None] | None = None) -> PathResult:
         """Every load step in turn, each from the previous step's material states and Z_E

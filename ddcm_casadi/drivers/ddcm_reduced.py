@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ddcm_casadi.formulations.base import BuiltFormulation, LocalSolution
+from ddcm_casadi.parallel import limited_blas
 from ddcm_casadi.problems.build import ProblemPair
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.reduction import NotReducible, Reduction, refusal
@@ -88,6 +89,7 @@ class ReducedProjection(BuiltFormulation):
                             message=message)
 
 
+@limited_blas
 def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True) -> BuiltFormulation:
     """The projection's formulation, built: reduced (:class:`ReducedProjection`) when ``reduce``
     and the reduction applies (:func:`~ddcm_casadi.problems.reduction.refusal`), else built on the

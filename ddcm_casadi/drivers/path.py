@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.parallel import limited_blas
 from ddcm_casadi.problems.build import ProblemPair
 from ddcm_casadi.drivers.checks import (
     PENALTY_PRESSURE_BOUND, PHYSICAL_TOL, ROUNDOFF, clip_roundoff, finish_step, physical_check,
@@ -30,6 +31,7 @@ __all__ = ["DDCMSolver", "PENALTY_PRESSURE_BOUND", "PHYSICAL_TOL", "PathResult",
            "check_convergence", "clip_roundoff", "finish_step", "physical_check", "solve_classical"]
 
 
+@limited_blas
 def solve_classical(problems: ProblemPair, built, formulation_name: str, *, raise_on_failure: bool = False,
                     progress: Callable[[StepResult], None] | None = None,
                     min_substep: float = DEFAULT_MIN_SUBSTEP) -> PathResult:
