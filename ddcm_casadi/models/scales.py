@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.linalg import SingularMatrix, factorize
+from ddcm_casadi.linalg import SingularMatrix, factorize_definite
 
 
 
@@ -61,6 +61,17 @@ LARGE_STRAIN = 0.1
 SINGULAR_DISPLACEMENT = 1e3
 
 
+def rigid_body_modes(model) -> np.ndarray | None:
+    """The rigid-body modes of a continuum ``model`` in its free dofs (``(n, 3)`` in 2-D,
+    ``(n, 6)`` in 3-D: the near-null space of its stiffness, for an algebraic multigrid solver),
+    ``None`` for other models."""
+    disc = getattr(model, "discretisation", None)
+    free = getattr(model, "free_dofs", None)
+    if disc is None or free is None or not hasattr(disc, "rigid_body_modes"):
+        return None
+    return disc.rigid_body_modes()[free]
+
+
 def reference_scales(model: ContactModel, kind: str) -> dict:
     """Reference magnitudes of the ``"classical"`` or the ``"ddcm"`` problem of ``model``.
 
@@ -85,11 +96,12 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
     kappa = 1e3 * k_max / float(np.max(a)) if model.n_contacts else 0.0
     GA = G.T @ sp.diags(a) if model.n_contacts else None
     spring_lu = None
+    modes = rigid_body_modes(model)
 
     def spring():  # K with a stiff spring on every pair (bodies resting on obstacles only)
         nonlocal spring_lu
         if spring_lu is None:
-            spring_lu = factorize(K + kappa * (GA @ G) if model.n_contacts else K)
+            spring_lu = factorize_definite(K + kappa * (GA @ G) if model.n_contacts else K, near_null=modes)
         return spring_lu
 
     u_f = np.zeros(model.n_dofs)
@@ -97,7 +109,7 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
     with np.errstate(over="ignore", invalid="ignore"):
         if np.any(f):
             try:
-                u_f = factorize(K).solve(f)
+                u_f = factorize_definite(K, near_null=modes).solve(f)
             except SingularMatrix:
                 u_f = np.full(model.n_dofs, np.inf)
             # a body held only by its contact (a cylinder pressed on a block by a force) leaves K
@@ -117,7 +129,7 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
                 model._cache[("imposed_strain", kind)] = imposed
                 strain = max(strain, imposed)
         if model.prescribed is not None:  # the hard device's largest step, alone
-            U_D, strain_D = _prescribed_response(model, K, D, spring)
+            U_D, strain_D = _prescribed_response(model, K, D, spring, modes)
             model._cache[("prescribed_strain", kind)] = strain_D
             strain = max(strain, strain_D)
             pen = max(pen, U_D)
@@ -127,7 +139,8 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
     return _checked(kind, _magnitudes(model, kind, D, U, strain))
 
 
-def _prescribed_response(model: ContactModel, K, D: np.ndarray, spring) -> tuple[float, float]:
+def _prescribed_response(model: ContactModel, K, D: np.ndarray, spring,
+                         modes: np.ndarray | None) -> tuple[float, float]:
     """``(displacement, strain)`` magnitudes of the step with the largest prescribed displacement:
     ``K u = -B^T W D B_D u_D`` (no load, no obstacle), the displacement ``max(|u|, |u_D|)`` and
     the strain ``max |B u + B_D u_D|``."""
@@ -141,7 +154,7 @@ def _prescribed_response(model: ContactModel, K, D: np.ndarray, spring) -> tuple
     if model.n_dofs:
         rhs = -(model.strain_operator.T @ (np.repeat(model.volumes * D, model.strain_components) * offset))
         try:
-            u = factorize(K).solve(rhs)
+            u = factorize_definite(K, near_null=modes).solve(rhs)
         except SingularMatrix:
             u = spring().solve(rhs)
     strain = float(np.max(np.abs(model.strain_operator @ u + offset), initial=0.0))
