@@ -23,6 +23,9 @@ run (``benchmarks/first_run.py``).
 The one-off build (``build, ...`` records and ``build_seconds``: both problems and the
 formulation's CasADi Functions) is measured against the same floor, for bars, trusses and a
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
+3-D (issue 28, item 5): ``K_C set-up and solve pair, 3-D block`` records (SuperLU, PARDISO,
+pyamg's smoothed aggregation + CG) and ``reduced DDCM iteration, 3-D block`` records against
+their floor, at 1e4 and 1e5 dofs of ``K_C`` (``--quick``) and 5e5 (full run, AMG only).
 Issue 28: ``DDCM search cost`` records, restarts + greedy against plain DDCM on the quality
 benchmark's noisy truss, their time ratio measured in this run (:func:`search_cost`), and ``first
 DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`).
@@ -984,6 +987,24 @@ def main(argv=None) -> int:
         for rec in in_fresh_process("reduction_factor", u, 1 if u > 10**5 else rep, env=one_thread,
                                     label=f"reduction factorisation, about {u:.0e} unknowns", unknowns=u):
             log(rec)
+    # 3-D (issue 28, item 5): K_C by each solver, then a reduced DDCM iteration against its floor,
+    # by dofs of K_C. 5e5 is the largest block whose build fits in 16 GB (about 10 GB); there only
+    # AMG runs (a direct factor's fill grows like n^(4/3) in 3-D). SuperLU's minimum degree takes
+    # minutes and 5 GB at 1e5: up to 1e4.
+    for dofs in ((10**4, 10**5) if quick else (10**4, 10**5, 5 * 10**5)):
+        direct = [s for s in (("superlu",) if dofs <= 10**4 else ()) + (("pardiso",) if dofs <= 10**5 else ())
+                  if s in linalg.available_solvers()]
+        amg = ["amg"] if importlib.util.find_spec("pyamg") is not None else []
+        for solver in direct + amg:
+            for rec in in_fresh_process("stiffness_solver_3d", dofs, solver, 1 if dofs > 10**4 else rep,
+                                        label=f"K_C set-up and solve pair, 3-D block, about {dofs:.0e} dofs, {solver}",
+                                        unknowns=dofs, env=one_thread):
+                log(rec)
+            for contact in (False, True):
+                for rec in in_fresh_process("reduction_record_3d", dofs, contact, 1 if dofs > 10**4 else rep, solver,
+                                            label=f"reduced DDCM iteration, 3-D block, about {dofs:.0e} dofs, {solver}",
+                                            unknowns=dofs, env=one_thread):
+                    log(rec)
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):
         log(data_set_memory(n_data))
         model = stopped_bar(3000, n_data)
