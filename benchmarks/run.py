@@ -446,7 +446,8 @@ def stiffness_solver_3d(dofs: int, solver: str, repeats: int) -> list[dict]:
     from ddcm_casadi.models.scales import rigid_body_modes
 
     model = block_3d(divisions_3d(dofs), False)
-    linalg.use_definite_solver("amg")  # the build's scale solves, cheap at every size
+    if importlib.util.find_spec("pyamg") is not None:
+        linalg.use_definite_solver("amg")  # the build's scale solves, cheap at every size
     problems = build_problems(model)
     K = build_projection(registry.get("fischer_burmeister"), problems).reduction.K_u
     rhs = np.cos(np.arange(2 * K.shape[0])).reshape(-1, 2)
