@@ -25,7 +25,8 @@ formulation's CasADi Functions) is measured against the same floor, for bars, tr
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
 3-D (issue 28, item 5): ``K_C set-up and solve pair, 3-D block`` records (SuperLU, PARDISO,
 pyamg's smoothed aggregation + CG) and ``reduced DDCM iteration, 3-D block`` records against
-their floor, at 1e4 and 1e5 dofs of ``K_C`` (``--quick``) and 5e5 (full run, AMG only).
+their floor, at 1e4 dofs of ``K_C`` and 1e5 (``--quick``: AMG without contact only; full run:
+every solver but SuperLU, with and without contact) and 5e5 (full run, AMG only).
 Issue 28: ``DDCM search cost`` records, restarts + greedy against plain DDCM on the quality
 benchmark's noisy truss, their time ratio measured in this run (:func:`search_cost`), and ``first
 DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`).
@@ -991,17 +992,17 @@ def main(argv=None) -> int:
     # 3-D (issue 28, item 5): K_C by each solver, then a reduced DDCM iteration against its floor,
     # by dofs of K_C. 5e5 is the largest block whose build fits in 16 GB (about 10 GB); there only
     # AMG runs (a direct factor's fill grows like n^(4/3) in 3-D). SuperLU's minimum degree takes
-    # minutes and 5 GB at 1e5: up to 1e4.
+    # more than 10 minutes and 7 GB at 1e5: up to 1e4. --quick: 1e5 by AMG alone, without contact.
+    have_amg = importlib.util.find_spec("pyamg") is not None
     for dofs in ((10**4, 10**5) if quick else (10**4, 10**5, 5 * 10**5)):
-        direct = [s for s in (("superlu",) if dofs <= 10**4 else ()) + (("pardiso",) if dofs <= 10**5 else ())
-                  if s in linalg.available_solvers()]
-        amg = ["amg"] if importlib.util.find_spec("pyamg") is not None else []
-        for solver in direct + amg:
+        solvers = [s for s in ("superlu", "pardiso") if s in linalg.available_solvers()
+                   and dofs <= (10**4 if s == "superlu" or quick else 10**5)] + (["amg"] if have_amg else [])
+        for solver in solvers:
             for rec in in_fresh_process("stiffness_solver_3d", dofs, solver, 1 if dofs > 10**4 else rep,
                                         label=f"K_C set-up and solve pair, 3-D block, about {dofs:.0e} dofs, {solver}",
                                         unknowns=dofs, env=one_thread):
                 log(rec)
-            for contact in (False, True):
+            for contact in (False,) if quick and dofs > 10**4 else (False, True):
                 for rec in in_fresh_process("reduction_record_3d", dofs, contact, 1 if dofs > 10**4 else rep, solver,
                                             label=f"reduced DDCM iteration, 3-D block, about {dofs:.0e} dofs, {solver}",
                                             unknowns=dofs, env=one_thread):
