@@ -24,6 +24,12 @@ registered when ``pypardiso`` imports. A symmetric matrix is factorised as symme
 matrices as general (``mtype = 11``). Others can be registered with :func:`register_solver` (a
 CHOLMOD or MUMPS wrapper, say) and selected with :func:`use_solver`.
 
+Symmetric positive definite systems (the reduction's ``K_C``, the reference scales' stiffness) go
+through :func:`factorize_definite`: the selected direct solver by default, or, after
+``use_definite_solver("amg")`` (optional: ``pip install ddcm-casadi[amg]``), pyamg's smoothed
+aggregation hierarchy set up once and CG per solve (:class:`AMGFactor`): in 3-D a direct factor's
+fill grows like ``n^(4/3)`` and no longer fits in memory at 5e5 dofs (``docs/performance.md``).
+
 Low-rank updates of a factor (the active-set solver's, when a few pairs switch piece) are
 :mod:`ddcm_casadi.factor_updates`'.
 """
