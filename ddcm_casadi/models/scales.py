@@ -61,7 +61,7 @@ LARGE_STRAIN = 0.1
 SINGULAR_DISPLACEMENT = 1e3
 
 
-def rigid_body_modes(model) -> np.ndarray | None:
+def rigid_body_modes(model: ContactModel) -> np.ndarray | None:
     """The rigid-body modes of a continuum ``model`` in its free dofs (``(n, 3)`` in 2-D,
     ``(n, 6)`` in 3-D: the near-null space of its stiffness, for an algebraic multigrid solver),
     ``None`` for other models."""
