@@ -7,10 +7,14 @@
 Each backend runs in a fresh process (its peak memory is its own): ``N`` points of a noisy linear
 law in the search's coordinates (:func:`law_data`; float32 for ``strips`` and ``ann``, float64
 for the KD-tree, which is float64 only), then ``--queries`` states near the data
-(:func:`states`). Measured (wall and CPU seconds: on a shared machine the process may get a fraction of a core,
-and CPU seconds are what it needed): build seconds; seconds to answer every state exactly (the certified
-search widened until every answer is certified); the share certified by the first search and
-its seconds; the memory of the structure (bytes a point beside the data) and the process's peak
+(:func:`states`). The strip search reads its data from a float32 ``.npy`` file written beforehand
+in a temporary folder (``--tmp``, default ``/tmp``) by another process (:func:`law_file`), as a
+set larger than memory would be: the file's pages stay in the page cache, outside the measured
+process. Its answers on a sample of 200 states are checked against an exact search that shares
+nothing with it (:func:`slab_check`). Measured (wall and CPU seconds: on a shared machine the
+process may get a fraction of a core, and CPU seconds are what it needed): build seconds;
+seconds to answer every state exactly (the certified search widened until every answer is
+certified); the share certified by the first search and its seconds; the memory of the structure (bytes a point beside the data) and the process's peak
 resident memory above the imports (Linux ``VmHWM``), data included. Prints a table and writes
 ``DIR/ann_search_N_k.json`` (atomically).
 """
@@ -21,6 +25,7 @@ import argparse
 import json
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -34,16 +39,16 @@ from ddcm_casadi.io import write_json_atomic
 BACKENDS = {"strips": StripSearch, "ann": IVFSearch, "kdtree": KDTreeSearch}
 
 
-def law_data(n: int, components: int, *, seed: int = 0, noise: float = 0.01, dtype=np.float64) -> np.ndarray:
-    """``n`` points of a noisy linear law in the search's coordinates: strain uniform in a box,
-    stress ``C strain`` plus Gaussian noise of ``noise`` times the stress range (``C``: ``E = 1``,
-    1 component; isotropic 3-D, ``nu = 0.3``, 6 components), scaled by the metric ``C``, centred
-    and rotated to the principal axes (as :class:`~ddcm_casadi.MaterialDataset` does)."""
+def law_blocks(n: int, components: int, *, seed: int = 0, noise: float = 0.01):
+    """``n`` points of a noisy linear law in the search's coordinates, as float64 blocks of up to
+    ``2^22`` rows: strain uniform in a box, stress ``C strain`` plus Gaussian noise of ``noise``
+    times the stress range (``C``: ``E = 1``, 1 component; isotropic 3-D, ``nu = 0.3``, 6
+    components), scaled by the metric ``C``, centred and rotated to the principal axes (as
+    :class:`~ddcm_casadi.MaterialDataset` does; the frame of the first block)."""
     rng = np.random.default_rng(seed)
     metric = Metric(1.0) if components == 1 else Metric.isotropic(1.0, 0.3, 3)
     C = metric.matrix
     lo, hi = (-0.05, 0.01) if components == 1 else (-0.01, 0.01)
-    X = np.empty((n, 2 * components), dtype=dtype)
     chunk = 1 << 22
     frame = None
     for a in range(0, n, chunk):
@@ -55,8 +60,69 @@ def law_data(n: int, components: int, *, seed: int = 0, noise: float = 0.01, dty
             mean = x.mean(axis=0)
             _, axes = np.linalg.eigh((x - mean).T @ (x - mean))
             frame = (mean, axes[:, ::-1])
-        X[a:a + m] = (x - frame[0]) @ frame[1]
+        x -= frame[0]
+        if x.shape[1] > 2:
+            yield x @ frame[1]
+        else:  # by columns: numpy's (m, 2) @ (2, 2) took 360 ns a row here, this 10
+            yield np.column_stack([x[:, 0] * frame[1][0, j] + x[:, 1] * frame[1][1, j] for j in range(2)])
+
+
+def law_data(n: int, components: int, *, dtype=np.float64) -> np.ndarray:
+    """The points of :func:`law_blocks` in one ``(n, 2 components)`` array of ``dtype``."""
+    X = np.empty((n, 2 * components), dtype=dtype)
+    a = 0
+    for block in law_blocks(n, components):
+        X[a:a + block.shape[0]] = block
+        a += block.shape[0]
     return X
+
+
+def law_file(folder: Path, n: int, queries: int) -> tuple[Path, Path]:
+    """:func:`law_data` (one component) written in float32 to ``folder/law.npy`` by plain writes
+    (no mapping: the pages go to the page cache, not to this process), and :func:`states` near
+    them to ``folder/states.npy``."""
+    path = folder / "law.npy"
+    header = np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=(n, 2))
+    offset = header.offset
+    del header
+    with open(path, "r+b") as fh:
+        fh.seek(offset)
+        for block in law_blocks(n, 1):
+            block.astype(np.float32).tofile(fh)
+    np.save(folder / "states.npy", states(np.load(path, mmap_mode="r"), queries))
+    return path, folder / "states.npy"
+
+
+def slab_check(path: Path, Q: np.ndarray, distance: np.ndarray) -> np.ndarray:
+    """The exact nearest distance of each state by a pass over the file in blocks, sharing
+    nothing with the search: a datum nearer than ``distance`` lies in the slab
+    ``|y_0 - q_0| <= distance`` (enlarged by a relative 1e-9), and only those are measured (the
+    states' slabs dealt into layers of disjoint intervals, one ``searchsorted`` a layer)."""
+    r = distance * (1 + 1e-9)
+    lo, hi = Q[:, 0] - r, Q[:, 0] + r
+    layers, ends = [], []
+    for i in np.argsort(lo):
+        k = next((k for k, e in enumerate(ends) if e < lo[i]), len(ends))
+        if k == len(ends):
+            layers.append([]), ends.append(-np.inf)
+        layers[k].append(i)
+        ends[k] = hi[i]
+    layers = [np.array(layer) for layer in layers]
+    best = np.full(Q.shape[0], np.inf)
+    X = np.load(path, mmap_mode="r")
+    n, offset = X.shape[0], X.offset
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        for a in range(0, n, 1 << 18):  # small blocks: their temporaries stay in malloc's heap
+            y = np.fromfile(fh, dtype=np.float32, count=2 * min(1 << 18, n - a)).reshape(-1, 2)
+            y0 = y[:, 0].astype(np.float64)
+            for layer in layers:
+                k = np.searchsorted(lo[layer], y0, side="right") - 1
+                inside = np.flatnonzero((k >= 0) & (y0 <= hi[layer][np.maximum(k, 0)]))
+                owner = layer[k[inside]]
+                diff = y[inside].astype(np.float64) - Q[owner]
+                np.minimum.at(best, owner, np.sqrt(np.einsum("ij,ij->i", diff, diff)))
+    return best
 
 
 def states(X: np.ndarray, n: int, *, seed: int = 1, spread: float = 0.05) -> np.ndarray:
@@ -88,17 +154,22 @@ def _structure_bytes(search) -> int:
                                                        "left_hi")))
 
 
-def measure(backend: str, n: int, components: int, queries: int) -> dict:
-    """One backend at one size (run in a fresh process by :func:`main`)."""
+def measure(backend: str, n: int, components: int, queries: int, data: Path | None = None) -> dict:
+    """One backend at one size (run in a fresh process by :func:`main`); ``data``: the folder of
+    :func:`law_file` (the strip search over the file)."""
     base = _status("VmRSS:")
     _reset_peak()
-    X = law_data(n, components, dtype=np.float64 if backend == "kdtree" else np.float32)
-    Q = states(X, queries)
+    if data is not None:
+        X, Q = np.load(data / "law.npy", mmap_mode="r"), np.load(data / "states.npy")
+    else:
+        X = law_data(n, components, dtype=np.float64 if backend == "kdtree" else np.float32)
+        Q = states(X, queries)
     t0, c0 = time.perf_counter(), time.process_time()
-    search = BACKENDS[backend].build(X)
+    search = StripSearch.from_npy(data / "law.npy") if data is not None else BACKENDS[backend].build(X)
     build, build_cpu = time.perf_counter() - t0, time.process_time() - c0
     row = dict(backend=backend, points=n, components=components, coordinates=X.shape[1], queries=queries,
-               build_seconds=build, build_cpu_seconds=build_cpu, data_bytes=int(X.nbytes), structure_bytes=_structure_bytes(search))
+               build_seconds=build, build_cpu_seconds=build_cpu, data_bytes=int(X.nbytes),
+               structure_bytes=_structure_bytes(search), peak_build_bytes=_status("VmHWM:") - base)
     if backend == "kdtree":
         t0, c0 = time.perf_counter(), time.process_time()
         search.nearest(Q)
@@ -117,12 +188,23 @@ def measure(backend: str, n: int, components: int, queries: int) -> dict:
                    median_distance=float(np.median(cert.distance)))
     row["peak_bytes"] = _status("VmHWM:") - base
     row["structure_bytes_per_point"] = row["structure_bytes"] / n
+    if data is not None:  # agreement with an exact search on a sample, first search and widened
+        pick = np.random.default_rng(2).choice(queries, min(queries, 200), replace=False)
+        t0 = time.perf_counter()
+        truth = slab_check(data / "law.npy", Q[pick], cert.distance[pick])
+        tol = 10 * 2.0 ** -53  # the two float64 distances' roundoff (2 coordinates)
+        sure = first.certified[pick]
+        row.update(check_states=int(pick.size), check_seconds=time.perf_counter() - t0,
+                   agreement=float(np.mean(cert.distance[pick] <= truth * (1 + tol))),
+                   first_certified_agreement=float(np.mean(first.distance[pick][sure] <= truth[sure] * (1 + tol))),
+                   first_sample_certified=float(sure.mean()))
     return row
 
 
 COLUMNS = ("backend", "points", "coordinates", "build_seconds", "build_cpu_seconds", "query_seconds",
            "query_cpu_seconds", "first_seconds", "first_cpu_seconds",
-           "first_certified", "certified", "structure_bytes_per_point", "peak_bytes")
+           "first_certified", "certified", "agreement", "structure_bytes_per_point", "peak_build_bytes",
+           "peak_bytes")
 
 
 def table(rows: list[dict]) -> str:
@@ -133,14 +215,24 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def run(n: int, components: int, backends, queries: int) -> list[dict]:
-    """Each backend in a fresh process; a failure (e.g. faiss missing) is a row with ``error``."""
+def run(n: int, components: int, backends, queries: int, tmp: str = "/tmp") -> list[dict]:
+    """Each backend in a fresh process; a failure (e.g. faiss missing) is a row with ``error``.
+    The one-component strip search reads a float32 file written by another process."""
     rows = []
     for backend in backends:
-        r = subprocess.run([sys.executable, __file__, str(n), "--components", str(components), "--one", backend,
-                            "--queries", str(queries)], capture_output=True, text=True)
+        with tempfile.TemporaryDirectory(dir=tmp) as folder:
+            extra, made = [], None
+            if backend == "strips" and components == 1:
+                t0 = time.perf_counter()
+                subprocess.run([sys.executable, __file__, str(n), "--write", folder, "--queries", str(queries)],
+                               check=True)
+                made, extra = time.perf_counter() - t0, ["--data", folder]
+            r = subprocess.run([sys.executable, __file__, str(n), "--components", str(components), "--one", backend,
+                                "--queries", str(queries), *extra], capture_output=True, text=True)
         if r.returncode == 0:
             rows.append(json.loads(r.stdout.strip().splitlines()[-1]))
+            if made is not None:
+                rows[-1]["data_file_seconds"] = made
         else:
             rows.append(dict(backend=backend, points=n, components=components,
                              error=(r.stderr.strip().splitlines() or ["killed"])[-1]))
@@ -154,14 +246,21 @@ def main(argv=None) -> int:
     ap.add_argument("--backends", default=None, help="default: strips,kdtree (1 component), ann,kdtree (6)")
     ap.add_argument("--queries", type=int, default=100_000)
     ap.add_argument("--out", default="results")
+    ap.add_argument("--tmp", default="/tmp", help="folder of the strip search's temporary data file")
     ap.add_argument("--one", choices=tuple(BACKENDS), help=argparse.SUPPRESS)
+    ap.add_argument("--data", type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--write", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     n = int(args.n)
+    if args.write:
+        law_file(args.write, n, args.queries)
+        return 0
     if args.one:
-        print(json.dumps(measure(args.one, n, args.components, args.queries)))
+        print(json.dumps(measure(args.one, n, args.components, args.queries, args.data)))
         return 0
     backends = (args.backends or ("strips,kdtree" if args.components == 1 else "ann,kdtree")).split(",")
-    rows = run(n, args.components, backends, args.queries)
+    rows = run(n, args.components, backends, args.queries, args.tmp)
+    Path(args.out).mkdir(parents=True, exist_ok=True)
     print(table(rows))
     write_json_atomic(Path(args.out) / f"ann_search_{n:.0e}_{args.components}.json", rows)
     return 0

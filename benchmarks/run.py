@@ -29,7 +29,12 @@ their floor, at 1e4 dofs of ``K_C`` and 1e5 (``--quick``: AMG without contact on
 every solver but SuperLU, with and without contact) and 5e5 (full run, AMG only).
 Issue 28: ``DDCM search cost`` records, restarts + greedy against plain DDCM on the quality
 benchmark's noisy truss, their time ratio measured in this run (:func:`search_cost`), and ``first
-DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`).
+DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`);
+with ``$DDFENICS_PYTHON`` set, ``DDCM iteration against ddfenics`` records (``benchmarks/ddfenics_block.py``:
+5e3 points, and 1e5 in the full run; ratio = our seconds per iteration over ddfenics');
+``solve / FB solve`` records, the augmented Lagrangian's and MPCC's solve time over
+Fischer-Burmeister's on the continuum examples, classical and DDCM (``hertz2d`` with ``--quick``,
+:data:`CONTINUUM_CASES` in the full run; :func:`formulation_ratios`).
 """
 
 from __future__ import annotations
@@ -245,15 +250,37 @@ def build_record(family: str, unknowns: int, repeats: int) -> dict:
     system and its piece system) of a ``family`` model of about ``unknowns`` unknowns, against
     the floor of one DDCM iteration (:func:`iteration_floor`, at the zero start with a random
     data assignment, whose states are queried). ``peak_memory_bytes``: the peak resident set
-    (Linux ``VmHWM``) of the process, imports and model included."""
+    (Linux ``VmHWM``) of the process, imports and model included.
+
+    Per stage (seconds, and the peak resident set after it): ``model_seconds`` (the case read,
+    meshed and assembled, its data and their KD-tree), ``problem_build_seconds``
+    (:func:`build_problems`, with the reference scales), ``formulation_build_seconds`` (FB on the
+    full projection), ``classical_build_seconds`` (FB on the classical problem),
+    ``reduced_build_seconds`` (the projection as the driver builds it, :func:`build_projection`:
+    the Kirchdoerfer-Ortiz reduction and FB on the condensed problem) and ``ddcm_setup_seconds``
+    (the DDCM driver). ``classical_run_build_seconds`` and ``ddcm_run_build_seconds``: all that
+    precedes a classical run's first Newton step and a DDCM run's first iteration."""
     from ddcm_casadi.drivers.ddcm_search import random_assignment
 
-    model = BUILD_MODELS[family](unknowns)
-    t0 = time.perf_counter()
-    problems = build_problems(model)
-    t1 = time.perf_counter()
-    built = registry.get("fischer_burmeister").build(problems.projection)
-    build = time.perf_counter() - t0
+    stages, peaks = {}, {}
+
+    def stage(name, fn):
+        t = time.perf_counter()
+        out = fn()
+        stages[name] = time.perf_counter() - t
+        peaks[name] = peak_memory_bytes()
+        return out
+
+    model = stage("model", lambda: BUILD_MODELS[family](unknowns))
+    problems = stage("problem_build", lambda: build_problems(model))
+    fb = registry.get("fischer_burmeister")
+    built = stage("formulation_build", lambda: fb.build(problems.projection))
+    build = stages["problem_build"] + stages["formulation_build"]
+    if problems.classical is not None:
+        stage("classical_build", lambda: fb.build(problems.classical))
+    reduced = stage("reduced_build", lambda: build_projection(fb, problems))
+    stage("ddcm_setup", lambda: DDCMSolver(problems, reduced))
+    del reduced
     data = model.dataset
     index = random_assignment(model, np.random.default_rng(0))
     assigned = (data.strain[index], data.stress[index])
@@ -261,10 +288,22 @@ def build_record(family: str, unknowns: int, repeats: int) -> dict:
     low = iteration_floor(problems, built, model.n_steps - 1, x, p, assigned, assigned, repeats)
     n = int(built.newton_system().unknowns.size)
     peak = peak_memory_bytes()
+    run_builds = dict(ddcm_run_build_seconds=stages["model"] + stages["problem_build"] + stages["reduced_build"]
+                      + stages["ddcm_setup"])
+    if "classical_build" in stages:
+        run_builds["classical_run_build_seconds"] = stages["model"] + stages["problem_build"] + stages["classical_build"]
     return dict(name=f"build, {family}: {model.name}", unknowns=n, data_points=len(data), seconds=build,
-                ratio=build / low["floor_seconds"], **low, build_seconds=build, problem_build_seconds=t1 - t0,
-                formulation_build_seconds=build - (t1 - t0), build_seconds_per_1e5_unknowns=build * 1e5 / n,
-                peak_memory_bytes=peak)
+                ratio=build / low["floor_seconds"], **low, build_seconds=build,
+                **{f"{k}_seconds": v for k, v in stages.items()}, **run_builds,
+                **{f"{k}_peak_memory_bytes": v for k, v in peaks.items()},
+                build_seconds_per_1e5_unknowns=build * 1e5 / n, peak_memory_bytes=peak)
+
+
+#: One BLAS thread: on a shared 2-core machine OpenBLAS's threads spin. Measured in a build at
+#: 1e5 unknowns: the back-solves of the reduction (SuperLU's solve with several right-hand sides
+#: calls BLAS) took 7.4 s with the default threads and 1.8 s with one; a first LAPACK call
+#: (eigvalsh of 343 x 343) 3.2 s.
+ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 FRESH = """
@@ -295,11 +334,12 @@ def in_fresh_process(function: str, *args, label: str, unknowns: int, env: dict 
 
 def build_sizes(family: str, sizes, repeats: int) -> list[dict]:
     """:func:`build_record` per size, each in a fresh process (its peak memory its own; a size the
-    machine cannot hold is reported, not fatal), then the growth: build seconds per 1e5 unknowns
-    at the largest size that ran against the smallest (``ratio`` 1 for linear growth)."""
+    machine cannot hold is reported, not fatal; one BLAS thread, :data:`ONE_THREAD`), then the
+    growth: build seconds per 1e5 unknowns at the largest size that ran against the smallest
+    (``ratio`` 1 for linear growth)."""
     out = []
     for u in sizes:
-        out += in_fresh_process("build_record", family, u, repeats,
+        out += in_fresh_process("build_record", family, u, repeats, env=ONE_THREAD,
                                 label=f"build, {family}, about {u:.0e} unknowns", unknowns=u)
     done = [r for r in out if np.isfinite(r["seconds"])]
     if len(done) >= 2:
@@ -714,14 +754,17 @@ def data_size(n_data: int, components: int, *, states: int, warm: bool) -> dict:
     return rec
 
 
-def certified_search(n_data: int, components: int) -> list[dict]:
+def certified_search(n_data: int, components: int, backends: str | None = None) -> list[dict]:
     """The certified searches (``benchmarks/ann_search.py``: the strip search for one component,
-    faiss's IVF for six, where installed) against the exact KD-tree, each backend in a fresh
-    process: build seconds, seconds for 1e5 states near the data answered exactly, the share
-    certified by the first search, memory. The floor is the KD-tree's search of the same states."""
+    over a float32 file, faiss's IVF for six, where installed) against the exact KD-tree, each
+    backend in a fresh process: build seconds, seconds for 1e5 states near the data answered
+    exactly, the share certified by the first search, agreement with an exact search on 200
+    states (strips), memory. The floor is the KD-tree's search of the same states (``nan``
+    where ``backends`` leaves it out: at 1e9 points it would need 46 GB)."""
     script = Path(__file__).resolve().parent / "ann_search.py"
     with tempfile.TemporaryDirectory() as tmp:
-        subprocess.run([sys.executable, str(script), str(n_data), "--components", str(components), "--out", tmp],
+        subprocess.run([sys.executable, str(script), str(n_data), "--components", str(components), "--out", tmp,
+                        *(["--backends", backends] if backends else [])],
                        capture_output=True, text=True, check=True)
         rows = json.loads(next(Path(tmp).glob("ann_search_*.json")).read_text())
     floor = next((r["query_seconds"] for r in rows if r["backend"] == "kdtree" and "error" not in r), float("nan"))
@@ -935,6 +978,27 @@ def markdown(records: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: The continuum examples of the full run's formulation records (benchmarks/continuum_timings.py).
+CONTINUUM_CASES = ("hertz2d", "hertz3d", "nafems1", "two_spheres", "gmsh_cylinder_on_block", "sphere_shear3d")
+
+
+def formulation_ratios(case: str) -> list[dict]:
+    """Per variant and formulation on the example ``case``: the solve seconds (``seconds``) over
+    Fischer-Burmeister's in the same variant (``floor_seconds``), issue 28's targets: the augmented
+    Lagrangian at most 3, MPCC at most 10 (:func:`continuum_timings.case_timings`)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/ is a folder of scripts
+    from continuum_timings import CLASSICAL_ONLY, case_timings
+
+    variants = ("classical",) if case in CLASSICAL_ONLY else ("classical", "ddcm")
+    rows = case_timings([case], variants, ("augmented_lagrangian", "fischer_burmeister", "mpcc"))
+    fb = {r["variant"]: r["solve_seconds"] for r in rows if r["formulation"] == "fischer_burmeister"}
+    return [dict(name=f"solve / FB solve, {case}, {r['variant']} {r['formulation']}", unknowns=r["unknowns"],
+                 data_points=0, seconds=r["solve_seconds"], floor_seconds=fb[r["variant"]], ratio=r["ratio_to_fb"],
+                 build_seconds=r["build_seconds"], cpu_seconds=r["cpu_seconds"], converged=r["converged"],
+                 steps=r["steps"], iterations_per_step=r["iterations_per_step"])
+            for r in rows if r["formulation"] != "fischer_burmeister"]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="smaller sizes and fewer repeats (about 5 minutes)")
@@ -979,7 +1043,7 @@ def main(argv=None) -> int:
     # and without contact, each in a fresh process; today's full path beside it up to 1e5 (at
     # 1e6 it costs 93 s an iteration). One BLAS thread: on a shared 2-core machine OpenBLAS's
     # threads spin, and a dense product of 1e4 entries stalled for 10-20 ms (0.3 ms alone).
-    one_thread = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    one_thread = ONE_THREAD
     for u in ((10**4, 10**5) if quick else (10**4, 10**5, 10**6)):
         for contact in (True, False):
             for rec in in_fresh_process("reduction_record", u, contact, 1 if u > 10**5 else rep, u <= 10**5,
@@ -1024,8 +1088,12 @@ def main(argv=None) -> int:
     for n_data, k in (((10**6, 1), (10**6, 6)) if quick else
                       ((10**6, 1), (10**7, 1), (10**8, 1), (10**6, 6), (10**7, 6))):
         log(data_size(n_data, k, states=10**5 if k == 1 else 2 * 10**4, warm=k == 1))
-    for n_data, k in (((10**6, 1), (10**5, 6)) if quick else ((10**6, 1), (10**7, 1), (10**6, 6), (10**7, 6))):
+    for n_data, k in (((10**6, 1), (10**5, 6)) if quick else
+                      ((10**6, 1), (10**7, 1), (10**8, 1), (10**6, 6), (10**7, 6))):
         for rec in certified_search(n_data, k):
+            log(rec)
+    if not quick:  # issue 28: 1e9 one-component points, the strip search alone (12 GB + an 8 GB file in /tmp)
+        for rec in certified_search(10**9, 1, backends="strips"):
             log(rec)
     for n in ((1000, 10_000) if quick else (1000, 10_000, 100_000)):
         # qpOASES (dense internals) and OSQP take minutes per path above these sizes.
@@ -1047,6 +1115,22 @@ def main(argv=None) -> int:
         for rec in in_fresh_process("first_solve_record", family, 2 * 10**4,
                                     label=f"first DDCM solve, 2-D continuum {family}, about 2e4 points",
                                     unknowns=0):
+            log(rec)
+    # Issue 28: plain DDCM without contact against ddfenics on the same block, where a Python with
+    # DOLFINx and ddfenicsx is given ($DDFENICS_PYTHON; benchmarks/ddfenics_block.py).
+    from ddfenics_block import peer_record
+
+    peer = os.environ.get("DDFENICS_PYTHON")
+    if peer is None:
+        print("no $DDFENICS_PYTHON: the ddfenics comparison is left out", file=sys.stderr)
+    else:
+        for n in ((50,) if quick else (50, 224)):
+            log(peer_record(n, peer))
+    # Issue 28, item 2: every formulation's solve time over Fischer-Burmeister's on the continuum
+    # examples, classical and DDCM (one BLAS thread, a fresh process per case).
+    for case in (("hertz2d",) if quick else CONTINUUM_CASES):
+        for rec in in_fresh_process("formulation_ratios", case, label=f"formulations on {case}", unknowns=0,
+                                    env={"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}):
             log(rec)
     write_json_atomic(out / "benchmarks.json", records)
     write_bytes_atomic(out / "benchmarks.md", markdown(records).encode())

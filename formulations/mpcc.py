@@ -80,13 +80,31 @@ from ddcm_casadi.problems.complementarity import BIACTIVE, b_stationarity, ident
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.evaluate import NumericFunction
 from ddcm_casadi.loops.homotopy import scholtes_homotopy
+from ddcm_casadi.loops.active_set import ActiveSetSolver
 from ddcm_casadi.loops.ipopt_options import check_ipopt_options, ipopt_stats, iteration_count
 
+from .augmented_lagrangian import AugmentedLagrangian
 from .base import BuiltFormulation, Formulation, LocalSolution, positive_option
-from .friction import cone_traction, coulomb_branch, coulomb_constraints
+from .ncp import FBSystem
+from .friction import BuiltCoulomb, cone_traction, coulomb_branch, coulomb_constraints
 from .registry import register
 
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
+#: Branch NLPs of an affine classical problem's active-set rounds (:meth:`_BuiltMPCC._active_set`).
+#: From the predictor's branch one ends a step; from the start's branch the Hertz examples take 1-5.
+ACTIVE_SET_ROUNDS = 8
+
+
+@dataclass(frozen=True)
+class _PieceTolerances:
+    """The predictor's piece solves (linear: one step, then roundoff refinement)."""
+
+    tol: float = 1e-9
+    residual_tol: float = 1e-10
+    max_iter: int = 3
+
+
+_PIECE_TOLERANCES = _PieceTolerances()
 
 
 @register
@@ -132,6 +150,15 @@ class MPCC(Formulation):
             From a warm start that is a converged solution, first solve the branch NLP of the
             branch identified there (``g_i = 0`` where ``g_i <= p_i``, else ``p_i = 0``), accepted
             under the same tests as above; the homotopy runs only when that fails.
+        active_set : bool
+            Classical problems with small kinematics: before the homotopy, solve the branch NLP
+            of the branch a cheap classical solve identifies, accepted under the same tests as
+            above; the homotopy runs only when that fails. Without friction (one solution) the
+            branch is the active-set predictor's (Fischer-Burmeister's piece solves with kept
+            factors) and, while the signs fail, the one identified at the branch solution (a
+            primal-dual active-set iteration of branch NLPs); with Coulomb friction, the statuses
+            of Alart-Curnier's semismooth Newton solution (the augmented Lagrangian's), then the
+            branch NLP's own active-set rounds. IPOPT solves the branch NLPs from the start.
         ipopt : dict
             Extra IPOPT options passed through unchanged (copied).
         """
@@ -145,6 +172,7 @@ class MPCC(Formulation):
         max_homotopy: int = 30
         early_branch: int = 30
         warm_branch: bool = True
+        active_set: bool = True
         ipopt: dict = field(default_factory=dict)
 
     def _validate(self) -> None:
@@ -221,19 +249,29 @@ class _BuiltMPCC(BuiltFormulation):
         # then selects the one nearest the start (``anchor``, the previous converged step), the
         # path a quasi-static loading follows. An affine problem's solution is unique: no objective.
         self._anchored = problem.kind == "mcp" and not problem.affine
+        # An affine classical problem has one solution: a branch NLP solution whose signs hold is it.
+        # Its branch is identified by the active-set predictor's piece solves (kept factors, as
+        # Fischer-Burmeister's; pairs compared as g <= p in scaled units, as the MPCC's branches).
+        unique = problem.kind == "mcp" and problem.affine
+        self._predictor = (ActiveSetSolver(FBSystem(problem, 1.0, 1.0), predictor=True)
+                           if unique and opts.active_set else None)
         base = problem.parameters.extend(anchor=nx) if self._anchored else problem.parameters
         self._base = base
         self.parameters = base.extend(tau=1)
         ipopt = _ipopt_options(problem, opts)
-        # SX throughout, local terms (finite strain) written out element by element: IPOPT's
-        # Hessians of MX maps cost more than the expansion (measured on the 822-dof indentation:
-        # 12 s to build and 302 s to solve in MX, 52 s and 17 s in SX).
+        # Finite strain in SX, local terms written out element by element: IPOPT's Hessians of MX
+        # maps cost more than the expansion (measured on the 822-dof indentation: 12 s to build and
+        # 302 s to solve in MX, 52 s and 17 s in SX). Affine maps in MX, sparse matrices kept whole:
+        # SX's symbolic Jacobian of K z cost 17 s per NLP at 8 406 unknowns (the two spheres),
+        # MX 0.04 s, same iterations and solutions (docs/performance.md).
+        sym = ca.SX if not problem.affine else ca.MX
+
         def nlp(parameters, rows):
-            x, p, P = ca.SX.sym("x", nx), ca.SX.sym("p", nc), ca.SX.sym("P", parameters.size)
-            z, own = ca.vertcat(x, p), P[:problem.parameters.size]
+            z, P = sym.sym("z", nx + nc), sym.sym("P", parameters.size)
+            x, p, own = z[:nx], z[nx:], P[:problem.parameters.size]
             residual, gap = problem.residual_map.render(z, own), problem.gap_map.render(z, own)
             objective = (problem.distance.render(z, own) if problem.kind == "mpcc" else
-                         0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else ca.SX.zeros(1, 1))
+                         0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else sym.zeros(1, 1))
             return {"x": z, "p": P, "f": objective, "g": ca.vertcat(residual, gap, rows(p, gap, P))}
 
         self._solver = ca.nlpsol("mpcc", "ipopt", nlp(self.parameters, lambda p, gap, P: gap * p - P[self.parameters.slice("tau")]),
@@ -256,6 +294,11 @@ class _BuiltMPCC(BuiltFormulation):
         w = np.concatenate([x0, np.maximum(p0, 0.0)])
         values = self._base.pack(params, anchor=x0) if self._anchored else params  # the NLPs' parameters
         state = state or {}
+        if self._predictor is not None:
+            polished, iters, rounds, message = self._active_set(w, params, values)
+            if message:
+                return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
+                                    outer=rounds, message=message, state=self._next_state(True, polished, params))
         same_branch = "branch" in state and np.array_equal(state["branch"], self._branch_of(w, params))
         if state.get("on_branch") or same_branch:
             # The start is a branch solution (e.g. the exact global branch of a projection):
@@ -266,7 +309,6 @@ class _BuiltMPCC(BuiltFormulation):
                 return self._finish(polished[:nx], polished[nx:], params, converged=True, iterations=iters,
                                     outer=1, message="converged (branch NLP from the start's branch)",
                                     state=self._next_state(True, polished, params))
-
         relaxed = _relaxed(self._solver, self.parameters, values, dict(lbx=self._lbx, lbg=self._lbg, ubg=self._ubg))
 
         def measure(w):
@@ -294,6 +336,64 @@ class _BuiltMPCC(BuiltFormulation):
     def _branch_of(self, w: np.ndarray, params: np.ndarray) -> np.ndarray:
         """The side of every pair at ``w``: gap (``g_i <= p_i``) or pressure."""
         return np.asarray(self._gap(w, params), float).ravel() <= w[self._nx:]
+
+    def _active_set(self, w, params, values) -> tuple[np.ndarray, int, int, str]:
+        """Branch NLPs of an affine classical problem from ``w``: ``(w, iterations, branch NLPs,
+        message)``, ``iterations`` the predictor's linear solves and IPOPT's iterations,
+        ``message`` empty unless a branch NLP solution was accepted.
+
+        The first branch is that of the active-set predictor's solution (a primal-dual
+        active-set iteration on the piece systems ``F = 0, g_i = 0 or p_i = 0``, each a solve with
+        a kept or updated factor), else (no prediction) the one identified at ``w``. A branch
+        solution whose signs fail identifies the next branch there (``g_i = 0`` where ``g_i <=
+        p_i``, else ``p_i = 0``: a penetrating free pair closes, a pulling contact opens), as a
+        primal-dual active-set method does, at most :data:`ACTIVE_SET_ROUNDS` branch NLPs and
+        never one twice. An accepted branch NLP solution (IPOPT's, one iteration on these linear
+        constraints) satisfies every sign, the complementarity and the residual test, so it is
+        the problem's one solution; the homotopy runs when the rounds fail. On the Hertz example a
+        step then costs one branch NLP, where the homotopy took 2-4 relaxed solves of 8-21
+        iterations and 1-7 branch NLPs (docs/performance.md)."""
+        nx, system = self._nx, self._predictor.system
+        if self._solves(w, params):
+            return w, 0, 0, "converged (the start solves the problem)"
+        on_gap, tried, source = self._branch_of(w, params), set(), "the start's branch"
+        predicted, iters = self._predictor.branch_finish((system.start(w[:nx], w[nx:], None),), params,
+                                                         _PIECE_TOLERANCES)
+        if predicted is not None:
+            on_gap, source = self._branch_of(predicted.z[:nx + self._nc], params), "the predicted branch"
+        while len(tried) < ACTIVE_SET_ROUNDS and on_gap.tobytes() not in tried:
+            tried.add(on_gap.tobytes())
+            status, w_new, _, its, ok = self._solve_branch(w, params, values, on_gap, ~on_gap)
+            iters += its
+            if status:
+                break
+            if ok:
+                return w_new, iters, len(tried), f"converged (branch NLP, active set from {source})"
+            on_gap = self._branch_of(w_new, params)
+        return w, iters, len(tried), ""
+
+    def _solves(self, w, params) -> bool:
+        """Does ``w`` pass the tests of an accepted solution: every sign, the complementarity and
+        the residual (an unloaded step's start)?"""
+        nx = self._nx
+        residual, comp, _, _ = self.metrics(w[:nx], w[nx:], params)
+        gap = np.asarray(self._gap(w, params), float).ravel()
+        return (signs_hold(gap, w[nx:], self.opts.comp_tol) and comp <= self.opts.comp_tol
+                and residual <= self.opts.residual_tol)
+
+    def _solve_branch(self, w, params, values, fix_gap, fix_p) -> tuple[str, np.ndarray, np.ndarray | None, int, bool]:
+        """The branch NLP imposing ``g = 0`` on ``fix_gap`` and ``p = 0`` on ``fix_p`` from ``w``:
+        ``(status, w, lam_g, iterations, signs)``, ``signs`` whether every sign, the
+        complementarity and the residual tests hold at the solution (B-stationarity is the
+        caller's)."""
+        nc, ne = self._nc, self._ne
+        inf = np.full(nc, np.inf)
+        lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
+        ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
+        status, w_new, warm, its = _run(self._bnlp, dict(x0=w, p=values, lbg=lbg, ubg=ubg))
+        if status:
+            return status, w_new, None, its, False
+        return "", w_new, warm[1], its, self._solves(w_new, params)
 
     def _near_corner(self, w, params, tau) -> bool:
         """Is some pair within the branch NLP's biactive identification ``10 sqrt(tau)`` of a corner?"""
@@ -331,20 +431,13 @@ class _BuiltMPCC(BuiltFormulation):
             tried.add(key)
             if ne + fix_gap.sum() + fix_p.sum() > nx + nc:
                 continue  # over-determined (e.g. a biactive pair of the classical problem)
-            inf = np.full(nc, np.inf)
-            lbg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, -inf), np.where(fix_p, 0.0, -inf)])
-            ubg = np.concatenate([np.zeros(ne), np.where(fix_gap, 0.0, inf), np.where(fix_p, 0.0, inf)])
-            status, w_new, warm, its = _run(self._bnlp, dict(x0=w, p=values, lbg=lbg, ubg=ubg))
+            status, w_new, lam, its, signs = self._solve_branch(w, params, values, fix_gap, fix_p)
             iters += its
             if status:
                 continue
-            lam = warm[1]
             # CasADi's lam_g is the multiplier of f + lam^T g: the convention of b_stationarity.
             wrong_gap, wrong_p = b_stationarity(lam[ne:ne + nc], lam[ne + nc:], fix_gap & fix_p)
-            residual, comp, pen, _ = self.metrics(w_new[:nx], w_new[nx:], params)
-            gap_new = np.asarray(self._gap(w_new, params), float).ravel()
-            ok = (not (wrong_gap.any() or wrong_p.any()) and signs_hold(gap_new, w_new[nx:], self.opts.comp_tol)
-                  and comp <= self.opts.comp_tol and residual <= self.opts.residual_tol)
+            ok = not (wrong_gap.any() or wrong_p.any()) and signs
             if ok:
                 return w_new, iters, True
             if wrong_gap.any() or wrong_p.any():
@@ -382,7 +475,12 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         self._nx, self._nc, self._b = nx, nc, b
         base = problem.parameters
         self.parameters = base.extend(tau=1)
-        P = ca.SX.sym("P", self.parameters.size)
+        # Classical problems in MX (the sparse maps kept whole: the build took 9.4 s CPU in SX on
+        # sphere_shear3d, about 1 s in MX, same solutions); projections in SX as before: onto the
+        # frictional set they are nonconvex, and MX's other roundoff led IPOPT to other local KKT
+        # points on the friction rungs' block (docs/performance.md).
+        sym = ca.MX if problem.kind == "mcp" else ca.SX
+        P = sym.sym("P", self.parameters.size)
         own, tau = P[:base.size], P[self.parameters.slice("tau")]
         mu = own[base.slice("friction")]
 
@@ -390,10 +488,10 @@ class _BuiltCoulombMPCC(BuiltFormulation):
             return [v[start + j * nc:start + (j + 1) * nc] for j in range(count)]
 
         def objective(z, P):
-            return problem.distance.render(z, P) if problem.kind == "mpcc" else ca.SX.zeros(1, 1)
+            return problem.distance.render(z, P) if problem.kind == "mpcc" else sym.zeros(1, 1)
 
         # Relaxed NLP: the traction r = (p_N, mu p_N rho) is in the cone by construction.
-        w = ca.SX.sym("w", nx + b * nc)
+        w = sym.sym("w", nx + b * nc)
         pn, direction = w[nx:nx + nc], split(w, nx + nc, b - 1)
         r = cone_traction(pn, direction, mu)
         z = ca.vertcat(w[:nx], *r)
@@ -412,19 +510,34 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         # Branch NLP in z = [x; p]: the residual, b equations per contact and one more row (p_N at
         # a corner, the cone's surface mu^2 p_N^2 - |r_T|^2 at an edge; free elsewhere), the
         # statuses parameters (a square system for the classical problem).
-        zb = ca.SX.sym("z", nx + b * nc)
-        Pb = ca.SX.sym("P", base.size + 4 * nc)
-        own, (is_open, is_stick, is_corner, is_edge) = Pb[:base.size], split(Pb, base.size, 4)
-        ab, rb = split(problem.gap_map.render(zb, own), 0, b), split(zb, nx, b)
-        mu_b = own[base.slice("friction")]
-        surface = mu_b**2 * rb[0]**2 - sum(v**2 for v in rb[1:])
+        # The per-contact rows are one SX Function of the contacts' vectors (MX's if_else takes
+        # only a scalar condition), called on the MX maps.
+        a_s, r_s, mu_s, flags = (ca.SX.sym(n, k * nc) for n, k in (("a", b), ("r", b), ("mu", 1), ("flags", 4)))
+        is_open, is_stick, is_corner, is_edge = split(flags, 0, 4)
+        rs = split(r_s, 0, b)
+        surface = mu_s**2 * rs[0]**2 - sum(v**2 for v in rs[1:])
+        contact_rows = ca.Function("branch_rows", [a_s, r_s, mu_s, flags], [ca.vertcat(
+            *coulomb_branch(split(a_s, 0, b), rs, mu_s, is_open, is_stick + is_edge, is_corner),
+            ca.if_else(is_corner, rs[0], surface, True))])
+        zb = sym.sym("z", nx + b * nc)
+        Pb = sym.sym("P", base.size + 4 * nc)
+        own = Pb[:base.size]
         self._bnlp = ca.nlpsol("bnlp_coulomb", "ipopt", {
             "x": zb, "p": Pb, "f": objective(zb, own),
             "g": ca.vertcat(problem.residual_map.render(zb, own),
-                            *coulomb_branch(ab, rb, mu_b, is_open, is_stick + is_edge, is_corner),
-                            ca.if_else(is_corner, rb[0], surface, True))},
+                            contact_rows(problem.gap_map.render(zb, own), zb[nx:], own[base.slice("friction")],
+                                         Pb[base.size:]))},
             {"ipopt": {**_ipopt_options(problem, opts), "max_iter": BRANCH_MAX_ITER}, **_NLPSOL})
         self._ne = ne
+        # Classical problems: the statuses of Alart-Curnier's semismooth Newton solution (as the
+        # augmented Lagrangian's, with its default penalty) start the branch NLPs.
+        self._predictor = None
+        if problem.kind == "mcp" and problem.affine and opts.active_set:
+            al = AugmentedLagrangian.Options()
+            gamma = problem.scaled_penalty(AugmentedLagrangian.DEFAULT_GAMMA_FACTOR * problem.contact_stiffness)
+            self._predictor = BuiltCoulomb(problem, "alart_curnier", gamma, 1.0, tol=al.newton_tol,
+                                           residual_tol=al.residual_tol, max_iter=al.max_iter,
+                                           comp_tol=max(al.tol, 1e-9), predictor=True)
 
     # ------------------------------------------------------------------ variables
     def _blocks(self, x, p, params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -473,6 +586,15 @@ class _BuiltCoulombMPCC(BuiltFormulation):
         params = np.asarray(params, float)
         x0, p0 = np.asarray(x0, float), np.asarray(p0, float)
         state = state or {}
+        if self._predictor is not None:
+            predicted = self._predictor.solve(params, x0, p0)
+            if predicted.converged:
+                # IPOPT solves the branch NLP of the predicted statuses from the start
+                (x, p), iters, ok, status = self._branch_nlp(x0, p0, params, 0.0,
+                                                             self._status(predicted.x, predicted.p, params))
+                if ok:
+                    return self._done(x, p, params, True, predicted.iterations + iters, 1,
+                                      "converged (branch NLP of the predicted statuses)", status)
         last = state.get("status")
         if last is not None and np.array_equal(np.where(last < CORNER, last, -1),
                                                 np.where(last < CORNER, self._status(x0, p0, params), -1)):

@@ -144,3 +144,84 @@ def test_ddcm_fixed_points_equal_the_kd_tree_s(search):
     for field in ("data_index", "outer_iterations", "u", "p", "distance"):
         np.testing.assert_array_equal(paths[search].array(field), paths["kdtree"].array(field), err_msg=field)
     assert search in model.dataset._searches  # the backend was used
+
+
+@pytest.mark.parametrize("pack", [32, 0], ids=["packed", "argsort"])
+def test_strip_build_in_blocks_and_groups_sorts_every_strip(monkeypatch, tmp_path, pack):
+    """The build's passes over blocks of rows, its deal to groups of strips and each group's
+    sort (packed keys, or the argsort fallback) give strips sorted by key ``b``, each datum in
+    the strip of its key ``a``, ``perm`` a permutation with ``keys = X[perm]``; the search over
+    a float32 ``.npy`` file read in blocks answers as over the array, exactly."""
+    monkeypatch.setattr(StripSearch, "READ", 333)
+    monkeypatch.setattr(StripSearch, "GROUP", 64)
+    monkeypatch.setattr(StripSearch, "PACK", pack)
+    X, Q = _clouds()["band"]
+    X = X.astype(np.float32)
+    path = tmp_path / "band.npy"
+    np.save(path, X)
+    for search in (StripSearch.build(X), StripSearch.from_npy(path)):
+        a, b = search.axes
+        assert np.array_equal(np.sort(search.perm), np.arange(len(X)))
+        assert np.array_equal(search.keys[0], X[search.perm, a]) and np.array_equal(search.keys[1], X[search.perm, b])
+        t = np.floor((search.keys[0].astype(np.float64) - search.low) / search.width)
+        strip = np.repeat(np.arange(search.lo_t.size), np.diff(search.offsets))
+        assert np.array_equal(np.clip(t, 0, search.lo_t.size - 1), strip)
+        assert np.all((np.diff(search.keys[1]) >= 0) | (np.diff(strip) > 0))
+        truth = _brute(X, Q)
+        exact = search.nearest(Q)
+        np.testing.assert_allclose(np.sqrt(np.einsum("ij,ij->i", X[exact] - Q, X[exact] - Q)), truth,
+                                   rtol=_tolerance(2), atol=0)
+
+
+def test_strips_over_a_float32_file_never_read_the_points_again(tmp_path, monkeypatch):
+    """Float32 coordinates are their own keys: the re-ranking and the brute-force pass read the
+    keys (in memory), never the memory-mapped file."""
+    X = _clouds()["band"][0].astype(np.float32)
+    path = tmp_path / "band.npy"
+    np.save(path, X)
+    search = StripSearch.from_npy(path)
+    assert search.exact_keys
+
+    class Unread:
+        shape, dtype = X.shape, X.dtype
+
+        def __getitem__(self, _):
+            raise AssertionError("the points were read")
+
+    monkeypatch.setattr(search, "_points", Unread())
+    Q = RNG.normal(0, 0.5, (200, 2))
+    cert = search.certified(Q)
+    np.testing.assert_allclose(cert.distance, _brute(X, Q), rtol=_tolerance(2), atol=0)
+    assert np.array_equal(search.brute_force(Q).distance, cert.distance)
+
+
+def test_float32_storage_of_float64_data_costs_at_most_twice_its_rounding():
+    """Exact for the data as stored in float32; against the float64 data they were rounded from,
+    each datum moved by at most ``2^-24 R``, so the answer is at most ``2^-23 R`` (with the
+    distances' float64 roundoff) farther than the nearest."""
+    base = _clouds()["band"][0] * 1e3 + 7.0
+    X = np.vstack([base, base + RNG.normal(0, 1e-6, base.shape)])  # pairs that float32 (ulp 6e-5) merges
+    Q = X[RNG.integers(0, len(X), 500)] + RNG.normal(0, 1e-4, (500, 2))
+    found = StripSearch.build(X.astype(np.float32)).nearest(Q)
+    R = float(np.max(np.linalg.norm(X, axis=1)))
+    d = np.sqrt(np.einsum("ij,ij->i", X[found] - Q, X[found] - Q))
+    truth = _brute(X, Q)
+    assert np.all(d <= truth * (1 + _tolerance(2)) + 2.0 ** -23 * R)
+    assert np.any(d > truth * (1 + _tolerance(2)))  # the rounding does change answers here
+
+
+def test_strip_build_with_more_groups_than_sixteen_bits(monkeypatch):
+    """More than 2^16 groups of strips (their ids int64, the deal's argsort no longer a radix
+    sort of uint16): the strips are still sorted and the answers exact."""
+    monkeypatch.setattr(StripSearch, "GROUP", 1)
+    n = 540_000  # n / 8 strips of a line, one group each
+    X = np.column_stack([np.linspace(-1.0, 1.0, n), 1e-9 * RNG.normal(size=n)]).astype(np.float32)  # a line
+    search = StripSearch.build(X)
+    assert np.count_nonzero(np.diff(search.offsets)) > 2**16
+    strip = np.repeat(np.arange(search.lo_t.size), np.diff(search.offsets))
+    assert np.all((np.diff(search.keys[1]) >= 0) | (np.diff(strip) > 0))
+    assert np.array_equal(np.sort(search.perm), np.arange(n))
+    Q = X[RNG.integers(0, n, 300)].astype(np.float64) + RNG.normal(0, 1e-5, (300, 2))
+    found = search.nearest(Q)
+    d = np.sqrt(np.einsum("ij,ij->i", X[found] - Q, X[found] - Q))
+    np.testing.assert_allclose(d, _brute(X, Q), rtol=_tolerance(2), atol=0)

@@ -373,6 +373,10 @@ class ContactModel:
         if cached is None:
             cached = reference_scales(self, kind)
             self._cache[kind] = cached
+            kinds = [k for k, has in (("classical", self.youngs_modulus is not None),
+                                      ("ddcm", self.dataset is not None)) if has]
+            if all(k in self._cache for k in kinds):  # the kinds' shared factors are done with
+                self._cache.pop("scale_stiffness", None)
         return dict(cached)
 
     def path_warnings(self) -> list[str]:

@@ -125,6 +125,15 @@ def _columns_times(Z: np.ndarray, v: np.ndarray, on: np.ndarray) -> np.ndarray:
     return Z @ kept
 
 
+def _times_kept(A: sp.spmatrix, Z: np.ndarray) -> np.ndarray:
+    """``A @ Z`` for a sparse ``A`` whose columns are mostly empty (the contact rows ``G``,
+    ``R_p^T``) and kept columns ``Z`` (column-major): from the rows of ``Z`` that ``A`` uses only
+    (scipy's product would copy all of ``Z`` to row-major first: 640 MB and 7 s at 1e6 unknowns)."""
+    A = sp.csr_matrix(A)  # row by row, in the order of the full product: the same sums
+    used = np.unique(A.indices)
+    return np.asarray(A[:, used] @ np.ascontiguousarray(Z[used]))
+
+
 def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) -> str:
     """Why the reduction does not apply to ``problem`` (one line), or ``""``: it needs an affine
     projection whose objective separates strains (of ``u``) from stresses (of ``sigma``), whose
@@ -255,12 +264,12 @@ class Reduction:
             ratio = self._column_ratio()
             if ratio is not None and self.alpha is not None:  # K_s^-1 R_p = Z_u diag(r) / alpha
                 self._p_scale, self.Z_p = ratio / self.alpha, None
-                self.D_p = (self.R_p.T @ self.Z_u) * self._p_scale
+                self.D_p = _times_kept(self.R_p.T, self.Z_u) * self._p_scale
             else:
                 self._p_scale = None
                 self.Z_p = self._back_solves(self._solve_s, self.R_p)
-                self.D_p = self.R_p.T @ self.Z_p
-            self.D_u = self.G @ self.Z_u
+                self.D_p = _times_kept(self.R_p.T, self.Z_p)
+            self.D_u = _times_kept(self.G, self.Z_u)
             self.D_u, self.D_p = 0.5 * (self.D_u + self.D_u.T), 0.5 * (self.D_p + self.D_p.T)
             conditions = []
             for D in (self.D_u, self.D_p):
