@@ -23,6 +23,10 @@ run (``benchmarks/first_run.py``).
 The one-off build (``build, ...`` records and ``build_seconds``: both problems and the
 formulation's CasADi Functions) is measured against the same floor, for bars, trusses and a
 2-D continuum of 1e4 and 1e5 unknowns (``--quick``) and 1e6 (full run), each in a fresh process.
+3-D (issue 28, item 5): ``K_C set-up and solve pair, 3-D block`` records (SuperLU, PARDISO,
+pyamg's smoothed aggregation + CG) and ``reduced DDCM iteration, 3-D block`` records against
+their floor, at 1e4 dofs of ``K_C`` and 1e5 (``--quick``: AMG without contact only; full run:
+every solver but SuperLU, with and without contact) and 5e5 (full run, AMG only).
 Issue 28: ``DDCM search cost`` records, restarts + greedy against plain DDCM on the quality
 benchmark's noisy truss, their time ratio measured in this run (:func:`search_cost`), and ``first
 DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`);
@@ -147,7 +151,12 @@ def ddcm_iteration(model, repeats: int, formulation: str = "fischer_burmeister",
                iteration_seconds=float(sum(s.projection_seconds + s.search_seconds for s in steps)) / int(its.sum()),
                projection_path=path.projection_path)
     if reduced:
+        red = built.reduction
         rec["unknowns"] = problems.projection.n_x + problems.projection.n_pairs
+        rec.update(factor_seconds=red.factor_seconds, back_solves=red.back_solves,
+                   back_solve_seconds=red.back_solve_seconds, definite_solver=red.solver)
+        if isinstance(red.factor, linalg.AMGFactor):
+            rec["cg_iterations_per_solve"] = float(np.mean(red.factor.iterations))
         if floor:
             step = steps[-1]
             low = reduced_floor(problems, built, step.step, (step.strain_star, step.stress_star),
@@ -425,6 +434,112 @@ def reduction_factor(unknowns: int, repeats: int) -> list[dict]:
     floor = runs[0][1]
     return [dict(name=name(label), unknowns=int(K.shape[0]), data_points=0, seconds=t, floor_seconds=floor,
                  ratio=t / floor, solve_pair_seconds=ts, nnz=int(K.nnz)) for label, t, ts in runs]
+
+
+#: Half-width of the 3-D block's contact face (m, about the sphere's axis): pairs on the top face
+#: within it only; the Hertz radius at the last step is sqrt(R delta) = 1.1 mm.
+CONTACT_3D = 1.25e-3
+
+
+def block_3d(divisions: int, contact: bool):
+    """The body of the 3-D Hertz example (``examples/cases/hertz3d.toml``: a 10 mm quarter cube of
+    linear tetrahedra, 6 per hexahedron, 5^6 Hookean data, FB) on a uniform ``divisions^3`` mesh
+    without the grading. With ``contact``: the rigid sphere's travel, pairs on the top face within
+    :data:`CONTACT_3D` of the axis; without: the top face pushed down by a hard device, 40 um
+    times the load factors 0.25 to 1."""
+    from ddcm_casadi.casefiles.base import read_document
+    from ddcm_casadi.casefiles.config import case_from_dict
+    from ddcm_casadi.validation.continuum import EXAMPLE_3D
+
+    doc = read_document(EXAMPLE_3D)
+    doc["mesh"]["divisions"] = [divisions] * 3
+    doc["mesh"].pop("refine_near", None)
+    if contact:
+        doc["contact"][0]["boundary"] = {"min": [0.0, 0.0, 0.0], "max": [CONTACT_3D, CONTACT_3D, 0.0]}
+    else:
+        doc.pop("contact")
+        doc.pop("hertz", None)
+        doc["supports"].append({"boundary": "zmax", "fix": "z", "displacement": [0.0, 0.0, -4e-5]})
+        doc["loading"] = {"load_factors": [0.25, 0.5, 0.75, 1.0]}
+    kind = "sphere" if contact else "hard device"
+    return case_from_dict(doc, base_dir=EXAMPLE_3D.parent, source=f"3-D block {divisions}^3, {kind}").model
+
+
+#: Divisions of the 3-D block for about ``u`` dofs of ``K_C`` (``3 (N + 1)^3``).
+def divisions_3d(dofs: int) -> int:
+    return max(2, round((dofs / 3) ** (1 / 3)) - 1)
+
+
+def reset_peak_memory() -> None:
+    """Set the peak resident set (Linux ``VmHWM``) back to the current resident set."""
+    with open("/proc/self/clear_refs", "w") as fh:
+        fh.write("5")
+
+
+def stiffness_solver_3d(dofs: int, solver: str, repeats: int) -> list[dict]:
+    """``K_C`` of the 3-D block without contact (:func:`block_3d`, about ``dofs`` dofs): the set-up
+    (factorisation, or AMG hierarchy) and a solve pair with ``solver``, to be run in a fresh
+    process: ``"superlu"`` (the package's: minimum degree of ``K + K^T``), ``"superlu COLAMD"``
+    (scipy's default), ``"pardiso"`` or ``"amg"`` (:class:`~ddcm_casadi.linalg.AMGFactor`,
+    smoothed aggregation on the rigid-body modes, CG to :data:`~ddcm_casadi.linalg.DEFINITE_TOL`).
+    ``peak_memory_bytes``: the process's peak resident set; ``solver_memory_bytes``: its growth
+    from the end of the build to the end of the solves (the factor or hierarchy)."""
+    from ddcm_casadi.models.scales import rigid_body_modes
+
+    model = block_3d(divisions_3d(dofs), False)
+    if importlib.util.find_spec("pyamg") is not None:
+        linalg.use_definite_solver("amg")  # the build's scale solves, cheap at every size
+    problems = build_problems(model)
+    K = build_projection(registry.get("fischer_burmeister"), problems).reduction.K_u
+    rhs = np.cos(np.arange(2 * K.shape[0])).reshape(-1, 2)
+    base = peak_memory_bytes()
+    reset_peak_memory()
+    with open("/proc/self/status") as fh:
+        resident = next(int(line.split()[1]) for line in fh if line.startswith("VmRSS:")) * 1024
+    extra = {}
+    if solver == "superlu COLAMD":
+        make = lambda: spla.splu(K)
+    elif solver == "amg":
+        make = lambda: linalg.AMGFactor(K, rigid_body_modes(model))
+    else:
+        linalg.use_solver(solver)
+        make = lambda: linalg.factorize(K)
+    kept = {}
+    setup = median_time(lambda: kept.__setitem__("f", make()), 1 if K.shape[0] > 3 * 10**4 else repeats)
+    factor = kept["f"]
+    pair = median_time(lambda: factor.solve(rhs), max(3, repeats))
+    x = factor.solve(rhs)
+    if solver == "amg":
+        extra = dict(cg_iterations=float(np.mean(factor.iterations)), operator_complexity=factor.nnz / K.nnz)
+    else:
+        extra = dict(factor_nonzeros=int(getattr(factor, "nnz", 0) or 0))
+    residual = float(np.max(np.linalg.norm(K @ x - rhs, axis=0) / np.linalg.norm(rhs, axis=0)))
+    return [dict(name=f"K_C set-up and solve pair, 3-D block: {model.name}, {solver}", unknowns=int(K.shape[0]),
+                 data_points=0, seconds=setup, floor_seconds=float("nan"), ratio=float("nan"), setup_seconds=setup,
+                 solve_pair_seconds=pair, relative_residual=residual, nnz=int(K.nnz), **extra,
+                 peak_memory_bytes=max(base, peak_memory_bytes()),
+                 solver_memory_bytes=peak_memory_bytes() - resident)]
+
+
+def reduction_record_3d(dofs: int, contact: bool, repeats: int, solver: str) -> list[dict]:
+    """A reduced DDCM iteration (FB, :func:`ddcm_iteration`) on the 3-D block (:func:`block_3d`,
+    about ``dofs`` dofs of ``K_C``) with or without contact, ``K_C`` solved by ``solver``
+    (``"amg"``, or a direct solver of :mod:`ddcm_casadi.linalg`: ``"superlu"``, ``"pardiso"``; the
+    build's scale solves too), against its floor (one solve pair with the kept factor or hierarchy
+    plus the data search), with the build, the set-up of ``K_C`` and the ``nc`` back-solves of the
+    Delassus matrices, and the peak memory."""
+    if solver == "amg":
+        linalg.use_definite_solver("amg")
+    else:
+        linalg.use_solver(solver)
+    model = block_3d(divisions_3d(dofs), contact)
+    rec = ddcm_iteration(model, repeats)
+    peak = peak_memory_bytes()
+    return [dict(name=f"reduced DDCM iteration, 3-D block {'with' if contact else 'without'} contact: {model.name}, "
+                      f"{solver}", **rec,
+                 dofs=rec["unknowns"] - model.n_points * model.strain_components - model.n_contacts,
+                 material_points=model.n_points, contact_pairs=model.n_contacts, solver=solver,
+                 peak_memory_bytes=peak)]
 
 
 def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]:
@@ -938,6 +1053,24 @@ def main(argv=None) -> int:
         for rec in in_fresh_process("reduction_factor", u, 1 if u > 10**5 else rep, env=one_thread,
                                     label=f"reduction factorisation, about {u:.0e} unknowns", unknowns=u):
             log(rec)
+    # 3-D (issue 28, item 5): K_C by each solver, then a reduced DDCM iteration against its floor,
+    # by dofs of K_C. 5e5 is the largest block whose build fits in 16 GB (about 10 GB); there only
+    # AMG runs (a direct factor's fill grows like n^(4/3) in 3-D). SuperLU's minimum degree takes
+    # more than 10 minutes and 7 GB at 1e5: up to 1e4. --quick: 1e5 by AMG alone, without contact.
+    have_amg = importlib.util.find_spec("pyamg") is not None
+    for dofs in ((10**4, 10**5) if quick else (10**4, 10**5, 5 * 10**5)):
+        solvers = [s for s in ("superlu", "pardiso") if s in linalg.available_solvers()
+                   and dofs <= (10**4 if s == "superlu" or quick else 10**5)] + (["amg"] if have_amg else [])
+        for solver in solvers:
+            for rec in in_fresh_process("stiffness_solver_3d", dofs, solver, 1 if dofs > 10**4 else rep,
+                                        label=f"K_C set-up and solve pair, 3-D block, about {dofs:.0e} dofs, {solver}",
+                                        unknowns=dofs, env=one_thread):
+                log(rec)
+            for contact in (False,) if quick and dofs > 10**4 else (False, True):
+                for rec in in_fresh_process("reduction_record_3d", dofs, contact, 1 if dofs > 10**4 else rep, solver,
+                                            label=f"reduced DDCM iteration, 3-D block, about {dofs:.0e} dofs, {solver}",
+                                            unknowns=dofs, env=one_thread):
+                    log(rec)
     for n_data in ((10**4, 10**5, 10**6) if quick else (10**4, 10**5, 10**6, 10**7)):
         log(data_set_memory(n_data))
         model = stopped_bar(3000, n_data)

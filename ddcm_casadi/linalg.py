@@ -24,6 +24,12 @@ registered when ``pypardiso`` imports. A symmetric matrix is factorised as symme
 matrices as general (``mtype = 11``). Others can be registered with :func:`register_solver` (a
 CHOLMOD or MUMPS wrapper, say) and selected with :func:`use_solver`.
 
+Symmetric positive definite systems (the reduction's ``K_C``, the reference scales' stiffness) go
+through :func:`factorize_definite`: the selected direct solver by default, or, after
+``use_definite_solver("amg")`` (optional: ``pip install ddcm-casadi[amg]``), pyamg's smoothed
+aggregation hierarchy set up once and CG per solve (:class:`AMGFactor`): in 3-D a direct factor's
+fill grows like ``n^(4/3)`` and no longer fits in memory at 5e5 dofs (``docs/performance.md``).
+
 Low-rank updates of a factor (the active-set solver's, when a few pairs switch piece) are
 :mod:`ddcm_casadi.factor_updates`'.
 """
@@ -616,3 +622,106 @@ def factorize(A: sp.spmatrix, *, iterated: bool = False) -> Factor:
     if A.shape[0] >= INTERRUPTIBLE_MIN_SIZE and threading.current_thread() is threading.main_thread():
         return _interruptible(lambda: solver(A, tolerance=tolerance))
     return solver(A, tolerance=tolerance)
+
+
+# ---------------------------------------------------------------------- definite systems
+#: Relative residual ``||A x - b||_2 <= DEFINITE_TOL ||b||_2`` of an iterative solve of a
+#: definite system (:class:`AMGFactor`). The reduction's solves with ``K_C`` are the
+#: projection's equilibrium and stationarity residuals (``docs/maths.md`` section 17), which the
+#: formulations' Newton accepts at a scaled residual of 1e-9: a tenth of that leaves Newton its
+#: margin, as the direct factor's backward error (:data:`BACKWARD_ERROR`) does.
+DEFINITE_TOL = 1e-10
+#: Conjugate-gradient steps after which an AMG-preconditioned solve counts as failed (a singular
+#: or indefinite matrix): smoothed aggregation on 3-D elasticity takes 15-40 at any size.
+AMG_MAX_ITERATIONS = 500
+#: The solvers :func:`factorize_definite` can use: ``"direct"`` (the selected sparse direct
+#: solver, :func:`use_solver`) and ``"amg"`` (pyamg, where it imports).
+DEFINITE_SOLVERS = ("direct", "amg")
+_DEFINITE = ["direct"]
+
+
+class AMGFactor:
+    r"""A symmetric positive definite ``A`` "factorised" by an algebraic multigrid hierarchy
+    (pyamg's smoothed aggregation, set up once): each solve is a conjugate-gradient iteration
+    preconditioned by one V-cycle, to ``||A x - b||_2 <= tolerance ||b||_2`` per column.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix
+        Symmetric positive definite (a stiffness ``B^T (W (x) C) B`` with enough supports).
+    near_null : ndarray, optional
+        ``(n, r)`` near-null space (an elastic body's rigid-body modes): smoothed aggregation
+        interpolates it exactly, which keeps the iterations bounded as the mesh is refined.
+        ``None``: constants.
+    tolerance : float
+        Relative residual of every solve (:data:`DEFINITE_TOL`).
+
+    Attributes
+    ----------
+    iterations : list of int
+        Conjugate-gradient steps of every column solved so far.
+    nnz : int
+        Nonzeros of the hierarchy's operators (operator complexity times ``nnz(A)``).
+    """
+
+    def __init__(self, A: sp.spmatrix, near_null: np.ndarray | None = None, *,
+                 tolerance: float = DEFINITE_TOL) -> None:
+        import pyamg
+
+        self._A = sp.csr_matrix(A)
+        self._ml = pyamg.smoothed_aggregation_solver(self._A, B=near_null, symmetry="symmetric")
+        self._M = self._ml.aspreconditioner(cycle="V")
+        self.tolerance = float(tolerance)
+        self.iterations: list[int] = []
+        self.nnz = int(self._ml.operator_complexity() * self._A.nnz)
+
+    def _column(self, b: np.ndarray) -> np.ndarray:
+        import pyamg
+
+        norm_b = float(np.linalg.norm(b))
+        if norm_b == 0.0:
+            return np.zeros_like(b)
+        residuals: list[float] = []
+        x, _ = pyamg.krylov.cg(self._A, b, tol=self.tolerance, criteria="rr", maxiter=AMG_MAX_ITERATIONS,
+                               M=self._M, residuals=residuals)
+        self.iterations.append(len(residuals) - 1)
+        # the recurrence's residual drifts from the true one: check the true one
+        if not float(np.linalg.norm(self._A @ x - b)) <= 2.0 * self.tolerance * norm_b:
+            raise SingularMatrix(f"AMG-preconditioned CG did not reach a relative residual of {self.tolerance:.0e} "
+                                 f"in {AMG_MAX_ITERATIONS} steps (a singular or indefinite matrix)")
+        return x
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """``A^{-1} rhs`` for a vector or an ``n x k`` matrix of right-hand sides, column by column."""
+        rhs = np.asarray(rhs, float)
+        cols = rhs.reshape(rhs.shape[0], -1)
+        out = np.empty_like(cols)
+        for j in range(cols.shape[1]):
+            out[:, j] = self._column(np.ascontiguousarray(cols[:, j]))
+        return out.reshape(rhs.shape)
+
+
+def use_definite_solver(name: str) -> None:
+    """Select the solver of the symmetric positive definite systems (:func:`factorize_definite`):
+    ``"direct"`` (the default) or ``"amg"`` (``pip install ddcm-casadi[amg]``)."""
+    if name not in DEFINITE_SOLVERS:
+        raise InputError(f"unknown definite solver {name!r}; known: {', '.join(DEFINITE_SOLVERS)}")
+    if name == "amg" and importlib.util.find_spec("pyamg") is None:
+        raise InputError("definite solver 'amg' cannot run here: pyamg is not installed (pip install pyamg)")
+    _DEFINITE[0] = name
+
+
+def definite_solver_name() -> str:
+    """The name of the selected solver of definite systems."""
+    return _DEFINITE[0]
+
+
+def factorize_definite(A: sp.spmatrix, *, near_null: np.ndarray | None = None) -> Factor:
+    """A kept solver of the symmetric positive definite ``A`` (the reduction's ``K_C``, the
+    reference scales' stiffness): :func:`factorize` with the selected direct solver, or an
+    :class:`AMGFactor` (set up once, each solve to :data:`DEFINITE_TOL`), as selected by
+    :func:`use_definite_solver`. ``near_null``: the near-null space for AMG (ignored by a direct
+    solver). Raises :class:`SingularMatrix`."""
+    if _DEFINITE[0] == "amg":
+        return AMGFactor(A, near_null)
+    return factorize(A)

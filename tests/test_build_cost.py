@@ -16,13 +16,13 @@ from tests.test_reduction import hertz_block
 
 def _counting(monkeypatch) -> list:
     calls = []
-    original = scales.factorize
+    original = scales.factorize_definite  # the scales' solves (direct, or AMG where selected)
 
     def counted(A, **kw):
         calls.append(A.shape[0])
         return original(A, **kw)
 
-    monkeypatch.setattr(scales, "factorize", counted)
+    monkeypatch.setattr(scales, "factorize_definite", counted)
     return calls
 
 

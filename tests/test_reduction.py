@@ -190,3 +190,56 @@ def test_a_slender_truss_whose_delassus_condition_exceeds_the_roundoff_limit_kee
         assert "a Delassus matrix's condition" in path_description(built)
     path = DDCMSolver(problems, built).solve()
     assert path.converged
+
+
+def block_3d(divisions: int, contact: bool):
+    """The 3-D Hertz example's block (P1 tetrahedra) on a uniform mesh, pressed by its sphere
+    (pairs on the top face within 5 mm of the axis) or, without contact, by a hard device on its top."""
+    from ddcm_casadi.validation.continuum import EXAMPLE_3D
+
+    doc = read_document(EXAMPLE_3D)
+    doc["mesh"]["divisions"] = [divisions] * 3
+    doc["mesh"].pop("refine_near", None)
+    if contact:
+        doc["contact"][0]["boundary"] = {"min": [0.0, 0.0, 0.0], "max": [5e-3, 5e-3, 0.0]}
+    else:
+        doc.pop("contact")
+        doc.pop("hertz", None)
+        doc["supports"].append({"boundary": "zmax", "fix": "z", "displacement": [0.0, 0.0, -4e-5]})
+        doc["loading"] = {"load_factors": [0.5, 1.0]}
+    return case_from_dict(doc, base_dir=EXAMPLE_3D.parent, source="3-D block").model
+
+
+@pytest.mark.parametrize("contact", [False, True])
+def test_amg_solves_of_k_c_give_the_direct_fixed_points(contact):
+    """K_C by AMG-preconditioned CG (``use_definite_solver("amg")``) against its direct factor,
+    on a 3-D block: the same data assignment at every step, and fields within the forward error
+    of a solve to relative residual ``tol`` (twice DEFINITE_TOL, as accepted):
+    ``|e| / |x| <= cond(K_C) tol`` in the 2-norm, ``sqrt(n)`` more in the max-norm; with contact
+    the condensed solve amplifies a Delassus error by ``cond(D_u)`` more."""
+    pytest.importorskip("pyamg")
+    from ddcm_casadi import linalg
+
+    runs = {}
+    try:
+        for solver in ("direct", "amg"):
+            linalg.use_definite_solver(solver)
+            problems = build_problems(block_3d(4, contact))
+            built = build_projection(formulations.get("fischer_burmeister"), problems)
+            assert isinstance(built, ReducedProjection) and built.reduction.solver == solver
+            runs[solver] = (DDCMSolver(problems, built).solve(), built.reduction)
+    finally:
+        linalg.use_definite_solver("direct")
+    (direct, red), (amg, red_amg) = runs["direct"], runs["amg"]
+    assert isinstance(red_amg.factor, linalg.AMGFactor) and red.nc == red_amg.nc == (9 if contact else 0)
+    assert direct.converged and amg.converged
+    eig = np.linalg.eigvalsh(red.K_u.toarray())
+    bound = eig[-1] / eig[0] * 2 * linalg.DEFINITE_TOL * np.sqrt(red.n)
+    if contact:
+        eig_d = np.linalg.eigvalsh(red.D_u)
+        bound *= eig_d[-1] / eig_d[0]
+    for s, t in zip(direct.steps, amg.steps, strict=True):
+        np.testing.assert_array_equal(s.data_index, t.data_index)
+    for field in ("u", "stress", "p"):
+        x, y = direct.array(field), amg.array(field)
+        assert np.max(np.abs(x - y), initial=0.0) <= bound * max(np.max(np.abs(x), initial=0.0), 1e-300)

@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ddcm_casadi.formulations.base import BuiltFormulation, LocalSolution
+from ddcm_casadi.linalg import definite_solver_name
+from ddcm_casadi.models.scales import rigid_body_modes
 from ddcm_casadi.parallel import limited_blas
 from ddcm_casadi.problems.build import ProblemPair
 from ddcm_casadi.problems.contract import ComplementarityProblem
@@ -98,8 +100,9 @@ def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True)
     formulation.check_supports(problem)
     why = refusal(problem) if reduce else "reduction off"
     reduction = None
-    if not why:
-        reduction = problem.shared(("reduction",), lambda: _reduction(problem))
+    if not why:  # one reduction per problem and solver of K_C
+        reduction = problem.shared(("reduction", definite_solver_name()),
+                                   lambda: _reduction(problem, rigid_body_modes(problems.model)))
         why = reduction if isinstance(reduction, str) else ""
     if why:
         built = formulation.build(problem)
@@ -111,10 +114,10 @@ def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True)
     return built
 
 
-def _reduction(problem: ComplementarityProblem) -> Reduction | str:
+def _reduction(problem: ComplementarityProblem, near_null: np.ndarray | None) -> Reduction | str:
     """The reduction of ``problem``, or why it does not apply (a singular Delassus matrix)."""
     try:
-        return Reduction(problem)
+        return Reduction(problem, near_null)
     except NotReducible as exc:
         return str(exc)
 

@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ddcm_casadi.errors import InputError
-from ddcm_casadi.linalg import SingularMatrix, factorize
+from ddcm_casadi.linalg import SingularMatrix, factorize, factorize_definite
 
 
 
@@ -59,6 +59,17 @@ LARGE_STRAIN = 0.1
 #: A load's displacement beyond this many body sizes means the stiffness was singular (the body
 #: rests on its contact only; :func:`reference_scales` then adds springs on the pairs).
 SINGULAR_DISPLACEMENT = 1e3
+
+
+def rigid_body_modes(model: ContactModel) -> np.ndarray | None:
+    """The rigid-body modes of a continuum ``model`` in its free dofs (``(n, 3)`` in 2-D,
+    ``(n, 6)`` in 3-D: the near-null space of its stiffness, for an algebraic multigrid solver),
+    ``None`` for other models."""
+    disc = getattr(model, "discretisation", None)
+    free = getattr(model, "free_dofs", None)
+    if disc is None or free is None or not hasattr(disc, "rigid_body_modes"):
+        return None
+    return disc.rigid_body_modes()[free]
 
 
 def reference_scales(model: ContactModel, kind: str) -> dict:
@@ -148,8 +159,8 @@ class _Stiffness:
         """``K^-1 rhs`` (:class:`~ddcm_casadi.linalg.SingularMatrix` if ``K`` is singular)."""
         if self.base is not None:
             return self.base.solve(rhs) / self.beta
-        if self._lu is None:
-            self._lu = factorize(self.K)
+        if self._lu is None:  # the selected solver of definite systems (direct, or AMG)
+            self._lu = factorize_definite(self.K, near_null=rigid_body_modes(self.model))
         return self._lu.solve(rhs)
 
     def spring(self):
@@ -159,8 +170,8 @@ class _Stiffness:
         if self._spring_lu is None:
             model = self.model
             GA = model.gap_operator.T @ sp.diags(model.contact_area) if model.n_contacts else None
-            self._spring_lu = factorize(self.K + self.kappa * (GA @ model.gap_operator) if model.n_contacts
-                                        else self.K)
+            self._spring_lu = factorize_definite(self.K + self.kappa * (GA @ model.gap_operator) if model.n_contacts
+                                                 else self.K, near_null=rigid_body_modes(model))
         return self._spring_lu
 
 

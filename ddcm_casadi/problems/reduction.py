@@ -33,6 +33,7 @@ update of a formulation's factor. ``u``, ``eta`` and ``sigma`` follow from the s
 
 from __future__ import annotations
 
+import time
 from functools import cached_property
 
 import numpy as np
@@ -40,7 +41,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ddcm_casadi.linalg import SingularMatrix, factorize
+from ddcm_casadi.linalg import SingularMatrix, definite_solver_name, factorize_definite
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
@@ -175,6 +176,10 @@ class Reduction:
     problem : ComplementarityProblem
         The projection (kind ``"mpcc"``, :func:`refusal` empty; else, or with a singular
         Delassus matrix, :class:`NotReducible`).
+    near_null : ndarray, optional
+        The near-null space of ``K_u`` (a body's rigid-body modes in the free dofs), for an
+        algebraic multigrid solver (:func:`~ddcm_casadi.linalg.use_definite_solver`); a direct
+        solver ignores it.
 
     Attributes
     ----------
@@ -183,7 +188,15 @@ class Reduction:
     factorizations : int
         Sparse factorisations made (1 with a Hookean metric).
     factor : Factor
-        The kept factor of ``K_u`` (:func:`~ddcm_casadi.linalg.factorize`).
+        The kept factor of ``K_u`` (:func:`~ddcm_casadi.linalg.factorize_definite`: a direct
+        factor, or an AMG hierarchy whose solves are CG iterations to
+        :data:`~ddcm_casadi.linalg.DEFINITE_TOL`).
+    solver : str
+        Which (:func:`~ddcm_casadi.linalg.definite_solver_name` when built).
+    back_solves : int
+        Solves with the kept factor made for the Delassus matrices (``nc`` or ``2 nc``).
+    factor_seconds, back_solve_seconds : float
+        Wall time of the factorisation (or AMG set-up) and of the back-solves.
     K_u : scipy.sparse.csc_matrix
         ``A_u^T W_e A_u`` (a multiple of ``K_C``).
     Z_u : ndarray
@@ -192,7 +205,7 @@ class Reduction:
         The Delassus matrices ``G K_u^-1 G^T`` and ``R_p^T K_s^-1 R_p`` (``nc x nc``).
     """
 
-    def __init__(self, problem: ComplementarityProblem) -> None:
+    def __init__(self, problem: ComplementarityProblem, near_null: np.ndarray | None = None) -> None:
         why = refusal(problem, max_pairs=np.iinfo(np.int64).max)
         if why:
             raise NotReducible(why)
@@ -224,9 +237,11 @@ class Reduction:
         K_s = (self.R_s @ self._MRt).tocsc()
         self.G = Gm.z[:, :n].tocsr()
         self._g = Gm.params.tocsr()
-        self.factorizations = 1
+        self.factorizations, self.back_solves = 1, 0
+        self.solver = definite_solver_name()
+        start = time.perf_counter()
         try:
-            self.factor = factorize(self.K_u)
+            self.factor = factorize_definite(self.K_u, near_null=near_null)
         except SingularMatrix:
             raise NotReducible("K_C is singular (a body held only by its contacts)") from None
         scale = float((K_s.multiply(self.K_u)).sum()) / max(float(self.K_u.multiply(self.K_u).sum()), 1e-300)
@@ -236,10 +251,12 @@ class Reduction:
         else:
             self.alpha = None
             try:
-                self._factor_s = factorize(K_s)
+                self._factor_s = factorize_definite(K_s, near_null=near_null)
             except SingularMatrix:
                 raise NotReducible("the stress block K_s is singular") from None
             self.factorizations = 2
+        self.factor_seconds = time.perf_counter() - start
+        start = time.perf_counter()
         if nc:
             # nc back-solves: the columns K_u^-1 G^T and K_s^-1 R_p (shared when R_p is a
             # multiple of G^T column by column, as the contact forces G^T (a p) are)
@@ -269,11 +286,13 @@ class Reduction:
             self.Z_u = self.Z_p = np.zeros((n, 0))
             self._p_scale = None
             self.D_u = self.D_p = np.zeros((0, 0))
+        self.back_solve_seconds = time.perf_counter() - start
 
     def _back_solves(self, solve, columns: sp.spmatrix) -> np.ndarray:
         """``solve`` applied to the columns of ``columns``, :data:`SOLVE_BLOCK` at a time, into one
         column-major ``n x nc`` array (the recovery takes whole columns)."""
         columns = sp.csc_matrix(columns)
+        self.back_solves += columns.shape[1]
         out = np.empty((self.n, columns.shape[1]), order="F")
         for j in range(0, columns.shape[1], SOLVE_BLOCK):
             block = columns[:, j:j + SOLVE_BLOCK].toarray()
