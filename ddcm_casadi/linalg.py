@@ -3,7 +3,10 @@
 Every factorisation in the package (Newton steps, cached active-set systems, exact enumeration,
 the reference scales) goes through :func:`factorize`, so the solver is chosen in one place.
 
-``"superlu"`` (the default, no extra dependency): scipy's SuperLU, with the ordering chosen by the
+``"auto"`` (the default): ``"pardiso"`` for matrices of :data:`PARDISO_MIN_SIZE` unknowns or
+more where ``pypardiso`` is installed and loads, else ``"superlu"`` (:func:`chosen_solver`).
+
+``"superlu"`` (always available, no extra dependency): scipy's SuperLU, with the ordering chosen by the
 matrix's pattern. Every matrix this package factorises is a stiffness or the KKT matrix of a
 projection, whose *pattern* is symmetric; for those, the minimum-degree ordering of ``A + A^T``
 with diagonal pivots (SuperLU's symmetric mode) keeps the fill of a Cholesky-like factor. Its
@@ -291,6 +294,10 @@ def _superlu(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
     return _splu(A)
 
 
+#: PARDISO's iterative refinement steps on a solve with a factor whose pivots it perturbed.
+PERTURBED_REFINEMENT = 2
+
+
 class _PardisoFactor:
     """A PARDISO factorisation (``pypardiso``), freed with the object."""
 
@@ -314,11 +321,22 @@ class _PardisoFactor:
         except (pypardiso.pardiso_wrapper.PyPardisoError, ValueError) as exc:  # ValueError: an empty row
             raise SingularMatrix(f"PARDISO: {exc}") from None
         self.perturbed = int(self._solver.get_iparm(14))  # pivots PARDISO perturbed
+        # iparm(1) = 0 made PARDISO fill in its defaults at the factorisation, two steps of
+        # iterative refinement among them: each solve cost three (0.29 s against SuperLU's 0.10 s
+        # on the 95 485-unknown Hertz piece matrix). The callers check or refine their solves, so
+        # only a factor with perturbed pivots keeps them.
+        self._solver.set_iparm(8, PERTURBED_REFINEMENT if self.perturbed else 0)
         # nonzeros of L and U (of L only for a symmetric factor, whose U is its transpose)
         self.nnz = int(self._solver.get_iparm(18)) * (2 if symmetric else 1)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return self._solver.solve(self._matrix, np.asarray(rhs, dtype=float))
+        b = np.asarray(rhs, dtype=float)
+        if b.shape[0] != self._matrix.shape[0]:
+            raise InputError(f"right-hand side of {b.shape[0]} rows for a matrix of {self._matrix.shape[0]}")
+        # Phase 33 (solve) straight away: pypardiso's solve() first compares the whole matrix
+        # with the factorised one (0.5 s of 10 s in a 1e5 Hertz path's 49 solves).
+        self._solver.set_phase(33)
+        return self._solver._call_pardiso(self._matrix, np.asfortranarray(b))
 
     def __del__(self) -> None:
         solver = getattr(self, "_solver", None)
@@ -396,24 +414,48 @@ def register_solver(name: str, factorize_fn: Callable[[sp.csc_matrix], Factor], 
 
 def unregister_solver(name: str) -> None:
     """Remove the solver ``name`` registered with :func:`register_solver` (if it is selected,
-    ``"superlu"`` is selected instead).
+    ``"auto"``, the default, is selected instead).
 
     Raises
     ------
     ValueError
-        ``name`` is ``"superlu"``, the default, which stays.
+        ``name`` is ``"superlu"`` or ``"auto"``, which stay.
     """
-    if name == "superlu":
-        raise ValueError("the default linear solver 'superlu' cannot be unregistered")
+    if name in ("superlu", "auto"):
+        raise ValueError(f"the built-in linear solver {name!r} cannot be unregistered")
     _SOLVERS.pop(name, None)
     _LIBRARIES.pop(name, None)
     _UNUSABLE.pop(name, None)
     if _ACTIVE[0] == name:
-        _ACTIVE[0] = "superlu"
+        _ACTIVE[0] = "auto"
 
 
 if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on first use (it loads MKL)
     register_solver("pardiso", _pardiso, library="pypardiso")
+
+
+#: Unknowns from which ``"auto"`` factorises with PARDISO where it runs. Measured on the Hertz
+#: stiffness (benchmarks/snesvi.py, docs/performance.md 2026-11-26): SuperLU was as fast or faster
+#: up to 5e4 dofs (0.19 s against 0.28 s at 9 870, MKL's start-up and threads), PARDISO 2.5x
+#: faster at 95 266 (1.7 s against 4.5 s).
+PARDISO_MIN_SIZE = 80_000
+
+
+def chosen_solver(n: int) -> str:
+    """The solver ``"auto"`` uses for a matrix of ``n`` unknowns: ``"pardiso"`` from
+    :data:`PARDISO_MIN_SIZE` unknowns where it is registered and its library loads, else
+    ``"superlu"``."""
+    if n >= PARDISO_MIN_SIZE and "pardiso" in _SOLVERS and _check_loads("pardiso") is None:
+        return "pardiso"
+    return "superlu"
+
+
+def _auto(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
+    return _SOLVERS[chosen_solver(A.shape[0])](A, tolerance=tolerance)
+
+
+register_solver("auto", _auto)
+_ACTIVE[0] = "auto"
 
 
 def use_solver(name: str) -> None:

@@ -1,0 +1,234 @@
+"""Classical Signorini against an independent VI solver: ddcm-casadi's Fischer-Burmeister Newton
+(active-set predictor, low-rank factor updates) against PETSc's reduced-space active-set VI Newton
+(SNES ``vinewtonrsls``) with MUMPS, on the same discrete problem.
+
+    python benchmarks/snesvi.py [--full] [--out DIR] [--peer-python PATH]
+
+The problem is the Hertz example's body (:func:`run.continuum_block`, P2 plane strain, a rigid
+cylinder pressed in over 5 steps; 1 step, its last, at 1e6): about 1e4 and 1e5 unknowns, and 1e6
+with ``--full``. ddcm-casadi builds it, writes the free-dof stiffness ``K``, the gap operator,
+gap offsets and loads to an ``.npz``, and solves it with every available sparse solver of
+:mod:`ddcm_casadi.linalg`; ``benchmarks/snesvi_peer.py``, run by a Python that has ``petsc4py``
+(the ``dolfinx-solver-real`` wheel, Python >= 3.12; not a dependency of the package), solves the
+same ``.npz`` with MUMPS in each tuning of :data:`PEER_TUNINGS`. Each side runs in its own process
+(its own peak memory); the solutions must agree to :data:`AGREEMENT` (``u`` relative to
+``max |u|``, ``p`` relative to ``max p``). Also the time of one factorisation and solve of ``K``
+with each solver on both sides (:func:`factor_times`, ``factor_seconds`` of the peer).
+
+Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
+``/work/venv-petsc/bin/python``) it prints one line and exits 0. Writes ``DIR/snesvi.json`` and
+``DIR/snesvi.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from ddcm_casadi import formulations as registry
+from ddcm_casadi import linalg
+from ddcm_casadi.drivers.path import solve_classical
+from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
+from ddcm_casadi.problems.build import build_problems
+
+HERE = Path(__file__).resolve().parent
+#: Mesh divisions of the sizes (about ``8.1 d^2`` unknowns): 1e4, 9.7e4; ``--full`` adds 1e6.
+SIZES = (35, 109)
+FULL_SIZES = SIZES + (352,)
+#: From this many divisions only the last load step is solved (the 1e6 run's cost and memory).
+ONE_STEP_FROM = 200
+#: MUMPS tunings of the peer: (``ICNTL(7)`` ordering, factor); 0 AMD, 5 METIS.
+PEER_TUNINGS = ((0, "lu"), (5, "lu"), (0, "cholesky"), (5, "cholesky"))
+#: The solutions agree when ``u`` and ``p`` differ by at most this relative to ``max |u|``, ``max p``.
+AGREEMENT = 1e-10
+DEFAULT_PEER = "/work/venv-petsc/bin/python"
+
+
+def peak_memory_bytes() -> int:
+    """The peak resident set of this process (Linux ``VmHWM``), in bytes."""
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:")) * 1024
+
+
+def hertz_model(divisions: int):
+    """:func:`run.continuum_block` of ``divisions``, reduced to its last load step from
+    :data:`ONE_STEP_FROM` divisions on."""
+    sys.path.insert(0, str(HERE))  # run.py is a sibling script, not a package module
+    from run import continuum_block
+
+    model = continuum_block(divisions)
+    if divisions >= ONE_STEP_FROM:
+        model = replace(model, gap_offsets=model.gap_offsets[-1:], loads=model.loads[-1:],
+                        load_parameter=model.load_parameter[-1:])
+    return model
+
+
+def write_problem(model, path: str) -> None:
+    """The discrete problem the peer solves: ``K``, ``G``, contact areas, ``gap0`` and ``f``."""
+    K, G = sp.csr_matrix(model.stiffness()), sp.csr_matrix(model.gap_operator)
+    with open(path, "wb") as fh:
+        np.savez(fh, n=model.n_dofs, nc=model.n_contacts, K_data=K.data, K_indices=K.indices, K_indptr=K.indptr,
+                 G_data=G.data, G_indices=G.indices, G_indptr=G.indptr, area=model.contact_area,
+                 gap0=model.gap_offsets, f=model.loads)
+
+
+def ours(divisions: int, solver: str, problem: str | None, solution: str) -> dict:
+    """Build the problem, write it to ``problem`` (unless ``None``), solve its path with FB and the
+    sparse solver ``solver``, and write ``u`` and ``p`` per step to ``solution``."""
+    linalg.use_solver(solver)
+    model = hertz_model(divisions)
+    t0 = time.perf_counter()
+    problems = build_problems(model)
+    built = registry.get("fischer_burmeister").build(problems.classical)
+    build = time.perf_counter() - t0
+    if problem is not None:
+        write_problem(model, problem)
+    t0 = time.perf_counter()
+    res = solve_classical(problems, built, "fischer_burmeister")
+    seconds = time.perf_counter() - t0
+    np.savez(solution, u=res.array("u"), p=res.array("p"))
+    stats = built.stats
+    return dict(unknowns=model.n_dofs + model.n_contacts, dofs=model.n_dofs, contacts=model.n_contacts,
+                steps=model.n_steps, seconds=seconds, build_seconds=build, converged=bool(res.converged),
+                newton_iterations=int(res.array("iterations").sum()), factorisations=stats["factorizations"],
+                updates=stats["updates"], solver=solver, peak_memory_bytes=peak_memory_bytes())
+
+
+def factor_times(divisions: int, repeats: int) -> dict:
+    """Seconds of one factorisation and solve of the free-dof stiffness ``K`` with each available
+    solver of :mod:`ddcm_casadi.linalg` (median of ``repeats``; the first call, which loads a
+    library, untimed)."""
+    model = hertz_model(divisions)
+    K = sp.csc_matrix(model.stiffness())
+    b = np.cos(np.arange(K.shape[0]))
+    out = {}
+    previous = linalg.solver_name()
+    try:
+        for name in linalg.available_solvers():
+            linalg.use_solver(name)
+            linalg.factorize(K).solve(b)
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                linalg.factorize(K).solve(b)
+                times.append(time.perf_counter() - t0)
+            out[name] = float(np.median(times))
+    finally:
+        linalg.use_solver(previous)
+    return dict(dofs=int(K.shape[0]), nnz=int(K.nnz), seconds=out)
+
+
+FRESH = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+import snesvi
+print(json.dumps(getattr(snesvi, sys.argv[2])(*json.loads(sys.argv[3]))))
+"""
+
+
+def fresh(function: str, *args) -> dict:
+    """``function(*args)`` of this module in a fresh process (its own peak memory)."""
+    proc = subprocess.run([sys.executable, "-c", FRESH, str(HERE), function, json.dumps(args)],
+                          capture_output=True, text=True, cwd=HERE)
+    if proc.returncode:
+        return dict(error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def peer(python: str, problem: str, solution: str, ordering: int, factor: str) -> dict:
+    """PETSc SNESVI on ``problem`` (``snesvi_peer.py`` in the peer's Python)."""
+    proc = subprocess.run([python, str(HERE / "snesvi_peer.py"), problem, solution, str(ordering), factor],
+                          capture_output=True, text=True, cwd=HERE)
+    if proc.returncode:
+        return dict(error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def difference(a: str, b: str) -> dict:
+    """The largest differences of ``u`` and ``p`` between two solutions, relative to ``max |u|``
+    and ``max p`` of the first."""
+    x, y = np.load(a), np.load(b)
+    du = float(np.max(np.abs(x["u"] - y["u"])) / np.max(np.abs(x["u"])))
+    dp = float(np.max(np.abs(x["p"] - y["p"])) / np.max(np.abs(x["p"])))
+    return dict(u=du, p=dp, agree=bool(max(du, dp) <= AGREEMENT))
+
+
+def compare_size(divisions: int, python: str, tmp: str, repeats: int) -> list[dict]:
+    """Every solver of ours and every peer tuning on one size, and the per-factorisation times."""
+    problem = os.path.join(tmp, f"problem{divisions}.npz")
+    records = []
+    reference = None
+    for solver in linalg.available_solvers():
+        solution = os.path.join(tmp, f"ours{divisions}-{solver}.npz")
+        rec = fresh("ours", divisions, solver, problem if reference is None else None, solution)
+        rec.update(side="ddcm-casadi FB", divisions=divisions)
+        if "error" not in rec:
+            reference = reference or solution
+            rec["difference"] = difference(reference, solution)
+        records.append(rec)
+    if reference is None:
+        return records
+    for ordering, factor in PEER_TUNINGS:
+        solution = os.path.join(tmp, f"peer{divisions}-{ordering}{factor}.npz")
+        rec = peer(python, problem, solution, ordering, factor)
+        rec.update(side="PETSc vinewtonrsls + MUMPS", divisions=divisions, solver=f"mumps {factor} ICNTL(7)={ordering}")
+        if "error" not in rec:
+            rec["difference"] = difference(reference, solution)
+        records.append(rec)
+    factors = fresh("factor_times", divisions, repeats)
+    records.append(dict(side="factorisation of K", divisions=divisions, **factors))
+    return records
+
+
+def markdown(records: list[dict]) -> str:
+    lines = ["| divisions | side | solver | unknowns | seconds | Newton | factorisations (+updates) | "
+             "peak memory GB | difference u / p |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in records:
+        if r["side"] == "factorisation of K" or "error" in r:
+            continue
+        fac = (f"{r['factorisations']} + {r['updates']}" if "updates" in r else f"{r['numeric_factorisations']}")
+        d = r.get("difference", {})
+        lines.append(f"| {r['divisions']} | {r['side']} | {r['solver']} | {r.get('unknowns', '')} | {r['seconds']:.3g} | "
+                     f"{r['newton_iterations']} | {fac} | {r['peak_memory_bytes'] / 1e9:.2f} | "
+                     f"{d.get('u', float('nan')):.1e} / {d.get('p', float('nan')):.1e} |")
+    lines += ["", "| divisions | dofs | solver | seconds (factorise + solve K) |", "|---|---|---|---|"]
+    for r in records:
+        if r["side"] == "factorisation of K" and "seconds" in r:
+            lines += [f"| {r['divisions']} | {r['dofs']} | {k} | {v:.3g} |" for k, v in r["seconds"].items()]
+    errors = [f"- {r['side']} {r.get('solver', '')} at {r['divisions']}: {r['error']}" for r in records if "error" in r]
+    return "\n".join(lines + ([""] + errors if errors else [])) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--full", action="store_true", help="add the 1e6-unknown size (about 10 GB per process)")
+    ap.add_argument("--out", default="benchmark-results", help="output folder")
+    ap.add_argument("--peer-python", default=os.environ.get("DDCM_PETSC_PYTHON", DEFAULT_PEER))
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args(argv)
+    if not os.path.exists(args.peer_python):
+        print(f"snesvi: skipped, no Python with petsc4py at {args.peer_python} (--peer-python or DDCM_PETSC_PYTHON)")
+        return 0
+    out = prepare_output_dir(args.out)
+    records = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for divisions in FULL_SIZES if args.full else SIZES:
+            records += compare_size(divisions, args.peer_python, tmp, args.repeats)
+            write_json_atomic(out / "snesvi.json", records)
+    write_bytes_atomic(out / "snesvi.md", markdown(records).encode())
+    print(markdown(records))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
