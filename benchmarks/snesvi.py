@@ -13,7 +13,8 @@ gap offsets and loads to an ``.npz``, and solves it with every available sparse 
 same ``.npz`` with MUMPS in each tuning of :data:`PEER_TUNINGS`. Each side runs in its own process
 (its own peak memory); the solutions must agree to :data:`AGREEMENT` (``u`` relative to
 ``max |u|``, ``p`` relative to ``max p``). Also the time of one factorisation and solve of ``K``
-with each solver on both sides (:func:`factor_times`, ``factor_seconds`` of the peer).
+with each solver on both sides (:func:`factor_times`, and the peer's ``factor`` mode). Every
+process runs with one thread (:data:`THREADS`).
 
 Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
 ``/work/venv-petsc/bin/python``) it prints one line and exits 0. Writes ``DIR/snesvi.json`` and
@@ -49,6 +50,8 @@ FULL_SIZES = SIZES + (352,)
 ONE_STEP_FROM = 200
 #: MUMPS tunings of the peer: (``ICNTL(7)`` ordering, factor); 0 AMD, 5 METIS.
 PEER_TUNINGS = ((0, "lu"), (5, "lu"), (0, "cholesky"), (5, "cholesky"))
+#: At 1e6 the AMD ones only (METIS took 1.8x AMD's time at 1e5; a run is minutes at 1e6).
+LARGE_PEER_TUNINGS = ((0, "lu"), (0, "cholesky"))
 #: The solutions agree when ``u`` and ``p`` differ by at most this relative to ``max |u|``, ``max p``.
 AGREEMENT = 1e-10
 DEFAULT_PEER = "/work/venv-petsc/bin/python"
@@ -104,19 +107,23 @@ def ours(divisions: int, solver: str, problem: str | None, solution: str) -> dic
                 updates=stats["updates"], solver=solver, peak_memory_bytes=peak_memory_bytes())
 
 
+def solvers() -> list[str]:
+    """The sparse solvers of :mod:`ddcm_casadi.linalg` that run here, but ``"auto"`` (one of them)."""
+    return [name for name in linalg.available_solvers() if name != "auto"]
+
+
 def factor_times(divisions: int, repeats: int) -> dict:
     """Seconds of one factorisation and solve of the free-dof stiffness ``K`` with each available
-    solver of :mod:`ddcm_casadi.linalg` (median of ``repeats``; the first call, which loads a
-    library, untimed)."""
+    solver of :mod:`ddcm_casadi.linalg` (median of ``repeats``; loading a library untimed)."""
     model = hertz_model(divisions)
     K = sp.csc_matrix(model.stiffness())
     b = np.cos(np.arange(K.shape[0]))
     out = {}
     previous = linalg.solver_name()
     try:
-        for name in linalg.available_solvers():
+        for name in solvers():
             linalg.use_solver(name)
-            linalg.factorize(K).solve(b)
+            linalg.factorize(2.0 * sp.identity(4, format="csc"))  # loads the library (MKL)
             times = []
             for _ in range(repeats):
                 t0 = time.perf_counter()
@@ -125,7 +132,7 @@ def factor_times(divisions: int, repeats: int) -> dict:
             out[name] = float(np.median(times))
     finally:
         linalg.use_solver(previous)
-    return dict(dofs=int(K.shape[0]), nnz=int(K.nnz), seconds=out)
+    return dict(dofs=int(K.shape[0]), nnz=int(K.nnz), seconds=out, default=linalg.chosen_solver(K.shape[0]))
 
 
 FRESH = """
@@ -136,22 +143,29 @@ print(json.dumps(getattr(snesvi, sys.argv[2])(*json.loads(sys.argv[3]))))
 """
 
 
+#: Threads of every process (OpenMP, OpenBLAS, MKL): one, as both sides get on a 2-core machine
+#: shared with other sessions (MKL's two threads made a PARDISO solve 1.6x slower under load).
+THREADS = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+
+
+def _run(cmd: list[str]) -> dict:
+    """The JSON of the last line ``cmd`` prints (run with :data:`THREADS`), or its error."""
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=HERE, env={**os.environ, **THREADS})
+    if proc.returncode:
+        return dict(error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
 def fresh(function: str, *args) -> dict:
     """``function(*args)`` of this module in a fresh process (its own peak memory)."""
-    proc = subprocess.run([sys.executable, "-c", FRESH, str(HERE), function, json.dumps(args)],
-                          capture_output=True, text=True, cwd=HERE)
-    if proc.returncode:
-        return dict(error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return _run([sys.executable, "-c", FRESH, str(HERE), function, json.dumps(args)])
 
 
-def peer(python: str, problem: str, solution: str, ordering: int, factor: str) -> dict:
-    """PETSc SNESVI on ``problem`` (``snesvi_peer.py`` in the peer's Python)."""
-    proc = subprocess.run([python, str(HERE / "snesvi_peer.py"), problem, solution, str(ordering), factor],
-                          capture_output=True, text=True, cwd=HERE)
-    if proc.returncode:
-        return dict(error=f"exit status {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+def peer(python: str, mode: str, problem: str, out: str, ordering: int, factor: str) -> dict:
+    """``snesvi_peer.py`` in the peer's Python: PETSc SNESVI on ``problem`` (``mode`` ``"solve"``,
+    its solution written to ``out``), or the time of a MUMPS factorisation and solve of ``K``
+    (``"factor"``, median of ``out`` repeats)."""
+    return _run([python, str(HERE / "snesvi_peer.py"), mode, problem, out, str(ordering), factor])
 
 
 def difference(a: str, b: str) -> dict:
@@ -168,24 +182,32 @@ def compare_size(divisions: int, python: str, tmp: str, repeats: int) -> list[di
     problem = os.path.join(tmp, f"problem{divisions}.npz")
     records = []
     reference = None
-    for solver in linalg.available_solvers():
+    for solver in solvers():
         solution = os.path.join(tmp, f"ours{divisions}-{solver}.npz")
         rec = fresh("ours", divisions, solver, problem if reference is None else None, solution)
         rec.update(side="ddcm-casadi FB", divisions=divisions)
+        if "error" not in rec:
+            rec["default"] = linalg.chosen_solver(rec["unknowns"]) == solver
         if "error" not in rec:
             reference = reference or solution
             rec["difference"] = difference(reference, solution)
         records.append(rec)
     if reference is None:
         return records
-    for ordering, factor in PEER_TUNINGS:
+    tunings = PEER_TUNINGS if divisions < ONE_STEP_FROM else LARGE_PEER_TUNINGS
+    for ordering, factor in tunings:
         solution = os.path.join(tmp, f"peer{divisions}-{ordering}{factor}.npz")
-        rec = peer(python, problem, solution, ordering, factor)
+        rec = peer(python, "solve", problem, solution, ordering, factor)
         rec.update(side="PETSc vinewtonrsls + MUMPS", divisions=divisions, solver=f"mumps {factor} ICNTL(7)={ordering}")
         if "error" not in rec:
             rec["difference"] = difference(reference, solution)
         records.append(rec)
-    factors = fresh("factor_times", divisions, repeats)
+    large = divisions >= ONE_STEP_FROM
+    factors = fresh("factor_times", divisions, 1 if large else repeats)
+    for ordering, factor in tunings:
+        rec = peer(python, "factor", problem, str(1 if large else repeats), ordering, factor)
+        if "seconds" in rec:
+            factors.setdefault("seconds", {})[f"PETSc mumps {factor} ICNTL(7)={ordering}"] = rec["seconds"]
     records.append(dict(side="factorisation of K", divisions=divisions, **factors))
     return records
 
@@ -204,7 +226,8 @@ def markdown(records: list[dict]) -> str:
     lines += ["", "| divisions | dofs | solver | seconds (factorise + solve K) |", "|---|---|---|---|"]
     for r in records:
         if r["side"] == "factorisation of K" and "seconds" in r:
-            lines += [f"| {r['divisions']} | {r['dofs']} | {k} | {v:.3g} |" for k, v in r["seconds"].items()]
+            lines += [f"| {r['divisions']} | {r['dofs']} | {k}{' (auto)' if k == r['default'] else ''} | {v:.3g} |"
+                      for k, v in r["seconds"].items()]
     errors = [f"- {r['side']} {r.get('solver', '')} at {r['divisions']}: {r['error']}" for r in records if "error" in r]
     return "\n".join(lines + ([""] + errors if errors else [])) + "\n"
 
@@ -215,6 +238,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="benchmark-results", help="output folder")
     ap.add_argument("--peer-python", default=os.environ.get("DDCM_PETSC_PYTHON", DEFAULT_PEER))
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--divisions", type=int, nargs="*", help="mesh divisions to run instead (about 8.1 d^2 unknowns)")
     args = ap.parse_args(argv)
     if not os.path.exists(args.peer_python):
         print(f"snesvi: skipped, no Python with petsc4py at {args.peer_python} (--peer-python or DDCM_PETSC_PYTHON)")
@@ -222,7 +246,7 @@ def main(argv=None) -> int:
     out = prepare_output_dir(args.out)
     records = []
     with tempfile.TemporaryDirectory() as tmp:
-        for divisions in FULL_SIZES if args.full else SIZES:
+        for divisions in args.divisions or (FULL_SIZES if args.full else SIZES):
             records += compare_size(divisions, args.peer_python, tmp, args.repeats)
             write_json_atomic(out / "snesvi.json", records)
     write_bytes_atomic(out / "snesvi.md", markdown(records).encode())

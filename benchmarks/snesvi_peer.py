@@ -1,7 +1,8 @@
 """The peer side of ``benchmarks/snesvi.py``: PETSc's reduced-space active-set VI Newton
 (SNES ``vinewtonrsls``) with MUMPS on the discrete Signorini problem that ddcm-casadi wrote.
 
-    PYTHON_WITH_PETSC benchmarks/snesvi_peer.py PROBLEM.npz SOLUTION.npz ORDERING FACTOR
+    PYTHON_WITH_PETSC benchmarks/snesvi_peer.py solve PROBLEM.npz SOLUTION.npz ORDERING FACTOR
+    PYTHON_WITH_PETSC benchmarks/snesvi_peer.py factor PROBLEM.npz REPEATS ORDERING FACTOR
 
 Imports only numpy, scipy and petsc4py (the ``dolfinx-solver-real`` wheel ships PETSc, petsc4py
 and MUMPS; it needs Python >= 3.12, so this runs in its own interpreter). ``PROBLEM.npz`` holds the
@@ -16,7 +17,8 @@ whose contact pressures are ``p = F_n / a``. Steps are warm-started from the las
 ddcm-casadi's path is. ``ORDERING``: MUMPS's ``ICNTL(7)`` (0 AMD, 2 AMF, 5 METIS, 7 automatic);
 ``FACTOR``: ``lu`` or ``cholesky`` (MUMPS's LDL^T of the symmetric reduced matrix). Prints one
 JSON line: seconds per step, Newton iterations, numeric factorisations, symbolic analyses and the
-peak resident memory of this process.
+peak resident memory of this process. ``factor``: the seconds of one factorisation and solve of
+``K`` alone.
 """
 
 from __future__ import annotations
@@ -136,5 +138,38 @@ def main(problem: str, solution: str, ordering: int, factor: str) -> dict:
                 petsc_version=".".join(map(str, PETSc.Sys.getVersion())))
 
 
+def factor_time(problem: str, repeats: int, ordering: int, factor: str) -> dict:
+    """Seconds of one MUMPS factorisation (symbolic and numeric) and solve of ``K`` (median of
+    ``repeats``), and the peak resident memory."""
+    d = np.load(problem)
+    n = int(d["n"])
+    J = petsc_matrix(sp.csr_matrix((d["K_data"], d["K_indices"], d["K_indptr"]), shape=(n, n)))
+    J.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    b = J.createVecRight()
+    b.setArray(np.cos(np.arange(n)))
+    x = b.duplicate()
+    PETSc.Options()["mat_mumps_icntl_7"] = ordering
+    times = []
+    for _ in range(repeats):
+        ksp = PETSc.KSP().create()
+        ksp.setOperators(J)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType(factor)
+        pc.setFactorSolverType("mumps")
+        ksp.setFromOptions()
+        t0 = time.perf_counter()
+        ksp.setUp()
+        ksp.solve(b, x)
+        times.append(time.perf_counter() - t0)
+        ksp.destroy()
+    return dict(seconds=float(np.median(times)), ordering=ordering, factor=factor,
+                peak_memory_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+
+
 if __name__ == "__main__":
-    print(json.dumps(main(sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4])))
+    mode, path, out, ordering, factor = sys.argv[1:6]
+    if mode == "factor":
+        print(json.dumps(factor_time(path, int(out), int(ordering), factor)))
+    else:
+        print(json.dumps(main(path, out, int(ordering), factor)))
