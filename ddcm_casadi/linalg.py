@@ -434,11 +434,13 @@ if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on f
     register_solver("pardiso", _pardiso, library="pypardiso")
 
 
-#: Unknowns from which ``"auto"`` factorises with PARDISO where it runs. Measured on the Hertz
-#: stiffness (benchmarks/snesvi.py, docs/performance.md 2026-11-26): SuperLU was as fast or faster
-#: up to 5e4 dofs (0.19 s against 0.28 s at 9 870, MKL's start-up and threads), PARDISO 2.5x
-#: faster at 95 266 (1.7 s against 4.5 s).
-PARDISO_MIN_SIZE = 80_000
+#: Unknowns from which ``"auto"`` factorises with PARDISO where it runs (docs/performance.md,
+#: 2026-11-26, issue 28 item 6). On the Hertz stiffness PARDISO took 0.34 s against SuperLU's
+#: 0.29 s at 9 870 dofs, 1.97 s against 3.31 s at 95 266 and 14.0 s against 72.4 s at 991 936,
+#: where the classical FB path fits in 16 GB with PARDISO only. But at 99 687 unknowns the DDCM
+#: full-path iteration took 0.85 s with PARDISO against 0.61 s with SuperLU (5 factorisations
+#: against 3: its updates' solves missed more often), so SuperLU keeps the sizes up to here.
+PARDISO_MIN_SIZE = 200_000
 
 
 def chosen_solver(n: int) -> str:
