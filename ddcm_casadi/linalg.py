@@ -4,7 +4,8 @@ Every factorisation in the package (Newton steps, cached active-set systems, exa
 the reference scales) goes through :func:`factorize`, so the solver is chosen in one place.
 
 ``"auto"`` (the default): ``"pardiso"`` for matrices of :data:`PARDISO_MIN_SIZE` unknowns or
-more where ``pypardiso`` is installed and loads, else ``"superlu"`` (:func:`chosen_solver`).
+more (:data:`PARDISO_UNSYMMETRIC_MIN_SIZE` for unsymmetric ones) where ``pypardiso`` is
+installed and loads, else ``"superlu"`` (:func:`chosen_solver`).
 
 ``"superlu"`` (always available, no extra dependency): scipy's SuperLU, with the ordering chosen by the
 matrix's pattern. Every matrix this package factorises is a stiffness or the KKT matrix of a
@@ -354,10 +355,15 @@ def _solves_generic(lu: Factor, A: sp.csc_matrix) -> bool:
     return bool(np.all(np.isfinite(x))) and float(np.max(np.abs(A @ x - b))) <= 1e-6 * float(np.max(np.abs(b)))
 
 
+def numerically_symmetric(A: sp.spmatrix) -> bool:
+    """Whether ``|A - A^T| <= 1e-14 max |A|`` entrywise (and ``A`` has a nonzero)."""
+    return bool(A.nnz) and abs(A - A.T).max() <= 1e-14 * abs(A).max()
+
+
 def _pardiso(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
     # PARDISO perturbs tiny pivots instead of failing (then refines the solution iteratively):
     # a factor with perturbed pivots is accepted only if it solves a generic system.
-    if A.nnz and abs(A - A.T).max() <= 1e-14 * abs(A).max():
+    if numerically_symmetric(A):
         lu = _PardisoFactor(A, True)
         if _checked(lu, A, tolerance) and (not lu.perturbed or _solves_generic(lu, A)):
             return lu
@@ -434,26 +440,34 @@ if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on f
     register_solver("pardiso", _pardiso, library="pypardiso")
 
 
-#: Unknowns from which ``"auto"`` factorises with PARDISO where it runs (docs/performance.md,
-#: 2026-11-26, issue 28 item 6). On the Hertz stiffness PARDISO took 0.34 s against SuperLU's
-#: 0.29 s at 9 870 dofs, 1.97 s against 3.31 s at 95 266 and 14.0 s against 72.4 s at 991 936,
-#: where the classical FB path fits in 16 GB with PARDISO only. But at 99 687 unknowns the DDCM
-#: full-path iteration took 0.85 s with PARDISO against 0.61 s with SuperLU (5 factorisations
-#: against 3: its updates' solves missed more often), so SuperLU keeps the sizes up to here.
+#: Unknowns from which ``"auto"`` factorises a symmetric matrix with PARDISO where it runs
+#: (docs/performance.md, 2026-11-26, issue 28 item 6). At 99 687 unknowns the DDCM full path's
+#: symmetric KKT matrices (PARDISO's symmetric indefinite mode) took 0.85 s an iteration with
+#: PARDISO against 0.61 s with SuperLU (5 factorisations against 3: its updates missed their
+#: tolerance more often); on the Hertz stiffness at 991 936 dofs PARDISO took 14.0 s against
+#: SuperLU's 72.4 s.
 PARDISO_MIN_SIZE = 200_000
+#: The same for an unsymmetric matrix (PARDISO's LU): the classical FB piece matrix of 95 485
+#: unknowns factorised in 1.5 s against 4.4 s, its solves 0.05 s against 0.10 s. Below about 5e4
+#: SuperLU was as fast or faster (MKL's start-up: 0.34 s against 0.29 s at 9 870 dofs).
+PARDISO_UNSYMMETRIC_MIN_SIZE = 80_000
 
 
-def chosen_solver(n: int) -> str:
-    """The solver ``"auto"`` uses for a matrix of ``n`` unknowns: ``"pardiso"`` from
-    :data:`PARDISO_MIN_SIZE` unknowns where it is registered and its library loads, else
-    ``"superlu"``."""
-    if n >= PARDISO_MIN_SIZE and "pardiso" in _SOLVERS and _check_loads("pardiso") is None:
+def chosen_solver(n: int, symmetric: bool = True) -> str:
+    """The solver ``"auto"`` uses for a matrix of ``n`` unknowns, numerically symmetric or not
+    (:func:`numerically_symmetric`): ``"pardiso"`` from :data:`PARDISO_MIN_SIZE` unknowns
+    (:data:`PARDISO_UNSYMMETRIC_MIN_SIZE` if unsymmetric) where it is registered and its library
+    loads, else ``"superlu"``."""
+    large = n >= (PARDISO_MIN_SIZE if symmetric else PARDISO_UNSYMMETRIC_MIN_SIZE)
+    if large and "pardiso" in _SOLVERS and _check_loads("pardiso") is None:
         return "pardiso"
     return "superlu"
 
 
 def _auto(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
-    return _SOLVERS[chosen_solver(A.shape[0])](A, tolerance=tolerance)
+    n = A.shape[0]
+    symmetric = n >= PARDISO_MIN_SIZE or n < PARDISO_UNSYMMETRIC_MIN_SIZE or numerically_symmetric(A)
+    return _SOLVERS[chosen_solver(n, symmetric)](A, tolerance=tolerance)
 
 
 register_solver("auto", _auto)

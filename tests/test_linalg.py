@@ -120,11 +120,14 @@ def test_singular_matrix_raises(solver, rows):
 
 
 def test_auto_chooses_superlu_below_the_pardiso_size():
-    """The default ``"auto"`` factorises small matrices with SuperLU, always available."""
+    """The default ``"auto"`` factorises small matrices with SuperLU, always available, and large
+    ones (smaller if unsymmetric) with PARDISO where it runs."""
     assert linalg.solver_name() == "auto"
     assert linalg.chosen_solver(linalg.PARDISO_MIN_SIZE - 1) == "superlu"
+    assert linalg.chosen_solver(linalg.PARDISO_UNSYMMETRIC_MIN_SIZE - 1, symmetric=False) == "superlu"
     expected = "pardiso" if "pardiso" in linalg.available_solvers() else "superlu"
     assert linalg.chosen_solver(linalg.PARDISO_MIN_SIZE) == expected
+    assert linalg.chosen_solver(linalg.PARDISO_UNSYMMETRIC_MIN_SIZE, symmetric=False) == expected
 
 
 def test_unknown_solver_is_an_input_error():
