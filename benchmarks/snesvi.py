@@ -24,6 +24,7 @@ Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import subprocess
@@ -66,10 +67,10 @@ def peak_memory_bytes() -> int:
 def hertz_model(divisions: int):
     """:func:`run.continuum_block` of ``divisions``, reduced to its last load step from
     :data:`ONE_STEP_FROM` divisions on."""
-    sys.path.insert(0, str(HERE))  # run.py is a sibling script, not a package module
-    from run import continuum_block
-
-    model = continuum_block(divisions)
+    spec = importlib.util.spec_from_file_location("ddcm_benchmarks_run", HERE / "run.py")
+    run = importlib.util.module_from_spec(spec)  # run.py is a sibling script, not a package module
+    spec.loader.exec_module(run)
+    model = run.continuum_block(divisions)
     if divisions >= ONE_STEP_FROM:
         model = replace(model, gap_offsets=model.gap_offsets[-1:], loads=model.loads[-1:],
                         load_parameter=model.load_parameter[-1:])
@@ -135,14 +136,6 @@ def factor_times(divisions: int, repeats: int) -> dict:
     return dict(dofs=int(K.shape[0]), nnz=int(K.nnz), seconds=out, default=linalg.chosen_solver(K.shape[0]))
 
 
-FRESH = """
-import json, sys
-sys.path.insert(0, sys.argv[1])
-import snesvi
-print(json.dumps(getattr(snesvi, sys.argv[2])(*json.loads(sys.argv[3]))))
-"""
-
-
 #: Threads of every process (OpenMP, OpenBLAS, MKL): one, as both sides get on a 2-core machine
 #: shared with other sessions (MKL's two threads made a PARDISO solve 1.6x slower under load).
 THREADS = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
@@ -158,7 +151,7 @@ def _run(cmd: list[str]) -> dict:
 
 def fresh(function: str, *args) -> dict:
     """``function(*args)`` of this module in a fresh process (its own peak memory)."""
-    return _run([sys.executable, "-c", FRESH, str(HERE), function, json.dumps(args)])
+    return _run([sys.executable, str(HERE / "snesvi.py"), "--call", function, json.dumps(args)])
 
 
 def peer(python: str, mode: str, problem: str, out: str, ordering: int, factor: str) -> dict:
@@ -212,6 +205,10 @@ def compare_size(divisions: int, python: str, tmp: str, repeats: int) -> list[di
     return records
 
 
+#: The functions :func:`fresh` runs in a fresh process.
+CALLABLE = {"ours": ours, "factor_times": factor_times}
+
+
 def markdown(records: list[dict]) -> str:
     lines = ["| divisions | side | solver | unknowns | seconds | Newton | factorisations (+updates) | "
              "peak memory GB | difference u / p |", "|---|---|---|---|---|---|---|---|---|"]
@@ -239,7 +236,14 @@ def main(argv=None) -> int:
     ap.add_argument("--peer-python", default=os.environ.get("DDCM_PETSC_PYTHON", DEFAULT_PEER))
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--divisions", type=int, nargs="*", help="mesh divisions to run instead (about 8.1 d^2 unknowns)")
+    ap.add_argument("--call", nargs=2, metavar=("FUNCTION", "JSON_ARGS"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.call:  # a fresh process of fresh(): one of CALLABLE, its record printed as JSON
+        name, arguments = args.call
+        if name not in CALLABLE:
+            raise SystemExit(f"snesvi: --call takes one of {', '.join(CALLABLE)}")
+        print(json.dumps(CALLABLE[name](*json.loads(arguments))))
+        return 0
     if not os.path.exists(args.peer_python):
         print(f"snesvi: skipped, no Python with petsc4py at {args.peer_python} (--peer-python or DDCM_PETSC_PYTHON)")
         return 0
