@@ -16,7 +16,8 @@ same ``.npz`` with MUMPS in each tuning of :data:`PEER_TUNINGS`. Each side runs 
 with each solver on both sides (:func:`factor_times`, and the peer's ``factor`` mode). Every
 process runs with one thread (:data:`THREADS`).
 
-Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
+``--full`` needs about 11 GB a process (PARDISO; SuperLU did not fit under a 16 GB address-space
+cap at 1e6): run it under the machine's memory lock. Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
 ``/work/venv-petsc/bin/python``) it prints one line and exits 0. Writes ``DIR/snesvi.json`` and
 ``DIR/snesvi.md``.
 """
@@ -226,6 +227,8 @@ def markdown(records: list[dict]) -> str:
             lines += [f"| {r['divisions']} | {r['dofs']} | {k}{' (auto)' if k == r['default'] else ''} | {v:.3g} |"
                       for k, v in r["seconds"].items()]
     errors = [f"- {r['side']} {r.get('solver', '')} at {r['divisions']}: {r['error']}" for r in records if "error" in r]
+    errors += [f"- {r['side']} {r['solver']} at {r['divisions']}: the solutions differ by more than {AGREEMENT:g}"
+               for r in records if not r.get("difference", {}).get("agree", True)]
     return "\n".join(lines + ([""] + errors if errors else [])) + "\n"
 
 
