@@ -179,7 +179,7 @@ def compare_size(divisions: int, python: str, tmp: str, repeats: int) -> list[di
     for solver in solvers():
         solution = os.path.join(tmp, f"ours{divisions}-{solver}.npz")
         rec = fresh("ours", divisions, solver, problem if reference is None else None, solution)
-        rec.update(side="ddcm-casadi FB", divisions=divisions)
+        rec.update(side="ddcm-casadi FB", divisions=divisions, solver=solver)
         if "error" not in rec:
             rec["default"] = linalg.chosen_solver(rec["unknowns"], symmetric=False) == solver  # the FB piece matrix
         if "error" not in rec:
