@@ -109,9 +109,14 @@ def ours(divisions: int, solver: str, problem: str | None, solution: str) -> dic
                 updates=stats["updates"], solver=solver, peak_memory_bytes=peak_memory_bytes())
 
 
+#: The solvers to run (``--solvers``; empty: every one that runs here).
+ONLY: list[str] = []
+
+
 def solvers() -> list[str]:
-    """The sparse solvers of :mod:`ddcm_casadi.linalg` that run here, but ``"auto"`` (one of them)."""
-    return [name for name in linalg.available_solvers() if name != "auto"]
+    """The sparse solvers of :mod:`ddcm_casadi.linalg` that run here, but ``"auto"`` (one of them),
+    restricted to :data:`ONLY` if given."""
+    return [name for name in linalg.available_solvers() if name != "auto" and (not ONLY or name in ONLY)]
 
 
 def factor_times(divisions: int, repeats: int) -> dict:
@@ -239,6 +244,7 @@ def main(argv=None) -> int:
     ap.add_argument("--peer-python", default=os.environ.get("DDCM_PETSC_PYTHON", DEFAULT_PEER))
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--divisions", type=int, nargs="*", help="mesh divisions to run instead (about 8.1 d^2 unknowns)")
+    ap.add_argument("--solvers", nargs="*", default=[], help="ddcm-casadi's sparse solvers to run (default: all)")
     ap.add_argument("--call", nargs=2, metavar=("FUNCTION", "JSON_ARGS"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.call:  # a fresh process of fresh(): one of CALLABLE, its record printed as JSON
@@ -247,6 +253,7 @@ def main(argv=None) -> int:
             raise SystemExit(f"snesvi: --call takes one of {', '.join(CALLABLE)}")
         print(json.dumps(CALLABLE[name](*json.loads(arguments))))
         return 0
+    ONLY[:] = args.solvers
     if not os.path.exists(args.peer_python):
         print(f"snesvi: skipped, no Python with petsc4py at {args.peer_python} (--peer-python or DDCM_PETSC_PYTHON)")
         return 0
