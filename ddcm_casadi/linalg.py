@@ -3,7 +3,11 @@
 Every factorisation in the package (Newton steps, cached active-set systems, exact enumeration,
 the reference scales) goes through :func:`factorize`, so the solver is chosen in one place.
 
-``"superlu"`` (the default, no extra dependency): scipy's SuperLU, with the ordering chosen by the
+``"auto"`` (the default): ``"pardiso"`` for matrices of :data:`PARDISO_MIN_SIZE` unknowns or
+more (:data:`PARDISO_UNSYMMETRIC_MIN_SIZE` for unsymmetric ones) where ``pypardiso`` is
+installed and loads, else ``"superlu"`` (:func:`chosen_solver`).
+
+``"superlu"`` (always available, no extra dependency): scipy's SuperLU, with the ordering chosen by the
 matrix's pattern. Every matrix this package factorises is a stiffness or the KKT matrix of a
 projection, whose *pattern* is symmetric; for those, the minimum-degree ordering of ``A + A^T``
 with diagonal pivots (SuperLU's symmetric mode) keeps the fill of a Cholesky-like factor. Its
@@ -297,6 +301,10 @@ def _superlu(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
     return _splu(A)
 
 
+#: PARDISO's iterative refinement steps on a solve with a factor whose pivots it perturbed.
+PERTURBED_REFINEMENT = 2
+
+
 class _PardisoFactor:
     """A PARDISO factorisation (``pypardiso``), freed with the object."""
 
@@ -320,11 +328,22 @@ class _PardisoFactor:
         except (pypardiso.pardiso_wrapper.PyPardisoError, ValueError) as exc:  # ValueError: an empty row
             raise SingularMatrix(f"PARDISO: {exc}") from None
         self.perturbed = int(self._solver.get_iparm(14))  # pivots PARDISO perturbed
+        # iparm(1) = 0 made PARDISO fill in its defaults at the factorisation, two steps of
+        # iterative refinement among them: each solve cost three (0.29 s against SuperLU's 0.10 s
+        # on the 95 485-unknown Hertz piece matrix). The callers check or refine their solves, so
+        # only a factor with perturbed pivots keeps them.
+        self._solver.set_iparm(8, PERTURBED_REFINEMENT if self.perturbed else 0)
         # nonzeros of L and U (of L only for a symmetric factor, whose U is its transpose)
         self.nnz = int(self._solver.get_iparm(18)) * (2 if symmetric else 1)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return self._solver.solve(self._matrix, np.asarray(rhs, dtype=float))
+        b = np.asarray(rhs, dtype=float)
+        if b.shape[0] != self._matrix.shape[0]:
+            raise InputError(f"right-hand side of {b.shape[0]} rows for a matrix of {self._matrix.shape[0]}")
+        # Phase 33 (solve) straight away: pypardiso's solve() first compares the whole matrix
+        # with the factorised one (0.5 s of 10 s in a 1e5 Hertz path's 49 solves).
+        self._solver.set_phase(33)
+        return self._solver._call_pardiso(self._matrix, np.asfortranarray(b))
 
     def __del__(self) -> None:
         solver = getattr(self, "_solver", None)
@@ -342,10 +361,15 @@ def _solves_generic(lu: Factor, A: sp.csc_matrix) -> bool:
     return bool(np.all(np.isfinite(x))) and float(np.max(np.abs(A @ x - b))) <= 1e-6 * float(np.max(np.abs(b)))
 
 
+def numerically_symmetric(A: sp.spmatrix) -> bool:
+    """Whether ``|A - A^T| <= 1e-14 max |A|`` entrywise (and ``A`` has a nonzero)."""
+    return bool(A.nnz) and abs(A - A.T).max() <= 1e-14 * abs(A).max()
+
+
 def _pardiso(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
     # PARDISO perturbs tiny pivots instead of failing (then refines the solution iteratively):
     # a factor with perturbed pivots is accepted only if it solves a generic system.
-    if A.nnz and abs(A - A.T).max() <= 1e-14 * abs(A).max():
+    if numerically_symmetric(A):
         lu = _PardisoFactor(A, True)
         if _checked(lu, A, tolerance) and (not lu.perturbed or _solves_generic(lu, A)):
             return lu
@@ -402,24 +426,58 @@ def register_solver(name: str, factorize_fn: Callable[[sp.csc_matrix], Factor], 
 
 def unregister_solver(name: str) -> None:
     """Remove the solver ``name`` registered with :func:`register_solver` (if it is selected,
-    ``"superlu"`` is selected instead).
+    ``"auto"``, the default, is selected instead).
 
     Raises
     ------
     ValueError
-        ``name`` is ``"superlu"``, the default, which stays.
+        ``name`` is ``"superlu"`` or ``"auto"``, which stay.
     """
-    if name == "superlu":
-        raise ValueError("the default linear solver 'superlu' cannot be unregistered")
+    if name in ("superlu", "auto"):
+        raise ValueError(f"the built-in linear solver {name!r} cannot be unregistered")
     _SOLVERS.pop(name, None)
     _LIBRARIES.pop(name, None)
     _UNUSABLE.pop(name, None)
     if _ACTIVE[0] == name:
-        _ACTIVE[0] = "superlu"
+        _ACTIVE[0] = "auto"
 
 
 if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on first use (it loads MKL)
     register_solver("pardiso", _pardiso, library="pypardiso")
+
+
+#: Unknowns from which ``"auto"`` factorises a symmetric matrix with PARDISO where it runs
+#: (docs/performance.md, 2026-11-26, issue 28 item 6). At 99 687 unknowns the DDCM full path's
+#: symmetric KKT matrices (PARDISO's symmetric indefinite mode) took 0.85 s an iteration with
+#: PARDISO against 0.61 s with SuperLU (5 factorisations against 3: its updates missed their
+#: tolerance more often); on the Hertz stiffness at 991 936 dofs PARDISO took 14.0 s against
+#: SuperLU's 72.4 s.
+PARDISO_MIN_SIZE = 200_000
+#: The same for an unsymmetric matrix (PARDISO's LU): the classical FB piece matrix of 95 485
+#: unknowns factorised in 1.5 s against 4.4 s, its solves 0.05 s against 0.10 s. Below about 5e4
+#: SuperLU was as fast or faster (MKL's start-up: 0.34 s against 0.29 s at 9 870 dofs).
+PARDISO_UNSYMMETRIC_MIN_SIZE = 80_000
+
+
+def chosen_solver(n: int, symmetric: bool = True) -> str:
+    """The solver ``"auto"`` uses for a matrix of ``n`` unknowns, numerically symmetric or not
+    (:func:`numerically_symmetric`): ``"pardiso"`` from :data:`PARDISO_MIN_SIZE` unknowns
+    (:data:`PARDISO_UNSYMMETRIC_MIN_SIZE` if unsymmetric) where it is registered and its library
+    loads, else ``"superlu"``."""
+    large = n >= (PARDISO_MIN_SIZE if symmetric else PARDISO_UNSYMMETRIC_MIN_SIZE)
+    if large and "pardiso" in _SOLVERS and _check_loads("pardiso") is None:
+        return "pardiso"
+    return "superlu"
+
+
+def _auto(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
+    n = A.shape[0]
+    symmetric = n >= PARDISO_MIN_SIZE or n < PARDISO_UNSYMMETRIC_MIN_SIZE or numerically_symmetric(A)
+    return _SOLVERS[chosen_solver(n, symmetric)](A, tolerance=tolerance)
+
+
+register_solver("auto", _auto)
+_ACTIVE[0] = "auto"
 
 
 def use_solver(name: str) -> None:

@@ -119,6 +119,17 @@ def test_singular_matrix_raises(solver, rows):
         linalg.factorize(sp.csc_matrix(np.array(rows)))
 
 
+def test_auto_chooses_superlu_below_the_pardiso_size():
+    """The default ``"auto"`` factorises small matrices with SuperLU, always available, and large
+    ones (smaller if unsymmetric) with PARDISO where it runs."""
+    assert linalg.solver_name() == "auto"
+    assert linalg.chosen_solver(linalg.PARDISO_MIN_SIZE - 1) == "superlu"
+    assert linalg.chosen_solver(linalg.PARDISO_UNSYMMETRIC_MIN_SIZE - 1, symmetric=False) == "superlu"
+    expected = "pardiso" if "pardiso" in linalg.available_solvers() else "superlu"
+    assert linalg.chosen_solver(linalg.PARDISO_MIN_SIZE) == expected
+    assert linalg.chosen_solver(linalg.PARDISO_UNSYMMETRIC_MIN_SIZE, symmetric=False) == expected
+
+
 def test_unknown_solver_is_an_input_error():
     from ddcm_casadi.errors import InputError
 
@@ -239,7 +250,7 @@ def test_an_optional_solver_whose_library_does_not_load_is_not_offered(monkeypat
         assert "test_solver" in linalg.unavailable_solvers()
         with pytest.raises(InputError, match="linear solver 'test_solver' cannot run here: "):
             linalg.use_solver("test_solver")
-        assert linalg.solver_name() == "superlu"
+        assert linalg.solver_name() == "auto"
     finally:
         linalg.unregister_solver("test_solver")
     assert "test_solver" not in linalg.unavailable_solvers()
