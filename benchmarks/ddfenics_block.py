@@ -181,9 +181,10 @@ def main(argv=None) -> int:
         print(f"block {n}x{n}: ours {r['ours']['seconds_per_iteration']:.3g} s/iteration"
               + (f", ddfenics {r['ddfenics']['seconds_per_iteration']:.3g} (ratio {r['time_ratio']:.2f}),"
                  f" same datum {r['same_datum_share']:.4f}" if "ddfenics" in r else ""), file=sys.stderr, flush=True)
-    write_json_atomic(out / "ddfenics_block.json", records)
-    write_bytes_atomic(out / "ddfenics_block.md", markdown(records).encode())
-    print(f"wrote ddfenics_block.json and ddfenics_block.md to {out}", file=sys.stderr)
+    files = {"ddfenics_block.json": json.dumps(records, indent=1).encode(), "ddfenics_block.md": markdown(records).encode()}
+    for name, data in files.items():
+        write_bytes_atomic(out / name, data)
+    print(f"wrote {' and '.join(files)} to {out}", file=sys.stderr)
     return 0
 
 
