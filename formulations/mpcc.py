@@ -268,7 +268,8 @@ class _BuiltMPCC(BuiltFormulation):
 
         def nlp(parameters, rows):
             z, P = sym.sym("z", nx + nc), sym.sym("P", parameters.size)
-            x, p, own = z[:nx], z[nx:], P[:problem.parameters.size]
+            # vec: a 1 x 1 symbol sliced past its end is 1 x 0 in CasADi, not 0 x 1 (no pairs)
+            x, p, own = z[:nx], ca.vec(z[nx:]), P[:problem.parameters.size]
             residual, gap = problem.residual_map.render(z, own), problem.gap_map.render(z, own)
             objective = (problem.distance.render(z, own) if problem.kind == "mpcc" else
                          0.5 * ca.sumsqr(x - P[base.slice("anchor")]) if self._anchored else sym.zeros(1, 1))

@@ -293,6 +293,7 @@ class ActiveSetSolver:
         w = _Walk(z=z, branch=(identify(a, b) == CONTACT).astype(float), held=np.zeros(system.nc, dtype=bool),
                   releases=3 + system.nc, flips=np.zeros(system.nc, dtype=int))
         total = 0
+        linear = system.branch_system()[3]  # a nonlinear piece's Newton already ran to max_iter: no second try
         for _ in range(max_switches):
             w.seen.add(w.key())
             # One solve first: most pieces are left for another, and their switches need no
@@ -305,7 +306,7 @@ class ActiveSetSolver:
                 other = np.where(w.held, np.inf, self._signs(res.z, P, w.branch))
                 roundoff = 1e-12 * max(1.0, float(np.max(np.abs(other[~w.held]), initial=0.0)))
                 worst = -float(np.min(other, initial=np.inf))
-                if attempt or res.converged or worst > roundoff:
+                if attempt or res.converged or worst > roundoff or not linear:
                     break
                 # The signs hold: confirm, within the piece's budget of three steps (max_iter)
                 res = self._solve_piece(res.z, P, w.branch, w.held, kw, steps=min(3, kw["max_iter"]) - 1)

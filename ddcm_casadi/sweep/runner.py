@@ -239,8 +239,19 @@ def dask_client(*, workers: int | None = None, scheduler: str | None = None) -> 
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address=None, scheduler_kwargs=dict(dashboard_address="127.0.0.1:0"),
                                preload=[_IGNORE_SIGINT], silence_logs=logging.ERROR)
-    with cluster, Client(cluster) as client:
-        yield client
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    try:
+        with cluster, Client(cluster) as client:
+            try:
+                yield client
+            except BaseException:
+                # Torn down by an error or Ctrl-C: the local scheduler logs the tasks it is told to
+                # forget ("Couldn't gather keys") at ERROR, after the one-line message.
+                logger.setLevel(logging.CRITICAL)
+                raise
+    finally:
+        logger.setLevel(level)
 
 
 def n_workers(client) -> int:
