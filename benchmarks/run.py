@@ -484,7 +484,6 @@ def stiffness_solver_3d(dofs: int, solver: str, repeats: int) -> list[dict]:
     smoothed aggregation on the rigid-body modes, CG to :data:`~ddcm_casadi.linalg.DEFINITE_TOL`).
     ``peak_memory_bytes``: the process's peak resident set; ``solver_memory_bytes``: its growth
     from the end of the build to the end of the solves (the factor or hierarchy)."""
-    from ddcm_casadi.models.scales import rigid_body_modes
 
     model = block_3d(divisions_3d(dofs), False)
     if importlib.util.find_spec("pyamg") is not None:
@@ -500,7 +499,7 @@ def stiffness_solver_3d(dofs: int, solver: str, repeats: int) -> list[dict]:
     if solver == "superlu COLAMD":
         make = lambda: spla.splu(K)
     elif solver == "amg":
-        make = lambda: linalg.AMGFactor(K, rigid_body_modes(model))
+        make = lambda: linalg.AMGFactor(K, model.near_null_space())
     else:
         linalg.use_solver(solver)
         make = lambda: linalg.factorize(K)
@@ -616,7 +615,7 @@ def stiffness_solvers(unknowns: int, repeats: int) -> list[dict]:
                                error="not run: pyamg is not installed (pip install pyamg)")]
     import pyamg
 
-    modes = model.discretisation.rigid_body_modes()[model.free_dofs]
+    modes = model.near_null_space()
     Kr = K.tocsr()
     state = {}
 

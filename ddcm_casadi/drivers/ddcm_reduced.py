@@ -14,7 +14,6 @@ import numpy as np
 
 from ddcm_casadi.formulations.base import BuiltFormulation, LocalSolution
 from ddcm_casadi.linalg import definite_solver_name
-from ddcm_casadi.models.scales import rigid_body_modes
 from ddcm_casadi.parallel import limited_blas
 from ddcm_casadi.problems.build import ProblemPair
 from ddcm_casadi.problems.contract import ComplementarityProblem
@@ -102,7 +101,7 @@ def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True)
     reduction = None
     if not why:  # one reduction per problem and solver of K_C
         reduction = problem.shared(("reduction", definite_solver_name()),
-                                   lambda: _reduction(problem, rigid_body_modes(problems.model)))
+                                   lambda: _reduction(problem, problems.model.near_null_space()))
         why = reduction if isinstance(reduction, str) else ""
     if why:
         built = formulation.build(problem)

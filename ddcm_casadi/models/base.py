@@ -339,6 +339,12 @@ class ContactModel:
             raise InputError("this model has no material data set")
         return self.dataset.point_metric(self.n_points)
 
+    def near_null_space(self) -> np.ndarray | None:
+        """The near-null space of the stiffness in the free dofs, ``(n_dofs, r)``, for an algebraic
+        multigrid solver (:func:`~ddcm_casadi.linalg.factorize_definite`), or ``None`` (constants):
+        a continuum gives its rigid-body modes."""
+        return None
+
     def point_stiffness(self, kind: str) -> np.ndarray:
         """A representative modulus per material point: ``E`` (``"classical"``), or for the data
         (``"ddcm"``) the secant modulus of each point's data set, ``std(stress) / std(strain)``

@@ -53,23 +53,14 @@ class ContactModel(Protocol):
 
     def scales_for(self, kind: str) -> dict: ...
 
+    def near_null_space(self) -> np.ndarray | None: ...
+
 #: Imposed strain beyond which :func:`load_path_warnings` warns: small-strain kinematics then
 #: differ from finite-strain ones by more than ~5 % (Green-Lagrange ``e + e^2/2`` vs ``e``).
 LARGE_STRAIN = 0.1
 #: A load's displacement beyond this many body sizes means the stiffness was singular (the body
 #: rests on its contact only; :func:`reference_scales` then adds springs on the pairs).
 SINGULAR_DISPLACEMENT = 1e3
-
-
-def rigid_body_modes(model: ContactModel) -> np.ndarray | None:
-    """The rigid-body modes of a continuum ``model`` in its free dofs (``(n, 3)`` in 2-D,
-    ``(n, 6)`` in 3-D: the near-null space of its stiffness, for an algebraic multigrid solver),
-    ``None`` for other models."""
-    disc = getattr(model, "discretisation", None)
-    free = getattr(model, "free_dofs", None)
-    if disc is None or free is None or not hasattr(disc, "rigid_body_modes"):
-        return None
-    return disc.rigid_body_modes()[free]
 
 
 def reference_scales(model: ContactModel, kind: str) -> dict:
@@ -160,7 +151,7 @@ class _Stiffness:
         if self.base is not None:
             return self.base.solve(rhs) / self.beta
         if self._lu is None:  # the selected solver of definite systems (direct, or AMG)
-            self._lu = factorize_definite(self.K, near_null=rigid_body_modes(self.model))
+            self._lu = factorize_definite(self.K, near_null=self.model.near_null_space())
         return self._lu.solve(rhs)
 
     def spring(self):
@@ -171,7 +162,7 @@ class _Stiffness:
             model = self.model
             GA = model.gap_operator.T @ sp.diags(model.contact_area) if model.n_contacts else None
             self._spring_lu = factorize_definite(self.K + self.kappa * (GA @ model.gap_operator) if model.n_contacts
-                                                 else self.K, near_null=rigid_body_modes(model))
+                                                 else self.K, near_null=model.near_null_space())
         return self._spring_lu
 
 

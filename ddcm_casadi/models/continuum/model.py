@@ -92,6 +92,10 @@ class ContinuumModel(ContactModel):
         """Whether the kinematics are finite (total Lagrangian, :mod:`~ddcm_casadi.models.continuum.finite`)."""
         return self.kinematics == "finite"
 
+    def near_null_space(self) -> np.ndarray:
+        """The body's rigid-body modes in the free dofs (``(n, 3)`` in 2-D, ``(n, 6)`` in 3-D)."""
+        return self.discretisation.rigid_body_modes()[self.free_dofs]
+
     def gradient_operator(self) -> sp.csr_matrix:
         """``H = G u`` at every material point from the free displacements (cached)."""
         G = self._cache.get("gradient_operator")
