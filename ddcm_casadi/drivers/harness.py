@@ -403,7 +403,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     problems = build_problems(model)
     out = Comparison(model=model, problems=problems, formulations=forms, warnings=odd)
     runs = [(variant, form) for variant in variants
-            if (problems.classical if variant == "classical" else problems.projection) is not None
+            if problems.has("classical" if variant == "classical" else "projection")
             for form in forms]
     for variant, form in runs:  # refuse an unsupported contact law or kinematics before any work
         form.check_supports(problems.classical if variant == "classical" else problems.projection)

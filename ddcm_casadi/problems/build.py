@@ -6,6 +6,7 @@ parameters (the load step, the assigned data, the previous step's history)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property, partial
 from typing import Callable
 
 import casadi as ca
@@ -23,11 +24,36 @@ from ddcm_casadi.problems.parameters import Parameters
 
 @dataclass(frozen=True, eq=False)
 class ProblemPair:
-    """Both problems of one model, with the maps between scaled unknowns and physical fields."""
+    """Both problems of one model, with the maps between scaled unknowns and physical fields.
+
+    Each problem is built on first use (:attr:`classical`, :attr:`projection`), once: a DDCM run
+    never builds the classical problem, a classical run never the projection (at 1e5 points the
+    classical problem's sparse maps alone are 25 MB). :meth:`has` tells whether the model has a
+    problem without building it."""
 
     model: ContactModel
-    classical: ComplementarityProblem | None
-    projection: ComplementarityProblem | None
+    #: ``{"classical": build, "projection": build}``: the builders of the problems the model has
+    #: (a Young's modulus: the classical one; a data set: the projection).
+    builders: dict[str, Callable[[], ComplementarityProblem]]
+
+    def has(self, variant: str) -> bool:
+        """Whether the model has the ``"classical"`` problem or the ``"projection"`` (without
+        building it)."""
+        return variant in self.builders
+
+    @cached_property
+    def classical(self) -> ComplementarityProblem | None:
+        """The classical MCP (``None`` without a Young's modulus), built on first use."""
+        return self._built("classical")
+
+    @cached_property
+    def projection(self) -> ComplementarityProblem | None:
+        """The DDCM projection MPCC (``None`` without a data set), built on first use."""
+        return self._built("projection")
+
+    def _built(self, variant: str) -> ComplementarityProblem | None:
+        build = self.builders.get(variant)
+        return None if build is None else build()
 
     def _problem(self, kind: str) -> ComplementarityProblem:
         return self.classical if kind == "mcp" else self.projection
@@ -195,9 +221,9 @@ def _with_gap_map(z: ca.SX, Ps: ca.SX, gap: ca.SX, common: dict) -> dict:
     return common
 
 
-def _build_nonlinear(model: ContactModel) -> ProblemPair:
-    """Both problems of a model with nonlinear kinematics, as CasADi expressions
-    (:class:`NonlinearMap`, :class:`NonlinearObjective`).
+def _build_nonlinear(model: ContactModel, variant: str) -> ComplementarityProblem:
+    """The ``variant`` (``"classical"`` or ``"projection"``) of a model with nonlinear kinematics,
+    as CasADi expressions (:class:`NonlinearMap`, :class:`NonlinearObjective`).
 
     Classical: ``F = (B(u)^T W S(E(u)) - N(u)^T a p - f) / s_f`` with the model's law ``S``
     (:meth:`~ddcm_casadi.models.base.ContactModel.stress_expression`). Projection: ``h = (B(u)^T W
@@ -208,31 +234,28 @@ def _build_nonlinear(model: ContactModel) -> ProblemPair:
     (a curved obstacle at the current configuration).
     """
     n, m, nc, k = model.n_dofs, model.n_points, model.n_contacts, model.strain_components
-    classical = projection = None
-
-    if model.youngs_modulus is not None:
+    if variant == "classical":
         s = model.scales_for("classical")
         P = Parameters(**model.step_sizes())
         z, Ps = ca.SX.sym("z", n + nc), ca.SX.sym("P", P.size)
         _, F, terms, gap = _equilibrium(model, s, z[:n], z[n:], P, Ps, model.stress_expression)
-        classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),),
-                                           residual_map=NonlinearMap.of(F, z, Ps, terms, "residual"), distance=None,
-                                           **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], n + nc, P)))
-    if model.dataset is not None:
-        s = model.scales_for("ddcm")
-        mk = m * k
-        P = Parameters(**model.step_sizes(), strain_star=mk, stress_star=mk)
-        z, Ps = ca.SX.sym("z", n + mk + nc), ca.SX.sym("P", P.size)
-        stress = s["stress"] * z[n:n + mk]
-        E, h, terms, gap = _equilibrium(model, s, z[:n], z[n + mk:], P, Ps, lambda E: stress)
-        stacked = ca.vertcat(E - Ps[P.slice("strain_star")], stress - Ps[P.slice("stress_star")])
-        d = stacked[_point_major(mk, k).tolist()]
-        W = to_casadi(distance_weight(model) / s["energy"])
-        objective = NonlinearObjective(ca.Function("distance", [z, Ps], [0.5 * ca.dot(d, ca.mtimes(W, d))]))
-        projection = ComplementarityProblem(
-            kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=NonlinearMap.of(h, z, Ps, terms, "h"),
-            distance=objective, **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], n + mk + nc, P)))
-    return ProblemPair(model=model, classical=classical, projection=projection)
+        return ComplementarityProblem(kind="mcp", unknowns=(("u", n),),
+                                      residual_map=NonlinearMap.of(F, z, Ps, terms, "residual"), distance=None,
+                                      **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], n + nc, P)))
+    # the projection
+    s = model.scales_for("ddcm")
+    mk = m * k
+    P = Parameters(**model.step_sizes(), strain_star=mk, stress_star=mk)
+    z, Ps = ca.SX.sym("z", n + mk + nc), ca.SX.sym("P", P.size)
+    stress = s["stress"] * z[n:n + mk]
+    E, h, terms, gap = _equilibrium(model, s, z[:n], z[n + mk:], P, Ps, lambda E: stress)
+    stacked = ca.vertcat(E - Ps[P.slice("strain_star")], stress - Ps[P.slice("stress_star")])
+    d = stacked[_point_major(mk, k).tolist()]
+    W = to_casadi(distance_weight(model) / s["energy"])
+    objective = NonlinearObjective(ca.Function("distance", [z, Ps], [0.5 * ca.dot(d, ca.mtimes(W, d))]))
+    return ComplementarityProblem(
+        kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=NonlinearMap.of(h, z, Ps, terms, "h"),
+        distance=objective, **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], n + mk + nc, P)))
 
 
 def _gather(dofs: np.ndarray, columns: int, start: int = 0) -> sp.csr_matrix:
@@ -258,8 +281,9 @@ def _contact_expression(model: ContactModel, s: dict, uh: ca.SX, ph: ca.SX, P: P
     return r, t, gap / s["displacement"]
 
 
-def _build_local(model: ContactModel, lk) -> ProblemPair:
-    r"""Both problems of a model with :class:`~ddcm_casadi.models.base.LocalKinematics`, the bulk
+def _build_local(model: ContactModel, lk, variant: str) -> ComplementarityProblem:
+    r"""The ``variant`` (``"classical"`` or ``"projection"``) of a model with
+    :class:`~ddcm_casadi.models.base.LocalKinematics`, the bulk
     as :class:`LocalTerms` (one small function per element, assembled), the contact forces, loads and
     gaps as expressions (a few rows per pair).
 
@@ -272,7 +296,6 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
     ne, q = lk.dofs.shape
     nq = lk.points_per_item
     qg = lk.geometry.shape[1]
-    classical = projection = None
 
     def guarded(value, u_e, geometry):
         """NaN where an item's point is inverted (``J <= 0``): Newton's line search backs off."""
@@ -300,79 +323,93 @@ def _build_local(model: ContactModel, lk) -> ProblemPair:
             local.append(LocalTerms(item, Y, sp.csr_matrix((Y.shape[0], P.size)), Y[:, :n].T,
                                     np.concatenate([lk.geometry[items], constants], axis=1), terms))
         r, t, gap = _contact_expression(model, s, z[:n], z[n:], P, Ps)
-        classical = ComplementarityProblem(
+        return ComplementarityProblem(
             kind="mcp", unknowns=(("u", n),), residual_map=NonlinearMap.of(r, z, Ps, t, "residual", tuple(local)),
             distance=None, **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["modulus"], nz, P)))
-    if model.dataset is not None:
-        s = model.scales_for("ddcm")
-        mk = m * k
-        P = Parameters(**model.step_sizes(), strain_star=mk, stress_star=mk)
-        nz = n + mk + nc
-        z, Ps = ca.SX.sym("z", nz), ca.SX.sym("P", P.size)
-        nk = nq * k
-        points = np.arange(ne)[:, None] * nk + np.arange(nk)  # (ne, nq k): the element's stress entries
-        Y = sp.vstack([_gather(lk.dofs, nz), _gather(points, nz, n)]).tocsr()
-        order = np.concatenate([np.arange(ne)[:, None] * q + np.arange(q), ne * q + points], axis=1).ravel()
-        Y = Y[order]
-        u_e, S_e, c = ca.SX.sym("u_e", q), ca.SX.sym("S_e", nk), ca.SX.sym("c", qg + nq)
-        E = lk.strain(s["displacement"] * u_e, c[:qg])
-        stress = s["stress"] * S_e
-        w = ca.repmat(c[qg:].T, k, 1)  # (k, nq): each point's weight on its components
-        dE = ca.jacobian(E, u_e)
-        scale = 1.0 / (s["displacement"] * s["force"])
-        item = ca.Function("element_force", [ca.vertcat(u_e, S_e), c],
-                           [guarded(scale * ca.mtimes(dE.T, ca.vec(w) * stress), s["displacement"] * u_e, c[:qg])])
-        terms = ca.Function("element_terms", [ca.vertcat(u_e, S_e), c],
-                            [scale * ca.mtimes(ca.fabs(dE).T, ca.vec(w) * ca.fabs(stress))])
-        weights = np.asarray(model.volumes, float).reshape(ne, nq)
-        residual_local = LocalTerms(item, Y, sp.csr_matrix((Y.shape[0], P.size)), _gather(lk.dofs, n).T,
-                                    np.concatenate([lk.geometry, weights], axis=1), terms)
-        # the objective: per element [u_e; S_e; E*_e; S*_e] and its points' weight blocks
-        stars = sp.vstack([_gather(points, P.size, P.slice("strain_star").start),
-                           _gather(points, P.size, P.slice("stress_star").start)]).tocsr()
-        star_order = np.concatenate([np.arange(ne)[:, None] * nk + np.arange(nk),
-                                     ne * nk + np.arange(ne)[:, None] * nk + np.arange(nk)], axis=1)
-        Yo = sp.vstack([Y, sp.csr_matrix((2 * ne * nk, nz))]).tocsr()
-        YPo = sp.vstack([sp.csr_matrix((Y.shape[0], P.size)), stars[star_order.ravel()]]).tocsr()
-        # item-major: [u_e; S_e] rows of element e, then its [E*_e; S*_e]
-        qy = q + nk
-        obj_order = np.concatenate([np.arange(ne)[:, None] * qy + np.arange(qy),
-                                    ne * qy + np.arange(ne)[:, None] * 2 * nk + np.arange(2 * nk)], axis=1).ravel()
-        Yo, YPo = Yo[obj_order], YPo[obj_order]
-        blocks = distance_blocks(model) / s["energy"]  # (m, 2k, 2k), point-major [e; s]
-        Es, Ss, cb = ca.SX.sym("E_star", nk), ca.SX.sym("S_star", nk), ca.SX.sym("c", qg + nq * 4 * k * k)
-        Eo = lk.strain(s["displacement"] * u_e, cb[:qg])
-        f = 0
-        for p_ in range(nq):
-            dq = ca.vertcat(Eo[p_ * k:(p_ + 1) * k] - Es[p_ * k:(p_ + 1) * k],
-                            s["stress"] * S_e[p_ * k:(p_ + 1) * k] - Ss[p_ * k:(p_ + 1) * k])
-            Wq = ca.reshape(cb[qg + p_ * 4 * k * k:qg + (p_ + 1) * 4 * k * k], 2 * k, 2 * k)
-            f += 0.5 * ca.dot(dq, ca.mtimes(Wq, dq))
-        objective_item = ca.Function("element_distance", [ca.vertcat(u_e, S_e, Es, Ss), cb], [f])
-        objective_local = LocalTerms(objective_item, Yo, YPo, sp.csr_matrix(np.ones((1, ne))),
-                                     np.concatenate([lk.geometry, blocks.reshape(ne, -1)], axis=1))
-        r, t, gap = _contact_expression(model, s, z[:n], z[n + mk:], P, Ps)
-        projection = ComplementarityProblem(
-            kind="mpcc", unknowns=(("u", n), ("stress", mk)),
-            residual_map=NonlinearMap.of(r, z, Ps, t, "h", (residual_local,)),
-            distance=NonlinearObjective(ca.Function("distance", [z, Ps], [ca.SX(1, 1)]), (objective_local,)),
-            **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], nz, P)))
-    return ProblemPair(model=model, classical=classical, projection=projection)
+    # the projection
+    s = model.scales_for("ddcm")
+    mk = m * k
+    P = Parameters(**model.step_sizes(), strain_star=mk, stress_star=mk)
+    nz = n + mk + nc
+    z, Ps = ca.SX.sym("z", nz), ca.SX.sym("P", P.size)
+    nk = nq * k
+    points = np.arange(ne)[:, None] * nk + np.arange(nk)  # (ne, nq k): the element's stress entries
+    Y = sp.vstack([_gather(lk.dofs, nz), _gather(points, nz, n)]).tocsr()
+    order = np.concatenate([np.arange(ne)[:, None] * q + np.arange(q), ne * q + points], axis=1).ravel()
+    Y = Y[order]
+    u_e, S_e, c = ca.SX.sym("u_e", q), ca.SX.sym("S_e", nk), ca.SX.sym("c", qg + nq)
+    E = lk.strain(s["displacement"] * u_e, c[:qg])
+    stress = s["stress"] * S_e
+    w = ca.repmat(c[qg:].T, k, 1)  # (k, nq): each point's weight on its components
+    dE = ca.jacobian(E, u_e)
+    scale = 1.0 / (s["displacement"] * s["force"])
+    item = ca.Function("element_force", [ca.vertcat(u_e, S_e), c],
+                       [guarded(scale * ca.mtimes(dE.T, ca.vec(w) * stress), s["displacement"] * u_e, c[:qg])])
+    terms = ca.Function("element_terms", [ca.vertcat(u_e, S_e), c],
+                        [scale * ca.mtimes(ca.fabs(dE).T, ca.vec(w) * ca.fabs(stress))])
+    weights = np.asarray(model.volumes, float).reshape(ne, nq)
+    residual_local = LocalTerms(item, Y, sp.csr_matrix((Y.shape[0], P.size)), _gather(lk.dofs, n).T,
+                                np.concatenate([lk.geometry, weights], axis=1), terms)
+    # the objective: per element [u_e; S_e; E*_e; S*_e] and its points' weight blocks
+    stars = sp.vstack([_gather(points, P.size, P.slice("strain_star").start),
+                       _gather(points, P.size, P.slice("stress_star").start)]).tocsr()
+    star_order = np.concatenate([np.arange(ne)[:, None] * nk + np.arange(nk),
+                                 ne * nk + np.arange(ne)[:, None] * nk + np.arange(nk)], axis=1)
+    Yo = sp.vstack([Y, sp.csr_matrix((2 * ne * nk, nz))]).tocsr()
+    YPo = sp.vstack([sp.csr_matrix((Y.shape[0], P.size)), stars[star_order.ravel()]]).tocsr()
+    # item-major: [u_e; S_e] rows of element e, then its [E*_e; S*_e]
+    qy = q + nk
+    obj_order = np.concatenate([np.arange(ne)[:, None] * qy + np.arange(qy),
+                                ne * qy + np.arange(ne)[:, None] * 2 * nk + np.arange(2 * nk)], axis=1).ravel()
+    Yo, YPo = Yo[obj_order], YPo[obj_order]
+    blocks = distance_blocks(model) / s["energy"]  # (m, 2k, 2k), point-major [e; s]
+    Es, Ss, cb = ca.SX.sym("E_star", nk), ca.SX.sym("S_star", nk), ca.SX.sym("c", qg + nq * 4 * k * k)
+    Eo = lk.strain(s["displacement"] * u_e, cb[:qg])
+    f = 0
+    for p_ in range(nq):
+        dq = ca.vertcat(Eo[p_ * k:(p_ + 1) * k] - Es[p_ * k:(p_ + 1) * k],
+                        s["stress"] * S_e[p_ * k:(p_ + 1) * k] - Ss[p_ * k:(p_ + 1) * k])
+        Wq = ca.reshape(cb[qg + p_ * 4 * k * k:qg + (p_ + 1) * 4 * k * k], 2 * k, 2 * k)
+        f += 0.5 * ca.dot(dq, ca.mtimes(Wq, dq))
+    objective_item = ca.Function("element_distance", [ca.vertcat(u_e, S_e, Es, Ss), cb], [f])
+    objective_local = LocalTerms(objective_item, Yo, YPo, sp.csr_matrix(np.ones((1, ne))),
+                                 np.concatenate([lk.geometry, blocks.reshape(ne, -1)], axis=1))
+    r, t, gap = _contact_expression(model, s, z[:n], z[n + mk:], P, Ps)
+    return ComplementarityProblem(
+        kind="mpcc", unknowns=(("u", n), ("stress", mk)),
+        residual_map=NonlinearMap.of(r, z, Ps, t, "h", (residual_local,)),
+        distance=NonlinearObjective(ca.Function("distance", [z, Ps], [ca.SX(1, 1)]), (objective_local,)),
+        **_with_gap_map(z, Ps, gap, _common(model, s, 1.0 / s["metric"], nz, P)))
 
 
 def build_problems(model: ContactModel) -> ProblemPair:
-    """Build the classical MCP and the DDCM projection MPCC of ``model`` once: as sparse matrices
-    for small kinematics, as CasADi expressions for finite ones (:func:`_build_nonlinear`)."""
+    """The classical MCP and the DDCM projection MPCC of ``model``, each built once on first use
+    (:class:`ProblemPair`): as sparse matrices for small kinematics (:func:`_build_small`), as
+    CasADi expressions for finite ones (:func:`_build_nonlinear`, :func:`_build_local`)."""
     if model.kinematics != "small":
         lk = model.local_kinematics()
-        return _build_nonlinear(model) if lk is None else _build_local(model, lk)
+        build = partial(_build_nonlinear, model) if lk is None else partial(_build_local, model, lk)
+    else:
+        build = partial(_build_small, model)
+    has = {"classical": model.youngs_modulus is not None, "projection": model.dataset is not None}
+    # The reference scales now, in this order, whichever problem is built first: the projection's
+    # share the classical factor (a multiple of its stiffness, ``reference_scales``), which is
+    # freed once both are known, before any problem's matrices take memory.
+    for variant, kind in (("classical", "classical"), ("projection", "ddcm")):
+        if has[variant]:
+            model.scales_for(kind)
+    return ProblemPair(model=model, builders={variant: partial(build, variant) for variant, on in has.items() if on})
+
+
+def _build_small(model: ContactModel, variant: str) -> ComplementarityProblem:
+    """The ``variant`` (``"classical"`` or ``"projection"``) of a model with small kinematics,
+    as sparse matrices (:class:`Affine`, :class:`Distance`)."""
     n, m, k = model.n_dofs, model.n_points, model.strain_components
     nc = model.n_contacts * model.contact_block  # the pairs: with friction, a block per contact
     # contact forces G^T (a p) (with friction [G; T]^T (a [p; r_T]))
     GtA = (model.contact_operator.T @ sp.diags(np.tile(model.contact_area, model.contact_block))).tocsr()
 
-    classical = None
-    if model.youngs_modulus is not None:
+    if variant == "classical":
         s = model.scales_for("classical")
         P = Parameters(**model.step_sizes())
         # F = (K u - G^T a p - f) / s_f with u = s_d u_hat, p = s_s p_hat
@@ -383,30 +420,28 @@ def build_problems(model: ContactModel) -> ProblemPair:
             W = sp.diags(np.repeat(model.volumes, k))
             KD = model.strain_operator.T @ (W @ model.material_matrix()) @ model.prescribed.strain_operator
             F = F + Affine(sp.csr_matrix((n, n + nc)), _placed(KD / s["force"], P, PRESCRIBED))
-        classical = ComplementarityProblem(kind="mcp", unknowns=(("u", n),), residual_map=F, distance=None,
-                                           **_common(model, s, 1.0 / s["modulus"], n + nc, P))
+        return ComplementarityProblem(kind="mcp", unknowns=(("u", n),), residual_map=F, distance=None,
+                                      **_common(model, s, 1.0 / s["modulus"], n + nc, P))
 
-    projection = None
-    if model.dataset is not None:
-        s = model.scales_for("ddcm")
-        P = Parameters(**model.step_sizes(), strain_star=m * k, stress_star=m * k)
-        nz, mk = n + m * k + nc, m * k
-        BtW = model.strain_operator.T @ sp.diags(np.repeat(model.volumes, k))
-        # h = (B^T W stress - G^T a p - f) / s_f with stress = s_s stress_hat
-        h = Affine(sp.hstack([sp.csr_matrix((n, n)), BtW * s["stress"] / s["force"], GtA * -s["stress"] / s["force"]]),
-                   _selection(n, P.slice("f").start, P.size, -1.0 / s["force"]))
-        # d = [B u - strain_star; stress - stress_star] point-major, f = d^T W d / (2 energy)
-        stacked = Affine(sp.vstack([sp.hstack([model.strain_operator * s["displacement"], sp.csr_matrix((mk, mk + nc))]),
-                                    _selection(mk, n, nz, s["stress"])]),
-                         sp.vstack([_selection(mk, P.slice("strain_star").start, P.size, -1.0),
-                                    _selection(mk, P.slice("stress_star").start, P.size, -1.0)]))
-        if model.prescribed is not None:  # the strains B u + B_D u_D
-            stacked = stacked + Affine(sp.csr_matrix((2 * mk, nz)), sp.vstack([
-                _placed(model.prescribed.strain_operator, P, PRESCRIBED), sp.csr_matrix((mk, P.size))]))
-        order = _point_major(mk, k)
-        d = Affine(stacked.z[order], stacked.params[order])
-        projection = ComplementarityProblem(
-            kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=h,
-            distance=Distance(d, distance_weight(model) / s["energy"]),
-            **_common(model, s, 1.0 / s["metric"], nz, P))
-    return ProblemPair(model=model, classical=classical, projection=projection)
+    # the projection
+    s = model.scales_for("ddcm")
+    P = Parameters(**model.step_sizes(), strain_star=m * k, stress_star=m * k)
+    nz, mk = n + m * k + nc, m * k
+    BtW = model.strain_operator.T @ sp.diags(np.repeat(model.volumes, k))
+    # h = (B^T W stress - G^T a p - f) / s_f with stress = s_s stress_hat
+    h = Affine(sp.hstack([sp.csr_matrix((n, n)), BtW * s["stress"] / s["force"], GtA * -s["stress"] / s["force"]]),
+               _selection(n, P.slice("f").start, P.size, -1.0 / s["force"]))
+    # d = [B u - strain_star; stress - stress_star] point-major, f = d^T W d / (2 energy)
+    stacked = Affine(sp.vstack([sp.hstack([model.strain_operator * s["displacement"], sp.csr_matrix((mk, mk + nc))]),
+                                _selection(mk, n, nz, s["stress"])]),
+                     sp.vstack([_selection(mk, P.slice("strain_star").start, P.size, -1.0),
+                                _selection(mk, P.slice("stress_star").start, P.size, -1.0)]))
+    if model.prescribed is not None:  # the strains B u + B_D u_D
+        stacked = stacked + Affine(sp.csr_matrix((2 * mk, nz)), sp.vstack([
+            _placed(model.prescribed.strain_operator, P, PRESCRIBED), sp.csr_matrix((mk, P.size))]))
+    order = _point_major(mk, k)
+    d = Affine(stacked.z[order], stacked.params[order])
+    return ComplementarityProblem(
+        kind="mpcc", unknowns=(("u", n), ("stress", mk)), residual_map=h,
+        distance=Distance(d, distance_weight(model) / s["energy"]),
+        **_common(model, s, 1.0 / s["metric"], nz, P))

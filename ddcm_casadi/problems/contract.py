@@ -48,6 +48,9 @@ from ddcm_casadi.models.coulomb import blocks, flat, natural_map
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
 
+#: Nonzeros of a problem's maps up to which :meth:`ComplementarityProblem.evaluate` multiplies one
+#: stacked copy of them (``_stacked``), above which map by map.
+STACKED_MAX_NONZEROS = 1_000_000
 #: Up to this many unknowns :meth:`ComplementarityProblem.stability` is computed.
 STABILITY_MAX_UNKNOWNS = 2000
 #: Up to this many, densely (an eigendecomposition on the touching pairs' null space); above,
@@ -240,13 +243,28 @@ class ComplementarityProblem:
         return self._shared[key]
 
     @cached_property
-    def _stacked(self) -> tuple[sp.csr_matrix, sp.csr_matrix, tuple[int, int]]:
+    def _stacked(self) -> tuple[sp.csr_matrix, sp.csr_matrix, tuple[int, int]] | None:
         """``[residual; gap; d]`` and ``|residual|`` as matrices of ``[z; P]`` (three sparse products
-        per evaluation: scipy's overhead per product, not the arithmetic, is what small problems pay)."""
+        per evaluation: scipy's overhead per product, not the arithmetic, is what small problems pay),
+        or ``None`` above :data:`STACKED_MAX_NONZEROS` (a copy of every map: 42 MB at 1e5 points,
+        where the overhead is nothing)."""
         maps = [self.residual_map, self.gap_map] + ([self.distance.d] if self.distance is not None else [])
+        if sum(a.z.nnz + a.params.nnz for a in maps) > STACKED_MAX_NONZEROS:
+            return None
         stacked = sp.vstack([sp.hstack([a.z, a.params]) for a in maps]).tocsr()
         R = self.residual_map
         return stacked, abs(sp.hstack([R.z, R.params]).tocsr()), (R.rows, R.rows + self.gap_map.rows)
+
+    @cached_property
+    def _residual_size(self) -> Affine:
+        """``|residual|``: the residual's map with the absolute values of its entries (sharing
+        its index arrays), for :meth:`evaluate` without :attr:`_stacked`."""
+        R = self.residual_map
+        return Affine(*(sp.csr_matrix((np.abs(A.data), A.indices, A.indptr), shape=A.shape) for A in (R.z, R.params)))
+
+    def _objective(self, d: np.ndarray) -> float:
+        """``d^T W d / 2`` at the distance's values ``d`` (0 for ``mcp``)."""
+        return 0.0 if self.distance is None else 0.5 * float(d @ (self.distance.weight @ d))
 
     def evaluate(self, x, p, params) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """``(residual, residual_terms, gap, objective)`` at scaled ``(x, p)`` and the parameter
@@ -257,10 +275,15 @@ class ComplementarityProblem:
             values = self._nonlinear_values(z, P)
             return values[0], values[1], values[2], float(values[3][0]) if self.distance is not None else 0.0
         w = np.concatenate([np.ravel(x), np.ravel(p), np.ravel(params)]).astype(float, copy=False)
+        if self._stacked is None:  # map by map
+            nz = self.n_x + self.n_pairs
+            z, P = w[:nz], w[nz:]
+            d = self.distance.d.value(z, P) if self.distance is not None else None
+            return (self.residual_map.value(z, P), self._residual_size.value(np.abs(z), np.abs(P)),
+                    self.gap_map.value(z, P), self._objective(d))
         stacked, size, (ne, ng) = self._stacked
         v = stacked @ w
-        objective = 0.0 if self.distance is None else 0.5 * float(v[ng:] @ (self.distance.weight @ v[ng:]))
-        return v[:ne], size @ np.abs(w), v[ne:ng], objective
+        return v[:ne], size @ np.abs(w), v[ne:ng], self._objective(v[ng:])
 
     @cached_property
     def _nonlinear_values(self):
