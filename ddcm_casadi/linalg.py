@@ -41,6 +41,8 @@ Low-rank updates of a factor (the active-set solver's, when a few pairs switch p
 from __future__ import annotations
 
 import atexit
+import ctypes
+import functools
 import importlib
 import importlib.util
 import os
@@ -532,6 +534,27 @@ def abandoned_work() -> bool:
     return bool(_ABANDONED)
 
 
+@functools.cache
+def _malloc_trim() -> Callable[[int], int] | None:
+    """glibc's ``malloc_trim``, or ``None`` (another C library)."""
+    try:
+        return ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+def release_heap() -> None:
+    """Give the free pages of the C heap back to the system (glibc's ``malloc_trim(0)``; nothing
+    where the C library has none). A freed factor and a build's freed temporaries stay in the
+    process's heap otherwise, in holes that later arrays of other sizes do not fill: at 1e5
+    points, releasing after the reference scales' factor and the reduction's temporaries took the
+    DDCM run's peak from 0.63 to 0.56 GB (``docs/performance.md``). A few milliseconds; called
+    after a large factor is dropped and after a reduction is built, not in a loop."""
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
+
+
 class _ThreadOwned:
     """A factor made in the factorising thread, released there too (:class:`_FactorThread`).
 
@@ -581,6 +604,7 @@ class _FactorThread:
             if kind == "release":
                 del payload  # the factor's last reference: freed in this thread
                 self.released += 1
+                release_heap()
                 continue
             fn, box, done = payload
             del payload

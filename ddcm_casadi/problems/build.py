@@ -162,8 +162,12 @@ def _selection(rows: int, start: int, columns: int, scale: float = 1.0) -> sp.cs
 
 def distance_weight(model: ContactModel) -> sp.csr_matrix:
     """``W`` with ``sum_i w_i d_i^2 = d^T W d`` for ``d`` point-major ``[e_i - e*_i; s_i - s*_i]``:
-    the block diagonal of :func:`distance_blocks`."""
-    return block_diagonal(distance_blocks(model))
+    the block diagonal of :func:`distance_blocks`, without its zeros (a constant metric
+    separates strains from stresses, and an isotropic one shears from normal components: 10 of a
+    2-D point's 36 entries, 2.6M zeros of 3.6M entries at 1e5 points)."""
+    W = block_diagonal(distance_blocks(model))
+    W.eliminate_zeros()
+    return W
 
 
 def distance_blocks(model: ContactModel) -> np.ndarray:

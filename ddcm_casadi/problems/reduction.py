@@ -41,7 +41,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ddcm_casadi.linalg import SingularMatrix, definite_solver_name, factorize_definite
+from ddcm_casadi.linalg import SingularMatrix, definite_solver_name, factorize_definite, release_heap
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
@@ -251,18 +251,19 @@ class Reduction:
          self._g) = _operators(problem, n, mk)
         self.factorizations, self.back_solves = 1, 0
         self.solver = definite_solver_name()
+        # K_s against K_u before any factorisation: the check's copies are not held beside a factor
+        scale = float((K_s.multiply(self.K_u)).sum()) / max(float(self.K_u.multiply(self.K_u).sum()), 1e-300)
+        self.alpha = scale if _frobenius(K_s - scale * self.K_u) <= PROPORTIONAL * _frobenius(K_s) else None
+        if self.alpha is not None:
+            del K_s  # a copy of K_u's size, not needed with one factor
+        release_heap()  # the temporaries of the operators and of the check, before the factor's pages
+        self._factor_s = None
         start = time.perf_counter()
         try:
             self.factor = factorize_definite(self.K_u, near_null=near_null)
         except SingularMatrix:
             raise NotReducible("K_C is singular (a body held only by its contacts)") from None
-        scale = float((K_s.multiply(self.K_u)).sum()) / max(float(self.K_u.multiply(self.K_u).sum()), 1e-300)
-        if _frobenius(K_s - scale * self.K_u) <= PROPORTIONAL * _frobenius(K_s):
-            self.alpha = scale
-            self._factor_s = None
-            del K_s  # a copy of K_u's size, not needed with one factor
-        else:
-            self.alpha = None
+        if self.alpha is None:
             try:
                 self._factor_s = factorize_definite(K_s, near_null=near_null)
             except SingularMatrix:
@@ -300,6 +301,7 @@ class Reduction:
             self._p_scale = None
             self.D_u = self.D_p = np.zeros((0, 0))
         self.back_solve_seconds = time.perf_counter() - start
+        release_heap()  # the factorisation's working memory
 
     def _back_solves(self, solve, columns: sp.spmatrix) -> np.ndarray:
         """``solve`` applied to the columns of ``columns``, :data:`SOLVE_BLOCK` at a time, into one
