@@ -307,7 +307,7 @@ def _build_local(model: ContactModel, lk, variant: str) -> ComplementarityProble
             return value
         return ca.if_else(ca.mmin(lk.volume_ratio(u_e, geometry)) > 0, 1.0, np.nan) * value
 
-    if model.youngs_modulus is not None:
+    if variant == "classical":
         s = model.scales_for("classical")
         P = Parameters(**model.step_sizes())
         nz = n + nc

@@ -274,13 +274,13 @@ class ComplementarityProblem:
             z, P = np.concatenate([np.ravel(x), np.ravel(p)]), np.ravel(params)
             values = self._nonlinear_values(z, P)
             return values[0], values[1], values[2], float(values[3][0]) if self.distance is not None else 0.0
-        w = np.concatenate([np.ravel(x), np.ravel(p), np.ravel(params)]).astype(float, copy=False)
-        if self._stacked is None:  # map by map
-            nz = self.n_x + self.n_pairs
-            z, P = w[:nz], w[nz:]
-            d = self.distance.d.value(z, P) if self.distance is not None else None
+        if self._stacked is None:  # map by map, without a copy of the parameters
+            z = np.concatenate([np.ravel(x), np.ravel(p)]).astype(float, copy=False)
+            P = np.ravel(params).astype(float, copy=False)
+            objective = self._objective(self.distance.d.value(z, P)) if self.distance is not None else 0.0
             return (self.residual_map.value(z, P), self._residual_size.value(np.abs(z), np.abs(P)),
-                    self.gap_map.value(z, P), self._objective(d))
+                    self.gap_map.value(z, P), objective)
+        w = np.concatenate([np.ravel(x), np.ravel(p), np.ravel(params)]).astype(float, copy=False)
         stacked, size, (ne, ng) = self._stacked
         v = stacked @ w
         return v[:ne], size @ np.abs(w), v[ne:ng], self._objective(v[ng:])

@@ -54,7 +54,11 @@ class Affine:
 
     def value(self, z: np.ndarray, P: np.ndarray) -> np.ndarray:
         """``Z z + Q P`` for numbers."""
-        return self.z @ np.asarray(z, float) + self.params @ np.asarray(P, float)
+        v, w = self.z @ np.asarray(z, float), self.params @ np.asarray(P, float)
+        if v.shape != w.shape:  # one column per case of 2-D parameters
+            return v + w
+        v += w  # in place: one vector of the map's rows fewer (4.8 MB for a projection's d at 1e5 points)
+        return v
 
     def render(self, z, P):
         """``Z z + Q P`` for symbols ``z``, ``P`` (``SX`` or ``MX``)."""

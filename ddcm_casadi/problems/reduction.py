@@ -169,38 +169,29 @@ def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) ->
 
 
 def _operators(problem: ComplementarityProblem, n: int, mk: int) -> tuple:
-    r"""The sparse operators of the reduction of ``problem`` (module docstring): ``(K_u, K_s, b_P,
-    sigma0_P, c_P, M^-1 R_sigma^T, R_p, G, g_P)``, ``b = b_P P`` and so on. In a function of its
-    own so that the slices of the projection's maps it takes (``A_u``, ``W_e``, ``S``, ``W_s``, ``A_u^T
-    W_e``, ``M^-1``, ``R_sigma``: about 0.15 GB at 1e5 points) are freed before ``K_u`` is
-    factorised, not held through the factorisation."""
+    r"""The sparse operators of the reduction of ``problem`` (module docstring): ``(K_u, K_s,
+    sigma0_P, M^-1 R_sigma^T, R_p, G, g_P)``, ``sigma_0 = sigma0_P P`` and ``g = g_P P``. In a
+    function of its own so that the slices of the projection's maps it takes (``A_u``, ``W_e``,
+    ``S``, ``W_s``, ``A_u^T W_e``, ``M^-1``, ``R_sigma``: about 0.15 GB at 1e5 points) are freed
+    before ``K_u`` is factorised, not held through the factorisation."""
     R, Gm, dist = problem.residual_map, problem.gap_map, problem.distance
     d, W = dist.d, sp.csr_matrix(dist.weight)
     # the stress rows, and every other (strains; constant where no free dof moves a point)
     on_s = _rows(d.z, slice(n, n + mk))
     e_rows, s_rows = np.flatnonzero(~on_s), np.flatnonzero(on_s)
     A_u = d.z[e_rows][:, :n].tocsc()
-    a = d.params[e_rows].tocsr()  # a = a_P P
-    W_e = W[e_rows][:, e_rows]
-    AtW = (A_u.T @ W_e).tocsr()
-    del W_e
+    AtW = (A_u.T @ W[e_rows][:, e_rows]).tocsr()
     K_u = (AtW @ A_u).tocsc()
-    del A_u
-    b = (-(AtW @ a)).tocsr()  # b = b_P P
-    del AtW, a
-    S = d.z[s_rows][:, n:n + mk].tocsr()
-    S_inv = block_inverse(S)
-    del S
+    del A_u, AtW
+    S_inv = block_inverse(d.z[s_rows][:, n:n + mk])
     sigma0 = (-(S_inv @ d.params[s_rows])).tocsr()  # sigma_0 = -S^-1 s, s = s_P P
     M_inv = (S_inv @ block_inverse(W[s_rows][:, s_rows]) @ S_inv.T).tocsr()  # (S^T W_s S)^-1
     del S_inv, W
     R_s = R.z[:, n:n + mk].tocsr()
-    c = (R_s @ sigma0 + R.params).tocsr()  # c = c_P P
     MRt = (M_inv @ R_s.T).tocsr()
     del M_inv
     K_s = (R_s @ MRt).tocsc()
-    return K_u, K_s, b, sigma0, c, MRt, R.z[:, n + mk:].tocsc(), Gm.z[:, :n].tocsr(), Gm.params.tocsr()
-
+    return K_u, K_s, sigma0, MRt, R.z[:, n + mk:].tocsc(), Gm.z[:, :n].tocsr(), Gm.params.tocsr()
 
 class Reduction:
     r"""The reduction of one affine projection (module docstring), built once per model.
@@ -232,7 +223,7 @@ class Reduction:
     factor_seconds, back_solve_seconds : float
         Wall time of the factorisation (or AMG set-up) and of the back-solves.
     K_u : scipy.sparse.csc_matrix
-        ``A_u^T W_e A_u`` (a multiple of ``K_C``).
+        ``A_u^T W_e A_u`` (a multiple of ``K_C``; assembled on use, not held).
     Z_u : ndarray
         ``K_u^-1 G^T`` (``n x nc``, column-major), the kept columns.
     D_u, D_p : ndarray
@@ -247,22 +238,22 @@ class Reduction:
         n, mk = (size for _, size in problem.unknowns)
         nc = problem.n_pairs
         self.n, self.mk, self.nc = n, mk, nc
-        (self.K_u, K_s, self._b, self._sigma0, self._c, self._MRt, self.R_p, self.G,
-         self._g) = _operators(problem, n, mk)
+        K_u, K_s, self._sigma0, self._MRt, self.R_p, self.G, self._g = _operators(problem, n, mk)
         self.factorizations, self.back_solves = 1, 0
         self.solver = definite_solver_name()
         # K_s against K_u before any factorisation: the check's copies are not held beside a factor
-        scale = float((K_s.multiply(self.K_u)).sum()) / max(float(self.K_u.multiply(self.K_u).sum()), 1e-300)
-        self.alpha = scale if _frobenius(K_s - scale * self.K_u) <= PROPORTIONAL * _frobenius(K_s) else None
+        scale = float((K_s.multiply(K_u)).sum()) / max(float(K_u.multiply(K_u).sum()), 1e-300)
+        self.alpha = scale if _frobenius(K_s - scale * K_u) <= PROPORTIONAL * _frobenius(K_s) else None
         if self.alpha is not None:
             del K_s  # a copy of K_u's size, not needed with one factor
         release_heap()  # the temporaries of the operators and of the check, before the factor's pages
         self._factor_s = None
         start = time.perf_counter()
         try:
-            self.factor = factorize_definite(self.K_u, near_null=near_null)
+            self.factor = factorize_definite(K_u, near_null=near_null)
         except SingularMatrix:
             raise NotReducible("K_C is singular (a body held only by its contacts)") from None
+        del K_u  # the factor holds what it needs (K_u on demand: :attr:`K_u`)
         if self.alpha is None:
             try:
                 self._factor_s = factorize_definite(K_s, near_null=near_null)
@@ -357,11 +348,30 @@ class Reduction:
         projection without contact forces, by one solve with two right-hand sides (two solves
         without a shared factor)."""
         params = np.asarray(params, float)
-        b, c = self._b @ params, self._c @ params
+        b, c = self._right_hand_sides(params)
         if self._factor_s is None:
             both = np.asarray(self.factor.solve(np.column_stack([b, c])), float).reshape(self.n, 2)
             return both[:, 0], both[:, 1] / self.alpha
         return self.factor.solve(b), self._factor_s.solve(c)
+
+    def _right_hand_sides(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(b, c)`` at the parameter values, from the projection's own maps (no matrix of
+        their own: ``b_P`` and ``c_P`` took 25 MB at 1e5 points): ``b = -A_u^T W_e a`` is the
+        displacement block of ``-Z^T W (Q P)`` (the distance ``d = Z z + Q P``, whose stress rows
+        have no displacement entries and whose metric does not couple strains and stresses,
+        :func:`refusal`), and ``c = R_sigma sigma_0 + r`` the equilibrium residual at ``sigma_0``
+        with no displacements and no pressures."""
+        d, R = self.problem.distance.d, self.problem.residual_map
+        b = -(d.z.T @ (self.problem.distance.weight @ (d.params @ params)))[:self.n]
+        z = np.zeros(R.z.shape[1])
+        z[self.n:self.n + self.mk] = self._sigma0 @ params
+        return b, R.value(z, params)
+
+    @property
+    def K_u(self) -> sp.csc_matrix:
+        """``A_u^T W_e A_u`` (a multiple of ``K_C``), assembled again on each use: not held
+        beside its factor (14 MB at 1e5 points)."""
+        return _operators(self.problem, self.n, self.mk)[0]
 
     def condensed_params(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray) -> np.ndarray:
         """The condensed problem's parameter vector: ``g_c = G u_0 + g`` and

@@ -57,6 +57,12 @@ def scalar_element(dimension: int, degree: int) -> skfem.Element:
 class Discretisation:
     """A mesh with vector-valued Lagrange elements of one degree and its quadrature.
 
+    The scikit-fem bases (:attr:`basis`, :attr:`scalar_basis`) hold every basis function's values
+    and gradients at every quadrature point (40 MB at 1e5 P1 triangles), which only the
+    assembly reads: :meth:`release` drops them once a model is assembled, and they are made
+    again, the same, if anything asks for them later (outputs, a contact pressure); the sizes
+    and dof locations a run reads are kept.
+
     Parameters
     ----------
     mesh : skfem.MeshTri1 or skfem.MeshTet1
@@ -65,17 +71,40 @@ class Discretisation:
 
     mesh: skfem.Mesh
     degree: int
-    basis: skfem.CellBasis
-    scalar_basis: skfem.CellBasis
 
     @classmethod
     def create(cls, mesh: skfem.Mesh, degree: int) -> "Discretisation":
-        dim = mesh.p.shape[0]
-        element = scalar_element(dim, degree)
-        quadrature = _quadrature(element.refdom, 2 * (degree - 1))
-        return cls(mesh=mesh, degree=degree,
-                   basis=skfem.Basis(mesh, skfem.ElementVector(element, dim=dim), quadrature=quadrature),
-                   scalar_basis=skfem.Basis(mesh, element, quadrature=quadrature))
+        return cls(mesh=mesh, degree=degree)
+
+    @cached_property
+    def _bases(self) -> dict:
+        return {}
+
+    def _basis(self, vector: bool) -> skfem.CellBasis:
+        basis = self._bases.get(vector)
+        if basis is None:
+            element = scalar_element(self.dimension, self.degree)
+            quadrature = _quadrature(element.refdom, 2 * (self.degree - 1))
+            basis = self._bases[vector] = skfem.Basis(
+                self.mesh, skfem.ElementVector(element, dim=self.dimension) if vector else element,
+                quadrature=quadrature)
+        return basis
+
+    @property
+    def basis(self) -> skfem.CellBasis:
+        """The vector-valued basis (made on first use, again after :meth:`release`)."""
+        return self._basis(True)
+
+    @property
+    def scalar_basis(self) -> skfem.CellBasis:
+        """The scalar basis of the same element (made on first use, again after :meth:`release`)."""
+        return self._basis(False)
+
+    def release(self) -> None:
+        """Drop the bases (after assembly; the sizes and dof locations stay)."""
+        for kept in ("n_dofs", "points_per_element", "_dof_locations", "_vector_dofs"):
+            getattr(self, kept)  # computed while the bases are here (a run's rigid-body modes read them)
+        self._bases.clear()
 
     @property
     def dimension(self) -> int:
@@ -86,11 +115,11 @@ class Discretisation:
         """Mandel strain components per material point."""
         return COMPONENTS[self.dimension]
 
-    @property
+    @cached_property
     def n_dofs(self) -> int:
         return self.basis.N
 
-    @property
+    @cached_property
     def points_per_element(self) -> int:
         return self.basis.X.shape[1]
 
@@ -111,9 +140,13 @@ class Discretisation:
         computed once)."""
         return self._vector_dofs
 
+    @cached_property
+    def _dof_locations(self) -> np.ndarray:
+        return self.scalar_basis.doflocs.T.copy()
+
     def dof_locations(self) -> np.ndarray:
         """``(N_scalar, d)`` coordinates of the scalar dofs (nodes, then edge midpoints)."""
-        return self.scalar_basis.doflocs.T.copy()
+        return self._dof_locations.copy()
 
     def rigid_body_modes(self) -> np.ndarray:
         """``(N, 3)`` in 2-D, ``(N, 6)`` in 3-D: the translations, then the rotations in the

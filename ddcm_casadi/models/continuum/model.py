@@ -526,6 +526,7 @@ def continuum_model(mesh: skfem.Mesh, *, materials: Sequence[Material], supports
         symmetry_factor=(getattr(reference, "force_factor", 1.0) if symmetry_factor is None else symmetry_factor),
         **contact, **friction)
     _check_held(model)
+    disc.release()  # assembled: the bases' values and gradients are not needed any more
     return model
 
 
