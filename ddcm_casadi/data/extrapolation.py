@@ -79,6 +79,10 @@ _DUPLICATES = 8
 #: most :data:`_REMEMBERED` sets of them: a small model's steps (and the DDCM runs of every
 #: formulation) come back to the same data.
 _FEW = 64
+#: Material points checked at a time (:meth:`DataCoverage.check`, :meth:`DataCoverage.coarseness`):
+#: the checks are point by point, and their working arrays (coordinates, tangent spaces: 30 MB
+#: at 1e5 two-dimensional points) are then bounded, not proportional to the body.
+CHUNK = 16384
 _REMEMBERED = 4096
 
 
@@ -129,13 +133,18 @@ class DataCoverage:
         beyond = np.zeros(self.n_points, dtype=bool)
         spacings = np.full(self.n_points, np.nan)
         for s, d in enumerate(self.dataset.datasets):
-            pts = np.flatnonzero(self.material == s)
+            for pts in self._finite_points(s, strain, stress):
+                beyond[pts], spacings[pts] = self._check_set(s, d, strain[pts], stress[pts])
+        return beyond, spacings
+
+    def _finite_points(self, s: int, strain: np.ndarray, stress: np.ndarray):
+        """The points of set ``s`` whose states are finite, :data:`CHUNK` at a time."""
+        for start in range(0, self.n_points, CHUNK):
+            pts = start + np.flatnonzero(self.material[start:start + CHUNK] == s)
             pts = pts[np.all(np.isfinite(strain[pts]).reshape(pts.size, -1), axis=1)
                       & np.all(np.isfinite(stress[pts]).reshape(pts.size, -1), axis=1)]
-            if not pts.size:
-                continue
-            beyond[pts], spacings[pts] = self._check_set(s, d, strain[pts], stress[pts])
-        return beyond, spacings
+            if pts.size:
+                yield pts
 
     def _check_set(self, s: int, d, strain: np.ndarray, stress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self._boxes[s]
@@ -183,22 +192,21 @@ class DataCoverage:
         share = float(counts.max()) / self.n_points
         spread, spacings = 0.0, float("nan")
         for s, d in enumerate(self.dataset.datasets):
-            pts = np.flatnonzero(self.material == s)
-            finite = (np.all(np.isfinite(strain[pts]).reshape(pts.size, -1), axis=1)
-                      & np.all(np.isfinite(stress[pts]).reshape(pts.size, -1), axis=1))
-            pts = pts[finite]
-            if not pts.size:
-                continue
-            local = index[pts] - offsets[s]
-            h, _ = self._neighbourhood(s, d, local)
-            X = d.metric.coordinates(strain[pts], stress[pts])
-            ok = np.isfinite(h) & (h > 0)
-            if np.any(ok):
-                size = float(np.max(np.linalg.norm(X[ok], axis=1) / h[ok]))
-                spacings = size if not np.isfinite(spacings) else max(spacings, size)
-            on = index[pts] == top
-            if np.any(on) and np.all(ok[on]):
-                spread = float(np.max(np.linalg.norm(X[on] - X[on].mean(axis=0), axis=1)) / h[on][0])
+            on = []  # the finite points on the most used datum
+            for pts in self._finite_points(s, strain, stress):
+                h, _ = self._neighbourhood(s, d, index[pts] - offsets[s])
+                ok = np.isfinite(h) & (h > 0)
+                if np.any(ok):
+                    X = d.metric.coordinates(strain[pts[ok]], stress[pts[ok]])
+                    size = float(np.max(np.linalg.norm(X, axis=1) / h[ok]))
+                    spacings = size if not np.isfinite(spacings) else max(spacings, size)
+                on.append(pts[index[pts] == top])
+            on = np.concatenate(on) if on else np.zeros(0, np.intp)
+            if on.size:  # one datum: one spacing
+                h_top = self._neighbourhood(s, d, np.array([top - offsets[s]]))[0][0]
+                if np.isfinite(h_top) and h_top > 0:
+                    X = d.metric.coordinates(strain[on], stress[on])
+                    spread = float(np.max(np.linalg.norm(X - X.mean(axis=0), axis=1)) / h_top)
         return share, spread, spacings
 
     def _neighbourhood(self, s: int, d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
