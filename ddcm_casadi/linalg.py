@@ -595,6 +595,7 @@ class _FactorThread:
         self._closed = False
 
     def _run(self) -> None:
+        trim = release_heap  # bound here: no module global is looked up at shutdown
         while True:
             item = self._queue.get()
             kind, payload = item
@@ -604,7 +605,7 @@ class _FactorThread:
             if kind == "release":
                 del payload  # the factor's last reference: freed in this thread
                 self.released += 1
-                release_heap()
+                trim()
                 continue
             fn, box, done = payload
             del payload
