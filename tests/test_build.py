@@ -82,3 +82,29 @@ def test_piece_systems_of_a_linear_model_are_linear():
         f = system.rj.function
         z, P = ca.MX.sym("z", f.nnz_in(0)), ca.MX.sym("P", f.nnz_in(1))
         assert ca.depends_on(f(z, P)[1], z)
+
+
+def test_problems_are_built_on_first_use_and_once():
+    """A DDCM run builds the projection only, once; the classical problem is built when asked for,
+    once (``ProblemPair`` builds lazily; ``has`` answers without building)."""
+    from ddcm_casadi.drivers.ddcm_reduced import build_projection
+    from ddcm_casadi.drivers.path import DDCMSolver
+
+    pair = build_problems(_truss())
+    assert pair.has("classical") and pair.has("projection")
+    assert "classical" not in vars(pair) and "projection" not in vars(pair)
+    result = DDCMSolver(pair, build_projection(formulations.get("fischer_burmeister"), pair)).solve()
+    assert result.converged
+    assert "classical" not in vars(pair)
+    projection = pair.projection
+    assert pair.projection is projection and pair.classical is pair.classical
+    assert pair.classical.kind == "mcp" and projection.kind == "mpcc"
+
+
+def test_a_problem_the_model_has_not_is_none():
+    """A problem without a builder (no Young's modulus, no data set) is ``None``, as before the
+    problems were lazy."""
+    from ddcm_casadi.problems.build import ProblemPair
+
+    pair = ProblemPair(model=_truss(), builders={})
+    assert not pair.has("classical") and pair.classical is None and pair.projection is None
