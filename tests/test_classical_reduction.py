@@ -76,6 +76,22 @@ def test_the_path_is_reported_and_can_be_switched_off():
     assert classical_refusal(problems.projection) == "not a classical problem"
 
 
+def test_large_problems_need_the_schur_complement(monkeypatch):
+    """Above ``SCHUR_MIN_SIZE`` unknowns, ``nc`` back-solves with SuperLU cost more than the full
+    path: without PARDISO's Schur complement the full path is kept, and says why."""
+    import ddcm_casadi.problems.reduction as reduction
+
+    problems = build_problems(MODELS["continuum"]())
+    monkeypatch.setattr(reduction, "SCHUR_MIN_SIZE", 10)
+    previous = linalg.solver_name()
+    try:
+        linalg.use_solver("superlu")
+        why = classical_refusal(problems.classical)
+    finally:
+        linalg.use_solver(previous)
+    assert why.startswith(f"{problems.classical.n_x} unknowns without PARDISO's Schur complement")
+
+
 def test_finite_kinematics_keep_the_full_path():
     from ddcm_casadi.models.von_mises import von_mises_truss
 

@@ -42,8 +42,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ddcm_casadi.linalg import (
-    SOLVE_BLOCK, SingularMatrix, definite_solver_name, factorize_definite, factorize_with_delassus,
-    numerically_symmetric,
+    SCHUR_MIN_SIZE, SOLVE_BLOCK, SingularMatrix, definite_solver_name, delassus_solver, factorize_definite,
+    factorize_with_delassus, numerically_symmetric,
 )
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, Distance
@@ -399,8 +399,12 @@ def classical_refusal(problem: ComplementarityProblem, *, max_pairs: int | None 
     """Why the Delassus condensation (:class:`ClassicalReduction`) does not apply to the classical
     ``problem`` (one line), or ``""``: it needs an affine problem ``K u + R_p p + f = 0`` in the
     displacements ``u`` alone with a symmetric ``K``, gaps in ``u`` alone, contact forces
-    ``-R_p p = G^T diag(r) p`` (Signorini pairs, no friction), and 1 to ``max_pairs`` pairs
-    (default :data:`MAX_CLASSICAL_PAIRS`)."""
+    ``-R_p p = G^T diag(r) p`` (Signorini pairs, no friction), 1 to ``max_pairs`` pairs
+    (default :data:`MAX_CLASSICAL_PAIRS`), and, above
+    :data:`~ddcm_casadi.linalg.SCHUR_MIN_SIZE` unknowns, PARDISO's Schur complement for ``D_u``
+    (:func:`~ddcm_casadi.linalg.delassus_solver`): its ``nc`` back-solves with SuperLU cost more
+    than the full path (measured on the Hertz body of 95 266 dofs, 219 pairs: 15.4 s for the
+    factor and back-solves, where the full path took 6.6 s; PARDISO's Schur complement 0.9 s)."""
     max_pairs = MAX_CLASSICAL_PAIRS if max_pairs is None else max_pairs
     if problem.kind != "mcp":
         return "not a classical problem"
@@ -415,6 +419,9 @@ def classical_refusal(problem: ComplementarityProblem, *, max_pairs: int | None 
     if problem.n_pairs > max_pairs:
         return f"{problem.n_pairs} contact pairs (the condensed problem is assembled up to {max_pairs})"
     n = problem.n_x
+    if n > SCHUR_MIN_SIZE and delassus_solver(n) != "pardiso":
+        return (f"{n} unknowns without PARDISO's Schur complement ({problem.n_pairs} back-solves would cost "
+                "more than the full path's factorisation)")
     F, g = problem.residual_map.z, problem.gap_map.z
     if _rows(g, slice(n, None)).any():
         return "the gaps involve more than the displacements"
