@@ -10,7 +10,11 @@ with ``--full``. ddcm-casadi builds it, writes the free-dof stiffness ``K``, the
 gap offsets and loads to an ``.npz``, and solves it with every available sparse solver of
 :mod:`ddcm_casadi.linalg`; ``benchmarks/snesvi_peer.py``, run by a Python that has ``petsc4py``
 (the ``dolfinx-solver-real`` wheel, Python >= 3.12; not a dependency of the package), solves the
-same ``.npz`` with MUMPS in each tuning of :data:`PEER_TUNINGS`. Each side runs in its own process
+same ``.npz`` with MUMPS in each tuning of :data:`PEER_TUNINGS`. Ours is built by
+:func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical`: condensed on the contact pairs (one
+factorisation of ``K`` with the Delassus matrix, ``docs/maths.md`` section 17) where it applies,
+its time counted with the solve; ``--also-full`` also solves on the full problem (the comparison
+before and after). Each side runs in its own process
 (its own peak memory); the solutions must agree to :data:`AGREEMENT` (``u`` relative to
 ``max |u|``, ``p`` relative to ``max p``). Also the time of one factorisation and solve of ``K``
 with each solver on both sides (:func:`factor_times`, and the peer's ``factor`` mode). Every

@@ -817,10 +817,12 @@ class _PardisoSchur:
         M = sp.csr_matrix((np.concatenate([U.data, np.zeros(nc)]), (np.concatenate([U.row, index]),
                                                                       np.concatenate([U.col, index]))),
                           shape=(n + nc, n + nc))
+        del U  # the temporaries go before PARDISO allocates its factor (the peak memory)
         M.sort_indices()
         self.n, self.nc = n, nc
         self._data = M.data
         self._ia, self._ja = M.indptr.astype(np.int32) + 1, M.indices.astype(np.int32) + 1  # one-based
+        del M
         self._solver = s = pypardiso.PyPardisoSolver(mtype=-2)
         s.perm = np.zeros(n + nc, dtype=np.int32)
         s.perm[n:] = 1  # the Schur variables
