@@ -105,20 +105,7 @@ def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True)
     full problem. ``path_description(built)`` says which and why."""
     problem = problems.projection
     formulation.check_supports(problem)
-    why = refusal(problem) if reduce else "reduction off"
-    reduction = None
-    if not why:  # one reduction per problem and solver of K_C
-        reduction = problem.shared(("reduction", definite_solver_name()),
-                                   lambda: _reduction(problem, problems.model.near_null_space()))
-        why = reduction if isinstance(reduction, str) else ""
-    if why:
-        built = formulation.build(problem)
-        built.projection_path = FULL.format(why=why)
-        return built
-    inner = formulation.build(reduction.condensed) if reduction.nc else None
-    built = ReducedProjection(problem, reduction, inner, full=lambda: formulation.build(problem))
-    built.projection_path = built.path
-    return built
+    return _built(formulation, problems, problem, refusal(problem) if reduce else "reduction off", Reduction, FULL)
 
 
 @limited_blas
@@ -131,22 +118,30 @@ def build_classical(formulation, problems: ProblemPair, *, reduce: bool = True) 
     problem = problems.classical
     formulation.check_supports(problem)
     why = classical_refusal(problem) if reduce else "condensation off"
-    reduction = None
-    if not why:  # one condensation per problem and solver of K
-        reduction = problem.shared(("classical reduction", definite_solver_name(), solver_name()),
-                                   lambda: _reduction(problem, problems.model.near_null_space(), ClassicalReduction))
+    return _built(formulation, problems, problem, why, ClassicalReduction, CLASSICAL_FULL)
+
+
+def _built(formulation, problems: ProblemPair, problem: ComplementarityProblem, why: str, kind: type,
+           full: str) -> BuiltFormulation:
+    """``formulation`` built on the condensed problem of ``problem``'s reduction (a ``kind``,
+    made once per problem and solvers of ``K``), in a :class:`ReducedProjection`; on ``problem``
+    itself if ``why`` says why not, or the reduction refuses (its ``projection_path``: ``full``
+    with the reason)."""
+    if not why:
+        reduction = problem.shared((kind.__name__, definite_solver_name(), solver_name()),
+                                   lambda: _reduction(problem, problems.model.near_null_space(), kind))
         why = reduction if isinstance(reduction, str) else ""
     if why:
         built = formulation.build(problem)
-        built.projection_path = CLASSICAL_FULL.format(why=why)
+        built.projection_path = full.format(why=why)
         return built
-    built = ReducedProjection(problem, reduction, formulation.build(reduction.condensed),
-                              full=lambda: formulation.build(problem))
+    inner = formulation.build(reduction.condensed) if reduction.nc else None
+    built = ReducedProjection(problem, reduction, inner, full=lambda: formulation.build(problem))
     built.projection_path = built.path
     return built
 
 
-def _reduction(problem: ComplementarityProblem, near_null: np.ndarray | None, kind=Reduction):
+def _reduction(problem: ComplementarityProblem, near_null: np.ndarray | None, kind: type):
     """The reduction of ``problem`` (a ``kind``), or why it does not apply (a singular or
     ill-conditioned Delassus matrix)."""
     try:
