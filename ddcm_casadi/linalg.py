@@ -36,6 +36,11 @@ fill grows like ``n^(4/3)`` and no longer fits in memory at 5e5 dofs (``docs/per
 
 Low-rank updates of a factor (the active-set solver's, when a few pairs switch piece) are
 :mod:`ddcm_casadi.factor_updates`'.
+
+A factor of a definite ``K`` together with the Delassus matrix ``C K^-1 C^T`` of a few rows ``C``
+(the classical problem's condensation on its contact pairs) is :func:`factorize_with_delassus`:
+PARDISO's Schur complement of ``[[K, C^T], [C, 0]]`` in one partial factorisation where it runs,
+else a factor and back-solves.
 """
 
 from __future__ import annotations
