@@ -62,7 +62,7 @@ from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_at
 from ddcm_casadi.linalg import factorize, solver_name
 from ddcm_casadi.problems.build import ProblemPair, build_problems
 from ddcm_casadi.validation.reference import ContactQP
-from ddcm_casadi.drivers.ddcm_reduced import ReducedProjection, build_projection
+from ddcm_casadi.drivers.ddcm_reduced import ReducedProjection, build_classical, build_projection
 from ddcm_casadi.drivers.path import DDCMSolver, solve_classical
 from ddcm_casadi.models.truss import bar_chain, warren_truss
 
@@ -286,7 +286,7 @@ def build_record(family: str, unknowns: int, repeats: int) -> dict:
     built = stage("formulation_build", lambda: fb.build(problems.projection))
     build = stages["problem_build"] + stages["formulation_build"]
     if problems.has("classical"):
-        stage("classical_build", lambda: fb.build(problems.classical))
+        stage("classical_build", lambda: build_classical(fb, problems))  # condensed where it applies
     reduced = stage("reduced_build", lambda: build_projection(fb, problems))
     stage("ddcm_setup", lambda: DDCMSolver(problems, reduced))
     del reduced
@@ -790,8 +790,10 @@ def fb_vs_qp(model, repeats: int, *, max_dofs: dict) -> list[dict]:
     problems = build_problems(model)
     n = model.n_dofs + model.n_contacts
     ref = None
-    for predictor in (True, False):
-        built = registry.get("fischer_burmeister", active_set_predictor=predictor).build(problems.classical)
+    for predictor in (True, False, "condensed"):
+        fb = registry.get("fischer_burmeister", active_set_predictor=bool(predictor))
+        # condensed: on the contact pairs (build_classical), K's factor and D_u made at the build
+        built = build_classical(fb, problems) if predictor == "condensed" else fb.build(problems.classical)
 
         def run():
             built.reset()  # cold factorisation cache: every repeat measures the same work
@@ -802,10 +804,12 @@ def fb_vs_qp(model, repeats: int, *, max_dofs: dict) -> list[dict]:
         u = res.array("u")
         if ref is None:
             ref, t_fb = (u, t)
-        label = "with active-set predictor" if predictor else "plain semismooth Newton"
+        label = {True: "with active-set predictor", False: "plain semismooth Newton"}.get(
+            predictor, "condensed on the contact pairs")
         out.append(dict(name=f"classical FB Newton ({label}), {model.name}", unknowns=n, data_points=0,
                         seconds=t, floor_seconds=t_fb, ratio=t / t_fb, converged=bool(res.converged),
                         newton_iterations=int(res.array("iterations").sum()), steps=model.n_steps,
+                        path=res.projection_path,
                         max_rel_difference_u=float(np.max(np.abs(u - ref)) / np.max(np.abs(ref)))))
     for solver in ("highs", "osqp", "qpoases"):
         if model.n_dofs > max_dofs.get(solver, np.inf):

@@ -10,7 +10,11 @@ with ``--full``. ddcm-casadi builds it, writes the free-dof stiffness ``K``, the
 gap offsets and loads to an ``.npz``, and solves it with every available sparse solver of
 :mod:`ddcm_casadi.linalg`; ``benchmarks/snesvi_peer.py``, run by a Python that has ``petsc4py``
 (the ``dolfinx-solver-real`` wheel, Python >= 3.12; not a dependency of the package), solves the
-same ``.npz`` with MUMPS in each tuning of :data:`PEER_TUNINGS`. Each side runs in its own process
+same ``.npz`` with MUMPS in each tuning of :data:`PEER_TUNINGS`. Ours is built by
+:func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical`: condensed on the contact pairs (one
+factorisation of ``K`` with the Delassus matrix, ``docs/maths.md`` section 17) where it applies,
+its time counted with the solve; ``--also-full`` also solves on the full problem (the comparison
+before and after). Each side runs in its own process
 (its own peak memory); the solutions must agree to :data:`AGREEMENT` (``u`` relative to
 ``max |u|``, ``p`` relative to ``max p``). Also the time of one factorisation and solve of ``K``
 with each solver on both sides (:func:`factor_times`, and the peer's ``factor`` mode). Every
@@ -40,6 +44,7 @@ import scipy.sparse as sp
 
 from ddcm_casadi import formulations as registry
 from ddcm_casadi import linalg
+from ddcm_casadi.drivers.ddcm_reduced import build_classical
 from ddcm_casadi.drivers.path import solve_classical
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.problems.build import build_problems
@@ -66,12 +71,13 @@ def peak_memory_bytes() -> int:
 
 
 def hertz_model(divisions: int):
-    """:func:`run.continuum_block` of ``divisions``, reduced to its last load step from
-    :data:`ONE_STEP_FROM` divisions on."""
+    """:func:`run.continuum_block` of ``divisions`` without its material data (the classical
+    problem alone is built: the DDCM projection's operators took 1.3 GB of the 5.3 GB peak at
+    1e6 unknowns), reduced to its last load step from :data:`ONE_STEP_FROM` divisions on."""
     spec = importlib.util.spec_from_file_location("ddcm_benchmarks_run", HERE / "run.py")
     run = importlib.util.module_from_spec(spec)  # run.py is a sibling script, not a package module
     spec.loader.exec_module(run)
-    model = run.continuum_block(divisions)
+    model = replace(run.continuum_block(divisions), dataset=None)
     if divisions >= ONE_STEP_FROM:
         model = replace(model, gap_offsets=model.gap_offsets[-1:], loads=model.loads[-1:],
                         load_parameter=model.load_parameter[-1:])
@@ -87,30 +93,39 @@ def write_problem(model, path: str) -> None:
                  gap0=model.gap_offsets, f=model.loads)
 
 
-def ours(divisions: int, solver: str, problem: str | None, solution: str) -> dict:
+def ours(divisions: int, solver: str, problem: str | None, solution: str, condense: bool = True) -> dict:
     """Build the problem, write it to ``problem`` (unless ``None``), solve its path with FB and the
-    sparse solver ``solver``, and write ``u`` and ``p`` per step to ``solution``."""
+    sparse solver ``solver``, and write ``u`` and ``p`` per step to ``solution``. ``condense``:
+    as :func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical` selects (condensed on the contact
+    pairs where it applies), else the full problem. ``seconds`` counts the condensation's
+    factorisation and Delassus matrix (made at the build) with the solve: the work the peer does
+    in its solve; ``build_seconds`` the rest of the build."""
     linalg.use_solver(solver)
     model = hertz_model(divisions)
     t0 = time.perf_counter()
     problems = build_problems(model)
-    built = registry.get("fischer_burmeister").build(problems.classical)
-    build = time.perf_counter() - t0
+    built = build_classical(registry.get("fischer_burmeister"), problems, reduce=condense)
+    reduction = getattr(built, "reduction", None)
+    condensation = 0.0 if reduction is None else reduction.factor_seconds
+    build = time.perf_counter() - t0 - condensation
     if problem is not None:
         write_problem(model, problem)
     t0 = time.perf_counter()
     res = solve_classical(problems, built, "fischer_burmeister")
-    seconds = time.perf_counter() - t0
+    seconds = time.perf_counter() - t0 + condensation
     np.savez(solution, u=res.array("u"), p=res.array("p"))
     stats = built.stats
     return dict(unknowns=model.n_dofs + model.n_contacts, dofs=model.n_dofs, contacts=model.n_contacts,
-                steps=model.n_steps, seconds=seconds, build_seconds=build, converged=bool(res.converged),
+                steps=model.n_steps, seconds=seconds, build_seconds=build, condensation_seconds=condensation,
+                path=res.projection_path, converged=bool(res.converged),
                 newton_iterations=int(res.array("iterations").sum()), factorisations=stats["factorizations"],
                 updates=stats["updates"], solver=solver, peak_memory_bytes=peak_memory_bytes())
 
 
 #: The solvers to run (``--solvers``; empty: every one that runs here).
 ONLY: list[str] = []
+#: Also solve on the full problem, not condensed (``--also-full``: the comparison before/after).
+ALSO_FULL: list[bool] = [False]
 
 
 def solvers() -> list[str]:
@@ -181,12 +196,13 @@ def compare_size(divisions: int, python: str, tmp: str, repeats: int) -> list[di
     problem = os.path.join(tmp, f"problem{divisions}.npz")
     records = []
     reference = None
-    for solver in solvers():
-        solution = os.path.join(tmp, f"ours{divisions}-{solver}.npz")
-        rec = fresh("ours", divisions, solver, problem if reference is None else None, solution)
-        rec.update(side="ddcm-casadi FB", divisions=divisions, solver=solver)
+    for solver, condense in [(name, c) for name in solvers() for c in ((True, False) if ALSO_FULL[0] else (True,))]:
+        solution = os.path.join(tmp, f"ours{divisions}-{solver}-{condense}.npz")
+        rec = fresh("ours", divisions, solver, problem if reference is None else None, solution, condense)
+        rec.update(side="ddcm-casadi FB" + ("" if condense else " (full)"), divisions=divisions, solver=solver)
         if "error" not in rec:
-            rec["default"] = linalg.chosen_solver(rec["unknowns"], symmetric=False) == solver  # the FB piece matrix
+            rec["default"] = solver == (linalg.delassus_solver(rec["dofs"]) if rec["path"].startswith("condensed")
+                                        else linalg.chosen_solver(rec["unknowns"], symmetric=False))  # FB piece matrix
         if "error" not in rec:
             reference = reference or solution
             rec["difference"] = difference(reference, solution)
@@ -245,6 +261,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--divisions", type=int, nargs="*", help="mesh divisions to run instead (about 8.1 d^2 unknowns)")
     ap.add_argument("--solvers", nargs="*", default=[], help="ddcm-casadi's sparse solvers to run (default: all)")
+    ap.add_argument("--also-full", action="store_true", help="also solve ours on the full problem (not condensed)")
     ap.add_argument("--call", nargs=2, metavar=("FUNCTION", "JSON_ARGS"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.call:  # a fresh process of fresh(): one of CALLABLE, its record printed as JSON
@@ -254,6 +271,7 @@ def main(argv=None) -> int:
         print(json.dumps(CALLABLE[name](*json.loads(arguments))))
         return 0
     ONLY[:] = args.solvers
+    ALSO_FULL[0] = args.also_full
     if not os.path.exists(args.peer_python):
         print(f"snesvi: skipped, no Python with petsc4py at {args.peer_python} (--peer-python or DDCM_PETSC_PYTHON)")
         return 0

@@ -1,11 +1,15 @@
-"""The DDCM projection through the Kirchdoerfer-Ortiz reduction (:mod:`ddcm_casadi.problems.reduction`,
-``docs/maths.md`` section 17), behind the interface of a built formulation.
+"""The DDCM projection through the Kirchdoerfer-Ortiz reduction, and the classical problem through
+its Delassus condensation (:mod:`ddcm_casadi.problems.reduction`, ``docs/maths.md`` section 17),
+behind the interface of a built formulation.
 
 :func:`build_projection` is how drivers build the projection's formulation: reduced where the
 reduction applies and is asked for (the default), the formulation built on the full saddle-point
 problem otherwise. A reduced projection is the chosen formulation built on the condensed problem
 (the contact pairs only; none without contact), with the displacements and stresses recovered by
 one solve with the kept factor; its solutions, residuals and objectives are the full projection's.
+:func:`build_classical` does the same for the classical problem (:class:`ClassicalReduction`:
+the formulation on the pairs' linear complementarity problem, ``u`` by one solve with the kept
+factor of ``K``).
 """
 
 from __future__ import annotations
@@ -13,27 +17,30 @@ from __future__ import annotations
 import numpy as np
 
 from ddcm_casadi.formulations.base import BuiltFormulation, LocalSolution
-from ddcm_casadi.linalg import definite_solver_name
+from ddcm_casadi.linalg import definite_solver_name, solver_name
 from ddcm_casadi.parallel import limited_blas
 from ddcm_casadi.problems.build import ProblemPair
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.problems.reduction import NotReducible, Reduction, refusal
+from ddcm_casadi.problems.reduction import ClassicalReduction, NotReducible, Reduction, classical_refusal, refusal
 
 #: How a path's projection was solved (``PathResult.projection_path``).
-REDUCED = "reduced (Kirchdoerfer-Ortiz: {factors} factorisation(s) of K_C, {nc} condensed contact pairs)"
 FULL = "full saddle point ({why})"
+#: How a classical path was solved, when not condensed.
+CLASSICAL_FULL = "full ({why})"
 
 
 class ReducedProjection(BuiltFormulation):
-    """A formulation solving the condensed problem of a projection, returning the projection's
-    solutions (:class:`~ddcm_casadi.formulations.base.LocalSolution` of the full unknowns).
+    """A formulation solving the condensed problem of a projection (or of a classical problem),
+    returning the full problem's solutions (:class:`~ddcm_casadi.formulations.base.LocalSolution`
+    of the full unknowns).
 
     Parameters
     ----------
     problem : ComplementarityProblem
-        The full projection (residuals, gaps and objectives are evaluated on it).
-    reduction : Reduction
-        Its reduction (the kept factor, the condensed problem).
+        The full problem (residuals, gaps and objectives are evaluated on it).
+    reduction : Reduction or ClassicalReduction
+        Its reduction (the kept factor, the condensed problem; ``particular(params)`` a tuple
+        passed on to ``condensed_params`` and ``recover``).
     inner : BuiltFormulation or None
         The formulation built on :attr:`Reduction.condensed` (``None`` without contact pairs:
         the projection is then the solve with the kept factor alone).
@@ -47,8 +54,9 @@ class ReducedProjection(BuiltFormulation):
         #: later projection take the full path (measured: the 1000-panel Warren truss's condensed
         #: FB solves failed and bisected for minutes where the full path converged in 0.4 s).
         self._full_factory, self._full = full, None
+        self._full_path = FULL if problem.kind == "mpcc" else CLASSICAL_FULL
         self.penalty_stiffness = None if inner is None else inner.penalty_stiffness
-        self.path = REDUCED.format(factors=reduction.factorizations, nc=reduction.nc)
+        self.path = reduction.description
         #: Without contact pairs the projection is the closed form of the exact one (no branch to
         #: enumerate): the driver skips the enumeration's check.
         self.closed_form = inner is None
@@ -71,21 +79,21 @@ class ReducedProjection(BuiltFormulation):
             return self._full.solve(params, x0, p0, state)
         red = self.reduction
         params = np.asarray(params, float)
-        u0, eta0 = red.particular(params)
+        base = red.particular(params)
         if self.inner is None:
             w, p, converged, iterations, outer, state, message = np.zeros(0), np.zeros(0), True, 1, 0, None, ""
         else:
-            sol = self.inner.solve(red.condensed_params(params, u0, eta0), red.condensed_start(params, x0),
+            sol = self.inner.solve(red.condensed_params(params, *base), red.condensed_start(params, x0),
                                    np.asarray(p0, float), state)
             w, p, converged, iterations = sol.x, sol.p, sol.converged, sol.iterations
             outer, state, message = sol.outer_iterations, sol.state, sol.message
             if not converged and self._full_factory is not None:
                 self._full = self._full_factory()
-                self.path = self.projection_path = FULL.format(why=f"a condensed solve failed ({message})")
+                self.path = self.projection_path = self._full_path.format(why=f"a condensed solve failed ({message})")
                 full = self._full.solve(params, x0, p0, None)
                 full.iterations += iterations
                 return full
-        x = red.recover(params, u0, eta0, w, p)
+        x = red.recover(params, *base, w, p)
         return self._finish(x, p, params, converged=converged, iterations=iterations, outer=outer, state=state,
                             message=message)
 
@@ -97,15 +105,35 @@ def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True)
     full problem. ``path_description(built)`` says which and why."""
     problem = problems.projection
     formulation.check_supports(problem)
-    why = refusal(problem) if reduce else "reduction off"
-    reduction = None
-    if not why:  # one reduction per problem and solver of K_C
-        reduction = problem.shared(("reduction", definite_solver_name()),
-                                   lambda: _reduction(problem, problems.model.near_null_space()))
+    return _built(formulation, problems, problem, refusal(problem) if reduce else "reduction off", Reduction, FULL)
+
+
+@limited_blas
+def build_classical(formulation, problems: ProblemPair, *, reduce: bool = True) -> BuiltFormulation:
+    """The classical problem's formulation, built: condensed on the contact pairs
+    (:class:`~ddcm_casadi.problems.reduction.ClassicalReduction`, in a :class:`ReducedProjection`)
+    when ``reduce`` and the condensation applies
+    (:func:`~ddcm_casadi.problems.reduction.classical_refusal`, a well-conditioned Delassus
+    matrix), else built on the full problem. ``path_description(built)`` says which and why."""
+    problem = problems.classical
+    formulation.check_supports(problem)
+    why = classical_refusal(problem) if reduce else "condensation off"
+    return _built(formulation, problems, problem, why, ClassicalReduction, CLASSICAL_FULL)
+
+
+def _built(formulation, problems: ProblemPair, problem: ComplementarityProblem, why: str, kind: type,
+           full: str) -> BuiltFormulation:
+    """``formulation`` built on the condensed problem of ``problem``'s reduction (a ``kind``,
+    made once per problem and solvers of ``K``), in a :class:`ReducedProjection`; on ``problem``
+    itself if ``why`` says why not, or the reduction refuses (its ``projection_path``: ``full``
+    with the reason)."""
+    if not why:
+        reduction = problem.shared((kind.__name__, definite_solver_name(), solver_name()),
+                                   lambda: _reduction(problem, problems.model.near_null_space(), kind))
         why = reduction if isinstance(reduction, str) else ""
     if why:
         built = formulation.build(problem)
-        built.projection_path = FULL.format(why=why)
+        built.projection_path = full.format(why=why)
         return built
     inner = formulation.build(reduction.condensed) if reduction.nc else None
     built = ReducedProjection(problem, reduction, inner, full=lambda: formulation.build(problem))
@@ -113,10 +141,11 @@ def build_projection(formulation, problems: ProblemPair, *, reduce: bool = True)
     return built
 
 
-def _reduction(problem: ComplementarityProblem, near_null: np.ndarray | None) -> Reduction | str:
-    """The reduction of ``problem``, or why it does not apply (a singular Delassus matrix)."""
+def _reduction(problem: ComplementarityProblem, near_null: np.ndarray | None, kind: type):
+    """The reduction of ``problem`` (a ``kind``), or why it does not apply (a singular or
+    ill-conditioned Delassus matrix)."""
     try:
-        return Reduction(problem, near_null)
+        return kind(problem, near_null)
     except NotReducible as exc:
         return str(exc)
 

@@ -21,7 +21,7 @@ from ddcm_casadi.formulations.base import Formulation
 from ddcm_casadi.errors import InputError, PhysicsWarning
 from ddcm_casadi.models.base import ContactModel
 from ddcm_casadi.parallel import map_forked, resolve_jobs
-from ddcm_casadi.drivers.ddcm_reduced import build_projection
+from ddcm_casadi.drivers.ddcm_reduced import build_classical, build_projection
 from ddcm_casadi.problems.build import ProblemPair, build_problems
 from ddcm_casadi.drivers.ddcm_options import KEYS, DDCMOptions
 from ddcm_casadi.drivers.path import DDCMSolver, PathResult, StepResult, solve_classical
@@ -261,7 +261,7 @@ class Comparison:
                        bisected_steps=[s.step for s in r.steps if s.bisected and s.converged],
                        substeps=[s.substeps for s in r.steps],
                        smallest_substep=[s.smallest_substep for s in r.steps])
-            if r.projection_path:  # DDCM: reduced (Kirchdoerfer-Ortiz) or the full saddle point
+            if r.projection_path:  # reduced / condensed on the contact pairs, or the full problem, and why
                 rec["projection_path"] = r.projection_path
             if err is not None and self._penalty_reference(variant, name) is not None:
                 # compared with its own (penalty) closed form above; the exact one as well here
@@ -413,7 +413,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         cb = (lambda s: progress(variant, form.name, s)) if progress else None
         t0 = time.perf_counter()
         if variant == "classical":
-            built = form.build(problems.classical)
+            built = build_classical(form, problems)
             build = time.perf_counter() - t0
             r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb,
                                 min_substep=min_substep)

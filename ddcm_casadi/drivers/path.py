@@ -21,6 +21,7 @@ from ddcm_casadi.drivers.checks import (
     PENALTY_PRESSURE_BOUND, PHYSICAL_TOL, ROUNDOFF, clip_roundoff, finish_step, physical_check,
 )
 from ddcm_casadi.drivers.ddcm import DDCMSolver
+from ddcm_casadi.drivers.ddcm_reduced import path_description
 from ddcm_casadi.drivers.records import PathResult, StepResult, check_convergence
 from ddcm_casadi.drivers.substeps import (
     DEFAULT_MIN_SUBSTEP, accepted, bisect, bisection_enabled, check_min_substep, finish_bisected, interpolate,
@@ -35,7 +36,10 @@ __all__ = ["DDCMSolver", "PENALTY_PRESSURE_BOUND", "PHYSICAL_TOL", "PathResult",
 def solve_classical(problems: ProblemPair, built, formulation_name: str, *, raise_on_failure: bool = False,
                     progress: Callable[[StepResult], None] | None = None,
                     min_substep: float = DEFAULT_MIN_SUBSTEP) -> PathResult:
-    """Classical solution at every load step with a built formulation (warm-started).
+    """Classical solution at every load step with a built formulation (warm-started): built on
+    the full problem, or condensed on the contact pairs by
+    :func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical` (``PathResult.projection_path``
+    says which).
 
     A penalty formulation's penetration ``p / gamma`` is expected by the physical check
     (:func:`physical_check`, with ``built.penalty_stiffness``). A step that fails (not converged,
@@ -75,6 +79,7 @@ def solve_classical(problems: ProblemPair, built, formulation_name: str, *, rais
             previous = dict(u=step.u, p=step.p, traction=step.traction, step=k)
             converged_params = params
     out.solve_seconds = time.perf_counter() - t_all
+    out.projection_path = path_description(built)  # condensed or full (after any fallback), and why
     return out
 
 

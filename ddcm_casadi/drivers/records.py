@@ -94,7 +94,8 @@ class PathResult:
     #: What the driver left out for the whole path and why (one line each).
     warnings: list[str] = field(default_factory=list)
     #: How the DDCM projections were solved: reduced (Kirchdoerfer-Ortiz) or the full saddle point,
-    #: and why (:func:`~ddcm_casadi.drivers.ddcm_reduced.path_description`); ``""`` for classical paths.
+    #: and why; for a classical path, condensed on the contact pairs (Delassus) or full, and why
+    #: (:func:`~ddcm_casadi.drivers.ddcm_reduced.path_description`; ``""`` if not built by its builders).
     projection_path: str = ""
 
     @property

@@ -41,7 +41,10 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ddcm_casadi.linalg import SingularMatrix, definite_solver_name, factorize_definite, release_heap
+from ddcm_casadi.linalg import (
+    SCHUR_MIN_SIZE, SOLVE_BLOCK, SingularMatrix, definite_solver_name, delassus_solver, factorize_definite,
+    factorize_with_delassus, numerically_symmetric, release_heap,
+)
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
@@ -49,6 +52,11 @@ from ddcm_casadi.problems.parameters import Parameters
 #: Contact pairs up to which the condensed problem is assembled (``nc`` back-solves, an ``n x nc``
 #: dense block kept); above, the projection keeps the full saddle-point path.
 MAX_PAIRS = 500
+#: Contact pairs up to which the classical problem is condensed (:class:`ClassicalReduction`: it
+#: keeps nothing ``n x nc``; its cost is the condensed problem's dense ``nc x nc`` block). Measured
+#: (FB on a dense condensed problem, most pairs closed): 705 pairs built in 0.28 s and solved in
+#: 0.19 s, 1000 in 0.61 s and 0.55 s; the dense block grows like ``nc^2``, its solves like ``nc^3``.
+MAX_CLASSICAL_PAIRS = 1000
 #: Relative size (Frobenius) of ``K_s - alpha K_u`` up to which the two share one factor.
 PROPORTIONAL = 1e-12
 #: The formulations' Newton tolerance (relative increment and scaled residual, their default).
@@ -61,10 +69,6 @@ NEWTON_TOL = 1e-9
 #: continua (1e2-3e2) converge as on the full path. A body held only by its contacts (a rigid
 #: mode, ``B r = 0``) shows as ``1 / eps``. Above the limit the full path is kept.
 MAX_CONDITION = 0.1 * NEWTON_TOL / np.finfo(float).eps
-#: Right-hand sides per back-solve: SuperLU's solve with many columns is slower per column than
-#: with a few (measured on K_C of 23 436 dofs: 109 columns at once 14.7 s, by 16 4.4 s, by 4 0.74 s,
-#: one by one 1.5 s).
-SOLVE_BLOCK = 4
 #: Largest dense ``n x nc`` block kept (bytes); above, the full path is kept.
 MAX_DENSE_BYTES = 2 * 1024**3
 
@@ -132,6 +136,29 @@ def _times_kept(A: sp.spmatrix, Z: np.ndarray) -> np.ndarray:
     A = sp.csr_matrix(A)  # row by row, in the order of the full product: the same sums
     used = np.unique(A.indices)
     return np.asarray(A[:, used] @ np.ascontiguousarray(Z[used]))
+
+
+def column_ratio(G: sp.spmatrix, R: sp.spmatrix) -> np.ndarray | None:
+    """``r`` with ``R = G^T diag(r)`` (to :data:`PROPORTIONAL`), or ``None``: the contact forces
+    ``G^T (a p)`` are the gap rows' transposes scaled pair by pair."""
+    Gt, R = sp.csc_matrix(G).T.tocsc(), sp.csc_matrix(R)
+    r = np.asarray(Gt.multiply(R).sum(axis=0)).ravel() / np.maximum(
+        np.asarray(Gt.multiply(Gt).sum(axis=0)).ravel(), 1e-300)
+    if _frobenius(R - Gt @ sp.diags(r)) <= PROPORTIONAL * max(_frobenius(R), 1e-300):
+        return r
+    return None
+
+
+def delassus_condition(D: np.ndarray) -> float:
+    """The condition number of a Delassus matrix ``D`` (symmetric), or :class:`NotReducible`
+    above :data:`MAX_CONDITION` (the condensed solve's round-off would exceed Newton's tolerance)."""
+    eig = np.linalg.eigvalsh(D)
+    if not eig[0] > eig[-1] / MAX_CONDITION:
+        raise NotReducible(
+            f"a Delassus matrix's condition {eig[-1] / max(eig[0], 1e-300):.1e} is above"
+            f" {MAX_CONDITION:.1e}: the condensed solve's roundoff would exceed Newton's tolerance"
+            " (a slender structure, a body held only by its contacts, or dependent contact rows)")
+    return float(eig[-1] / eig[0])
 
 
 def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) -> str:
@@ -266,7 +293,7 @@ class Reduction:
             # nc back-solves: the columns K_u^-1 G^T and K_s^-1 R_p (shared when R_p is a
             # multiple of G^T column by column, as the contact forces G^T (a p) are)
             self.Z_u = self._back_solves(self.factor.solve, self.G.T)
-            ratio = self._column_ratio()
+            ratio = column_ratio(self.G, self.R_p)
             if ratio is not None and self.alpha is not None:  # K_s^-1 R_p = Z_u diag(r) / alpha
                 self._p_scale, self.Z_p = ratio / self.alpha, None
                 self.D_p = _times_kept(self.R_p.T, self.Z_u) * self._p_scale
@@ -276,22 +303,16 @@ class Reduction:
                 self.D_p = _times_kept(self.R_p.T, self.Z_p)
             self.D_u = _times_kept(self.G, self.Z_u)
             self.D_u, self.D_p = 0.5 * (self.D_u + self.D_u.T), 0.5 * (self.D_p + self.D_p.T)
-            conditions = []
-            for D in (self.D_u, self.D_p):
-                eig = np.linalg.eigvalsh(D)
-                if not eig[0] > eig[-1] / MAX_CONDITION:
-                    raise NotReducible(
-                        f"a Delassus matrix's condition {eig[-1] / max(eig[0], 1e-300):.1e} is above"
-                        f" {MAX_CONDITION:.1e}: the condensed solve's roundoff would exceed Newton's tolerance"
-                        " (a slender structure, a body held only by its contacts, or dependent contact rows)")
-                conditions.append(eig[-1] / eig[0])
-            self._condition_u = conditions[0]
+            self._condition_u = delassus_condition(self.D_u)
+            delassus_condition(self.D_p)
             self._D_p, self._D_u = sla.cho_factor(self.D_p), sla.cho_factor(self.D_u)
         else:
             self.Z_u = self.Z_p = np.zeros((n, 0))
             self._p_scale = None
             self.D_u = self.D_p = np.zeros((0, 0))
         self.back_solve_seconds = time.perf_counter() - start
+        self.description = (f"reduced (Kirchdoerfer-Ortiz: {self.factorizations} factorisation(s) of K_C, "
+                            f"{nc} condensed contact pairs)")
         release_heap()  # the factorisation's working memory
 
     def _back_solves(self, solve, columns: sp.spmatrix) -> np.ndarray:
@@ -304,15 +325,6 @@ class Reduction:
             block = columns[:, j:j + SOLVE_BLOCK].toarray()
             out[:, j:j + block.shape[1]] = np.asarray(solve(block), float).reshape(block.shape)
         return out
-
-    def _column_ratio(self) -> np.ndarray | None:
-        """``r`` with ``R_p = G^T diag(r)``, or ``None``."""
-        Gt = self.G.T.tocsc()
-        r = np.asarray(Gt.multiply(self.R_p).sum(axis=0)).ravel() / np.maximum(
-            np.asarray(Gt.multiply(Gt).sum(axis=0)).ravel(), 1e-300)
-        if _frobenius(self.R_p - Gt @ sp.diags(r)) <= PROPORTIONAL * max(_frobenius(self.R_p), 1e-300):
-            return r
-        return None
 
     def _solve_s(self, rhs: np.ndarray) -> np.ndarray:
         """``K_s^-1 rhs``."""
@@ -405,3 +417,147 @@ class Reduction:
             else:
                 eta = eta0 + _columns_times(self.Z_p, p, on)
         return np.concatenate([u, self._sigma0 @ np.asarray(params, float) - self._MRt @ eta])
+
+
+# ---------------------------------------------------------------------- the classical problem
+def classical_refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) -> str:
+    """Why the Delassus condensation (:class:`ClassicalReduction`) does not apply to the classical
+    ``problem`` (one line), or ``""``: it needs an affine problem ``K u + R_p p + f = 0`` in the
+    displacements ``u`` alone with a symmetric ``K``, gaps in ``u`` alone, contact forces
+    ``-R_p p = G^T diag(r) p`` (Signorini pairs, no friction), 1 to ``max_pairs`` pairs
+    (default :data:`MAX_CLASSICAL_PAIRS`), and, above
+    :data:`~ddcm_casadi.linalg.SCHUR_MIN_SIZE` unknowns, PARDISO's Schur complement for ``D_u``
+    (:func:`~ddcm_casadi.linalg.delassus_solver`): its ``nc`` back-solves with SuperLU cost more
+    than the full path (measured on the Hertz body of 95 266 dofs, 219 pairs: 15.4 s for the
+    factor and back-solves, where the full path took 6.6 s; PARDISO's Schur complement 0.9 s)."""
+    max_pairs = MAX_CLASSICAL_PAIRS if max_pairs is None else max_pairs
+    if problem.kind != "mcp":
+        return "not a classical problem"
+    if not problem.affine:
+        return "the classical problem is not affine (finite kinematics)"
+    if problem.frictional:
+        return "Coulomb friction (the condensed problem carries Signorini pairs only, for now)"
+    if [name for name, _ in problem.unknowns] != ["u"]:
+        return "the classical problem's unknowns are not the displacements alone"
+    if not problem.n_pairs:
+        return "no contact pairs (nothing to condense)"
+    if problem.n_pairs > max_pairs:
+        return f"{problem.n_pairs} contact pairs (the condensed problem is assembled up to {max_pairs})"
+    n = problem.n_x
+    if n > SCHUR_MIN_SIZE and delassus_solver(n) != "pardiso":
+        return (f"{n} unknowns without PARDISO's Schur complement ({problem.n_pairs} back-solves would cost "
+                "more than the full path's factorisation)")
+    F, g = problem.residual_map.z, problem.gap_map.z
+    if _rows(g, slice(n, None)).any():
+        return "the gaps involve more than the displacements"
+    if not numerically_symmetric(F[:, :n]):
+        return "the stiffness is not symmetric"
+    if column_ratio(g[:, :n], -F[:, n:]) is None:
+        return "the contact forces are not the gap rows' transposes scaled pair by pair"
+    return ""
+
+
+class ClassicalReduction:
+    r"""The Delassus condensation of an affine classical problem (``docs/maths.md``, section 17),
+    built once per model: the stationarity ``K u - G^T diag(r) p + f_P P = 0`` of
+    ``min 1/2 u^T K u + u^T f_P P`` subject to ``G u + g >= 0`` (multipliers ``diag(r) p``) gives
+    ``u = u_0 + K^-1 G^T diag(r) p`` with ``u_0 = -K^-1 f_P P``, and the gaps
+
+    .. math::  w = G u + g_P P = g_c + D_u \operatorname{diag}(r)\, p, \qquad
+               g_c = G u_0 + g_P P,\quad D_u = G K^{-1} G^T,
+
+    a linear complementarity problem ``0 <= w _|_ p >= 0`` on the pairs alone
+    (:attr:`condensed`, a classical problem in the unknowns ``w``, so every formulation solves it
+    unchanged). ``u`` follows by one solve with the kept factor of ``K``
+    (:meth:`recover`). ``K`` is factorised once and ``D_u`` assembled with it
+    (:func:`~ddcm_casadi.linalg.factorize_with_delassus`: PARDISO's Schur complement, or ``nc``
+    back-solves); nothing of size ``n x nc`` is kept.
+
+    Parameters
+    ----------
+    problem : ComplementarityProblem
+        The classical problem (:func:`classical_refusal` empty for any number of pairs; else, or
+        with a singular ``K`` or an ill-conditioned ``D_u``, :class:`NotReducible`).
+    near_null : ndarray, optional
+        The near-null space of ``K``, for an algebraic multigrid solver.
+
+    Attributes
+    ----------
+    factor : Factor
+        The kept factor of ``K``.
+    D_u : ndarray
+        ``G K^-1 G^T`` (``nc x nc``).
+    ratio : ndarray
+        ``r``: the contact forces ``-R_p p = G^T diag(r) p``.
+    factorizations, solver, factor_seconds, description
+        One factorisation (of ``K``), the definite solver's name, its wall time (with ``D_u``),
+        and the one-line description of the path.
+    """
+
+    def __init__(self, problem: ComplementarityProblem, near_null: np.ndarray | None = None) -> None:
+        why = classical_refusal(problem, max_pairs=np.iinfo(np.int64).max)
+        if why:
+            raise NotReducible(why)
+        self.problem = problem
+        self.n = n = problem.n_x
+        self.nc = problem.n_pairs
+        F, gap = problem.residual_map, problem.gap_map
+        K = F.z[:, :n].tocsc()  # not kept: a copy of the problem's (0.27 GB at 1e6 dofs)
+        self._R_p = F.z[:, n:].tocsr()
+        self._f = F.params.tocsr()  # F = K u + R_p p + f_P P
+        self.G = gap.z[:, :n].tocsr()
+        self._g = gap.params.tocsr()
+        self.ratio = column_ratio(self.G, -self._R_p)
+        self.factorizations, self.solver = 1, definite_solver_name()
+        start = time.perf_counter()
+        try:
+            self.factor, self.D_u = factorize_with_delassus(K, self.G, near_null=near_null)
+        except SingularMatrix:
+            raise NotReducible("the stiffness is singular (a body held only by its contacts)") from None
+        self.factor_seconds = time.perf_counter() - start
+        self.condition = delassus_condition(self.D_u)
+        self.description = (f"condensed (Delassus: 1 factorisation of K, {self.nc} contact pairs, "
+                            f"D_u condition {self.condition:.1e})")
+
+    @cached_property
+    def condensed(self) -> ComplementarityProblem:
+        """The condensed problem: unknowns the gaps ``w``, residual ``w - D_u diag(r) p - g_c``
+        (parameter ``gap_offset = g_c``), gaps ``w``. Scales, contact law and Fischer-Burmeister
+        scalings are the classical problem's."""
+        nc, full = self.nc, self.problem
+        P = Parameters(gap_offset=nc)
+        I = sp.identity(nc, format="csr")
+        residual = Affine(sp.hstack([I, sp.csr_matrix(-self.D_u * self.ratio[None, :])]).tocsr(), -I)
+        gap = Affine(sp.hstack([I, sp.csr_matrix((nc, nc))]).tocsr(), sp.csr_matrix((nc, P.size)))
+        return ComplementarityProblem(
+            kind="mcp", parameters=P, unknowns=(("gap", nc),), residual_map=residual, gap_map=gap, distance=None,
+            gap_ref=full.gap_ref, pressure_ref=full.pressure_ref, contact_stiffness=full.contact_stiffness,
+            fb_alpha=full.fb_alpha, fb_beta=full.fb_beta, contact_law=full.contact_law,
+            kinematics=full.kinematics)
+
+    def _solve(self, rhs: np.ndarray) -> np.ndarray:
+        """``K^-1 rhs``; zero without a solve for a zero right-hand side (no load on the free dofs)."""
+        if not np.any(rhs):
+            return np.zeros(self.n)
+        return np.asarray(self.factor.solve(rhs), float).reshape(self.n)
+
+    def particular(self, params: np.ndarray) -> tuple[np.ndarray]:
+        """``(u_0,)``: the displacements without contact forces, ``-K^-1 f_P P``."""
+        return (self._solve(-(self._f @ np.asarray(params, float))),)
+
+    def condensed_params(self, params: np.ndarray, u0: np.ndarray) -> np.ndarray:
+        """The condensed problem's parameters: ``g_c = G u_0 + g_P P``."""
+        return self.condensed_start(params, u0)
+
+    def condensed_start(self, params: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The gaps ``G u + g_P P`` of a classical start ``x`` (the condensed start)."""
+        return self.G @ np.asarray(x, float)[:self.n] + self._g @ np.asarray(params, float)
+
+    def recover(self, params: np.ndarray, u0: np.ndarray, w: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """``u`` from the pressures: ``K u = -(R_p p + f_P P)``, one solve (``u_0`` without contact
+        forces). ``w`` is not used: ``u`` satisfies the equilibrium to the factor's backward
+        error, and its gaps ``G u + g_P P`` are ``w`` to the condensed residual."""
+        p = np.asarray(p, float)
+        if not np.any(p):
+            return np.asarray(u0, float)
+        return self._solve(-(self._R_p @ p + self._f @ np.asarray(params, float)))
