@@ -18,7 +18,9 @@ from ddcm_casadi.drivers.ddcm_reduced import ReducedProjection, build_projection
 from ddcm_casadi.models.truss import bar_chain, warren_truss
 from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.problems.exact import ExactEnumerator
-from ddcm_casadi.problems.reduction import MAX_CONDITION, NEWTON_TOL, Reduction, block_inverse, refusal
+from ddcm_casadi.problems.reduction import (
+    MAX_CONDITION, NEWTON_TOL, Reduction, block_inverse, condition_limit, refusal,
+)
 from ddcm_casadi.validation.continuum import EXAMPLE
 from ddcm_casadi.validation.hard_device_rungs import stretched_block
 
@@ -190,6 +192,26 @@ def test_a_slender_truss_whose_delassus_condition_exceeds_the_roundoff_limit_kee
         assert "a Delassus matrix's condition" in path_description(built)
     path = DDCMSolver(problems, built).solve()
     assert path.converged
+
+
+@pytest.mark.parametrize("name", ["penalty", "augmented_lagrangian", "fischer_burmeister", "mpcc"])
+def test_a_formulation_with_a_tighter_residual_tolerance_gets_a_tighter_condition_limit(name):
+    """The limit is ``0.1 residual_tol / eps``, each formulation's own: the 100-panel truss
+    (condition 1.2e5) is reduced for the penalty and FB (1e-9: 4.5e5), not for the augmented
+    Lagrangian and the MPCC (1e-10: 4.5e4), which keep the full path and say why."""
+    nodes = np.arange(2, 99, 4)
+    model = warren_truss(panels=100, gap=1e-4 * (np.arange(nodes.size) % 3), contact_nodes=nodes,
+                         load_factors=(0.5, 1.0), dataset=MaterialDataset.hookean(200e9, -0.01, 0.01, 2001, c=200e9))
+    problems = build_problems(model)
+    formulation = formulations.get(name)
+    tol = formulation.resolved_options(problems.projection)["residual_tol"]
+    built = build_projection(formulation, problems)
+    condition = Reduction(problems.projection).condition
+    assert condition == pytest.approx(1.2e5, rel=0.1)
+    assert isinstance(built, ReducedProjection) == (condition <= condition_limit(tol))
+    assert isinstance(built, ReducedProjection) == (name in ("penalty", "fischer_burmeister"))
+    if not isinstance(built, ReducedProjection):
+        assert f"for the residual tolerance {tol:g}" in path_description(built)
 
 
 def block_3d(divisions: int, contact: bool):

@@ -21,7 +21,9 @@ from ddcm_casadi.linalg import definite_solver_name, solver_name
 from ddcm_casadi.parallel import limited_blas
 from ddcm_casadi.problems.build import ProblemPair
 from ddcm_casadi.problems.contract import ComplementarityProblem
-from ddcm_casadi.problems.reduction import ClassicalReduction, NotReducible, Reduction, classical_refusal, refusal
+from ddcm_casadi.problems.reduction import (
+    ClassicalReduction, NotReducible, Reduction, classical_refusal, condition_limit, refusal,
+)
 
 #: How a path's projection was solved (``PathResult.projection_path``).
 FULL = "full saddle point ({why})"
@@ -130,7 +132,7 @@ def _built(formulation, problems: ProblemPair, problem: ComplementarityProblem, 
     if not why:
         reduction = problem.shared((kind.__name__, definite_solver_name(), solver_name()),
                                    lambda: _reduction(problem, problems.model.near_null_space(), kind))
-        why = reduction if isinstance(reduction, str) else ""
+        why = reduction if isinstance(reduction, str) else _too_ill_conditioned(formulation, problem, reduction)
     if why:
         built = formulation.build(problem)
         built.projection_path = full.format(why=why)
@@ -139,6 +141,17 @@ def _built(formulation, problems: ProblemPair, problem: ComplementarityProblem, 
     built = ReducedProjection(problem, reduction, inner, full=lambda: formulation.build(problem))
     built.projection_path = built.path
     return built
+
+
+def _too_ill_conditioned(formulation, problem: ComplementarityProblem, reduction) -> str:
+    """Why ``formulation``'s own residual tolerance is too tight for the condensed solve
+    (:func:`~ddcm_casadi.problems.reduction.condition_limit`: the augmented Lagrangian and the
+    MPCC accept at 1e-10, a decade below the shared limit's 1e-9), or ``""``."""
+    tol = formulation.resolved_options(problem).get("residual_tol")
+    if tol is None or reduction.condition <= condition_limit(tol):
+        return ""
+    return (f"a Delassus condition of {reduction.condition:.1e}, above {condition_limit(tol):.1e} for the residual "
+            f"tolerance {tol:g}: the condensed solve's roundoff would exceed it")
 
 
 def _reduction(problem: ComplementarityProblem, near_null: np.ndarray | None, kind: type):

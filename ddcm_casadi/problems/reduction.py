@@ -67,8 +67,16 @@ NEWTON_TOL = 1e-9
 #: 1000-panel Warren truss (cond 1.2e9) stalls its piece solves at 2.5e-7 (``cond eps`` = 2.6e-7)
 #: and Newton took 219 steps where the full path takes 2; the 100-panel one (1.2e5) and the
 #: continua (1e2-3e2) converge as on the full path. A body held only by its contacts (a rigid
-#: mode, ``B r = 0``) shows as ``1 / eps``. Above the limit the full path is kept.
+#: mode, ``B r = 0``) shows as ``1 / eps``. Above the limit the full path is kept; a formulation
+#: whose own residual tolerance is tighter gets the tighter :func:`condition_limit`.
 MAX_CONDITION = 0.1 * NEWTON_TOL / np.finfo(float).eps
+
+
+def condition_limit(residual_tol: float) -> float:
+    """The largest Delassus condition a condensed solve to ``residual_tol`` carries with a decade
+    to spare above its roundoff floor ``cond eps``: ``0.1 residual_tol / eps``, at most
+    :data:`MAX_CONDITION`."""
+    return min(MAX_CONDITION, 0.1 * residual_tol / np.finfo(float).eps)
 #: Largest dense ``n x nc`` block kept (bytes); above, the full path is kept.
 MAX_DENSE_BYTES = 2 * 1024**3
 
@@ -255,6 +263,8 @@ class Reduction:
         ``K_u^-1 G^T`` (``n x nc``, column-major), the kept columns.
     D_u, D_p : ndarray
         The Delassus matrices ``G K_u^-1 G^T`` and ``R_p^T K_s^-1 R_p`` (``nc x nc``).
+    condition : float
+        The larger of their condition numbers (at most :data:`MAX_CONDITION`; 1 without pairs).
     """
 
     def __init__(self, problem: ComplementarityProblem, near_null: np.ndarray | None = None) -> None:
@@ -304,12 +314,13 @@ class Reduction:
             self.D_u = _times_kept(self.G, self.Z_u)
             self.D_u, self.D_p = 0.5 * (self.D_u + self.D_u.T), 0.5 * (self.D_p + self.D_p.T)
             self._condition_u = delassus_condition(self.D_u)
-            delassus_condition(self.D_p)
+            self.condition = max(self._condition_u, delassus_condition(self.D_p))
             self._D_p, self._D_u = sla.cho_factor(self.D_p), sla.cho_factor(self.D_u)
         else:
             self.Z_u = self.Z_p = np.zeros((n, 0))
             self._p_scale = None
             self.D_u = self.D_p = np.zeros((0, 0))
+            self.condition = 1.0
         self.back_solve_seconds = time.perf_counter() - start
         self.description = (f"reduced (Kirchdoerfer-Ortiz: {self.factorizations} factorisation(s) of K_C, "
                             f"{nc} condensed contact pairs)")
@@ -487,6 +498,8 @@ class ClassicalReduction:
         The kept factor of ``K``.
     D_u : ndarray
         ``G K^-1 G^T`` (``nc x nc``).
+    condition : float
+        The condition number of ``D_u`` (at most :data:`MAX_CONDITION`).
     ratio : ndarray
         ``r``: the contact forces ``-R_p p = G^T diag(r) p``.
     factorizations, solver, factor_seconds, description
