@@ -193,26 +193,30 @@ class DDCMSolver:
         start = "origin" if o.start == "elastic" and not self.affine else o.start
         return start_assignment(self.problems.model, start, k, np.random.default_rng((o.seed, k, 0)))
 
-    def project_data(self, k: int, strain_star, stress_star, warm: tuple, cost: dict):
+    def project_data(self, k: int, strain_star, stress_star, warm: tuple, cost: dict, *, exact: bool = False):
         """The ``Z_E`` projection of step ``k``'s material states
         (:meth:`~ddcm_casadi.drivers.ddcm_projection.Projection.project`)."""
-        return self.projection.project(k, strain_star, stress_star, warm, cost)
+        return self.projection.project(k, strain_star, stress_star, warm, cost, exact=exact)
 
     def _exact_projection(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """The exact projection (:meth:`~ddcm_casadi.drivers.ddcm_projection.Projection.exact_projection`)."""
         return self.projection.exact_projection(params)
 
-    def alternate(self, k: int, start: MaterialStates, x, p, state) -> tuple[Run, tuple]:
+    def alternate(self, k: int, start: MaterialStates, x, p, state, *, exact_first: bool = False) -> tuple[Run, tuple]:
         """The alternation of step ``k`` from the material states ``start`` (the Z_E solves
         warm-started from ``x, p, state``) until the scheme settles, a projection fails, or after
-        ``max_outer`` projections. Returns the run and the last ``(x, p, state)``."""
+        ``max_outer`` projections. ``exact_first``: the first projection is the exact one where that
+        is the formulation's answer (the greedy screen has evaluated it in closed form:
+        :meth:`~ddcm_casadi.drivers.ddcm_projection.Projection.exact_solution`). Returns the run
+        and the last ``(x, p, state)``."""
         problems, scheme = self.problems, self.scheme
         scheme.begin(start)
         star = start
         cost, t_search = dict(inner=0, t_project=0.0), 0.0
         converged, message = False, "maximum outer iterations reached"
         for outer in range(1, self.max_outer + 1):
-            sol, is_global, err, failed = self.project_data(k, star.strain, star.stress, (x, p, state), cost)
+            sol, is_global, err, failed = self.project_data(k, star.strain, star.stress, (x, p, state), cost,
+                                                            exact=exact_first and outer == 1)
             if failed:
                 message = failed
                 break

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ddcm_casadi.drivers.ddcm_search import descent_threshold, point_ranges, random_assignment, single_moves
+from ddcm_casadi.drivers.ddcm_search import (
+    descent_threshold, point_ranges, random_assignment, single_moves, tolerant_argsort,
+)
 from ddcm_casadi.drivers.records import Run, count
 
 #: Single-point moves screened per sweep of the greedy search (points x candidates).
@@ -74,10 +76,12 @@ def _screened_moves(solver, k: int, best: Run, order: np.ndarray) -> list[np.nda
         pts = f["strain"].reshape(model.n_points, -1)[order], f["stress"].reshape(model.n_points, -1)[order]
         cand = data.k_nearest(pts[0].ravel(), pts[1].ravel(), max(2, per_point))
     obj, mine = single_moves(solver.problems, solver.exact, k, best.index, order, cand, prune=True)
-    # Row-major, so the stable sort keeps the order of a stable sort of every move.
-    descending = np.flatnonzero(obj < descent_threshold(mine))
+    # Row-major, so the sort keeps the order of a sort of every move; moves whose objectives agree to
+    # the descent test's tolerance (mirror-symmetric moves) in that order.
+    limit = descent_threshold(mine)
+    descending = np.flatnonzero(obj < limit)
     moves = []
-    for a in descending[np.argsort(obj.ravel()[descending], kind="stable")]:
+    for a in descending[tolerant_argsort(obj.ravel()[descending], mine - limit)]:
         i, b = divmod(int(a), cand.shape[1])
         trial = best.index.copy()
         trial[order[i]] = cand[i, b]
@@ -95,7 +99,8 @@ def greedy_moves(solver, k: int, best: Run) -> list[np.ndarray]:
     opts, model = solver.options, solver.problems.model
     f = best.fields
     local = model.volumes * model.dataset.distance2(f["strain"], f["stress"], best.index)
-    order = np.argsort(-local, kind="stable")[:opts.greedy_points or model.n_points]
+    # Mirror-symmetric points have equal distances but for roundoff: taken by position.
+    order = tolerant_argsort(-local, 1e-9 * float(np.sum(local)))[:opts.greedy_points or model.n_points]
     if solver.exact is None or not opts.greedy_screen:
         return _next_nearest_moves(solver, best, order)
     return _screened_moves(solver, k, best, order)
@@ -107,6 +112,7 @@ def greedy(solver, k: int, best: Run, warm: tuple, visited: set, tally: dict):
     objective and start over from it; at most ``greedy_budget`` reruns. The objective never
     increases. Returns the best run and the ``(x, p, state)`` it ended at."""
     budget = solver.options.greedy_budget
+    screened = solver.exact is not None and solver.options.greedy_screen
     trials = 0
     while trials < budget:
         improved = False
@@ -115,7 +121,9 @@ def greedy(solver, k: int, best: Run, warm: tuple, visited: set, tally: dict):
             if key in visited:
                 continue
             visited.add(key)
-            run, state = solver.alternate(k, solver.scheme.states(trial), *warm)
+            # The screen evaluated the trial's exact projection in closed form: no formulation
+            # solve for it (where the exact projection is the formulation's answer).
+            run, state = solver.alternate(k, solver.scheme.states(trial), *warm, exact_first=screened)
             trials += 1
             count(tally, run)
             visited.add(run.index.tobytes())

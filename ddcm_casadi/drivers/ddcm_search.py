@@ -183,6 +183,17 @@ def _all_directions(problems, exact: ExactEnumerator, step: int, directions):
     return problems.projection.shared(("assignment_directions", step), solve)
 
 
+def tolerant_argsort(values: np.ndarray, tol: float) -> np.ndarray:
+    """The indices that sort ``values`` ascending, values within ``tol`` of their neighbour in
+    the sorted order (chains of them) in the order of their indices: ties of roundoff (mirror-
+    symmetric points and moves) are broken by position, not by the last bits of the values, so
+    the order does not depend on which solver computed them."""
+    values = np.asarray(values, dtype=float).ravel()
+    idx = np.argsort(values, kind="stable")
+    group = np.cumsum(np.concatenate([[False], np.diff(values[idx]) > tol]))[:idx.size]
+    return idx[np.lexsort((idx, group))]
+
+
 def descent_threshold(mine: float) -> float:
     """The objective a move must beat to descend from ``mine`` (past roundoff)."""
     return mine - 1e-12 - 1e-9 * abs(mine)
