@@ -270,6 +270,8 @@ def test_pruned_screen_keeps_every_descending_move(build):
         full, mine = single_moves(problems, exact, step, index, points, cand)
         pruned, mine_pruned = single_moves(problems, exact, step, index, points, cand, prune=True)
         assert mine_pruned == mine
+        one_row, _ = single_moves(problems, exact, step, index, points, cand[:1], prune=True)  # shared, as one row
+        assert np.array_equal(one_row, pruned)
         limit = descent_threshold(mine)
         assert np.array_equal(pruned < limit, full < limit)
         kept = np.isfinite(pruned)

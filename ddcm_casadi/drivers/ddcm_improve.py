@@ -70,8 +70,11 @@ def _screened_moves(solver, k: int, best: Run, order: np.ndarray) -> list[np.nda
     data = model.dataset
     offset, size = point_ranges(model)
     per_point = SCREEN_SIZE // len(order)
-    if np.all(size[order] <= per_point) and np.unique(size[order]).size == 1:
-        cand = offset[order][:, None] + np.arange(size[order[0]])[None, :]
+    sizes, offsets = size[order], offset[order]
+    if sizes[0] <= per_point and np.all(sizes == sizes[0]):
+        cand = offsets[0] + np.arange(sizes[0])[None, :]  # every point's own set: one row where they share it
+        if np.any(offsets != offsets[0]):
+            cand = offsets[:, None] + np.arange(sizes[0])[None, :]
     else:
         pts = f["strain"].reshape(model.n_points, -1)[order], f["stress"].reshape(model.n_points, -1)[order]
         cand = data.k_nearest(pts[0].ravel(), pts[1].ravel(), max(2, per_point))
@@ -84,7 +87,7 @@ def _screened_moves(solver, k: int, best: Run, order: np.ndarray) -> list[np.nda
     for a in descending[tolerant_argsort(obj.ravel()[descending], mine - limit)]:
         i, b = divmod(int(a), cand.shape[1])
         trial = best.index.copy()
-        trial[order[i]] = cand[i, b]
+        trial[order[i]] = cand[i % cand.shape[0], b]
         moves.append(trial)
         if len(moves) == solver.options.greedy_neighbours:
             break

@@ -160,25 +160,26 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
         return exact.affine_family(problems.projection_params(step, cur_e.ravel(), cur_s.ravel()), directions(cols)), \
             cur_e, cur_s
     # P(index) = P(0) + D c(index): the imposed solutions of index and of the directions by linearity.
-    dz, wz, E, W = solved
+    dz, wz, E, W, A2 = solved
     c = np.concatenate([cur_e.ravel(), cur_s.ravel()])
-    return exact.family(dz + E @ c, wz + W @ c, E[:, cols], W[:, cols]), cur_e, cur_s
+    return exact.family(dz + E @ c, wz + W @ c, E[:, cols], W[:, cols], A2=A2[np.ix_(cols, cols)]), cur_e, cur_s
 
 
 def _all_directions(problems, exact: ExactEnumerator, step: int, directions):
     """``(d, mu)`` of the projection with every constraint imposed (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.imposed`)
     for the zero assignment and for every direction of :func:`assignment_family` at ``step``,
-    solved once per problem and step (the greedy search screens sweep after sweep), or None
-    where they would exceed :data:`DIRECTION_CACHE_VALUES` floats."""
+    and the directions' quadratic term ``A_2 = E^T W E``, solved once per problem and step (the
+    greedy search screens sweep after sweep), or None where they would exceed
+    :data:`DIRECTION_CACHE_VALUES` floats."""
     model = problems.model
     n = 2 * model.n_points * model.strain_components
-    if n * (n + 2 * exact.nc + 2) > DIRECTION_CACHE_VALUES:  # d has 2 m k rows
+    if n * (2 * n + 2 * exact.nc + 2) > DIRECTION_CACHE_VALUES:  # d has 2 m k rows, A_2 is n x n
         return None
 
     def solve():
         d, w = exact.imposed(np.column_stack([problems.projection_params(step, np.zeros(n // 2), np.zeros(n // 2)),
                                               directions(np.arange(n))]))
-        return d[:, 0], w[:, 0], d[:, 1:], w[:, 1:]
+        return d[:, 0], w[:, 0], d[:, 1:], w[:, 1:], exact.family(d[:, 0], w[:, 0], d[:, 1:], w[:, 1:]).A2
 
     return problems.projection.shared(("assignment_directions", step), solve)
 
@@ -207,8 +208,9 @@ PRUNE_MARGIN = 1e-6
 def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray,
                  candidates: np.ndarray, *, prune: bool = False) -> tuple[np.ndarray, float]:
     r"""The exact projection's objective (scaled) of every assignment that differs from ``index``
-    at one point: ``points[a]`` moved to datum ``candidates[a, b]``; returns ``(objectives,
-    objective of index)`` with ``objectives`` shaped like ``candidates``. Only the moving points
+    at one point: ``points[a]`` moved to datum ``candidates[a, b]`` (``candidates`` with one row:
+    the same for every point); returns ``(objectives, objective of index)``, ``objectives``
+    ``(len(points), candidates.shape[1])``. Only the moving points
     enter the closed forms (``2 n k`` directions for ``n`` points, not ``2 m k``), and each move's
     ``c`` has ``2 k`` nonzeros.
 
@@ -223,6 +225,8 @@ def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
     stress = data.stress.reshape(len(data), k)
     n, n_c = len(points), candidates.shape[1]
     points = np.asarray(points)
+    shared = candidates.shape[0] == 1 or bool(np.all(candidates == candidates[:1]))  # one data set for every point
+    candidates = np.broadcast_to(candidates, (n, n_c))
 
     def pairs(indices):  # the data's strains and stresses, side by side
         return np.concatenate([strain[indices], stress[indices]], axis=-1)
@@ -234,37 +238,54 @@ def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
     relaxed = family.relaxed() if prune and isinstance(family, BorderedFamily) else None
     if relaxed is None:
         return family.best_moves(rows, pairs(candidates) - cur[:, None, :]), mine
-    if np.all(candidates == candidates[:1]):  # one data set for every point
-        bound, size = _shared_bound(*relaxed, rows, pairs(candidates[0]), cur)
+    if shared:
+        bound, size = _shared_bound(*relaxed, rows, _monomials(problems, candidates[0], pairs), cur)
     else:
         linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, pairs(candidates) - cur[:, None, :])
         bound, size = relaxed[0] + linear + quadratic, abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic)
     limit = descent_threshold(mine)
-    a, b = np.nonzero(bound <= limit + PRUNE_MARGIN * (size + abs(limit)))  # far above the bound's roundoff
+    size *= PRUNE_MARGIN  # in place: the bound's test is limit + PRUNE_MARGIN (size + |limit|)
+    size += limit + PRUNE_MARGIN * abs(limit)
+    a, b = np.nonzero(bound <= size)  # far above the bound's roundoff
     obj = np.full((n, n_c), np.inf)
     obj[a, b] = family.best_moves(rows[a], (pairs(candidates[a, b]) - cur[a])[:, None, :])[:, 0]
     return obj, mine
 
 
-def _shared_bound(a0: float, a1: np.ndarray, A2: np.ndarray, rows: np.ndarray, x: np.ndarray,
-                  cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _monomials(problems, candidates: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""``(x0, Y, |Y|)`` of the data ``x = pairs(candidates)`` (``(N, j)``) for
+    :func:`_shared_bound`: their centre ``x0`` (their mean, inside the data's range), and per datum
+    ``[1, y, y y^T]`` (``y = x - x0``; ``1 + j + j^2`` columns). Remembered per problem for a
+    contiguous range of data (a whole data set, screened sweep after sweep)."""
+    def build():
+        x = pairs(candidates)
+        centre = np.mean(x, axis=0)
+        y = x - centre
+        Y = np.hstack([np.ones((len(y), 1)), y, (y[:, :, None] * y[:, None, :]).reshape(len(y), -1)])
+        return centre, Y, np.abs(Y)
+
+    n = candidates.size
+    if n and candidates[-1] - candidates[0] == n - 1 and np.all(np.diff(candidates) == 1):
+        return problems.projection.shared(("screen_monomials", int(candidates[0]), n), build)
+    return build()
+
+
+def _shared_bound(a0: float, a1: np.ndarray, A2: np.ndarray, rows: np.ndarray,
+                  monomials: tuple[np.ndarray, np.ndarray, np.ndarray], cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     r"""The quadratic ``a0 + a1^T c + c^T A2 c / 2`` of every move of point ``g`` (rows ``rows[g]``)
     from ``cur[g]`` to a datum ``x[i]`` of one shared set ``x`` (``(N, j)``), and the size of its
-    terms: two ``(G, N)`` arrays. About a centre ``x0`` (``x = x0 + y``,
-    ``c = y + delta_g``, ``delta_g = x0 - cur[g]``) it is ``k_g + l_g^T y + y^T A_g y / 2``: two
-    products with the data's monomials instead of per-move arithmetic (``x0``: the mean of the
-    current data, inside the data's range)."""
+    terms: two ``(G, N)`` arrays. About the data's centre ``x0`` (``x = x0 + y``,
+    ``c = y + delta_g``, ``delta_g = x0 - cur[g]``) it is ``k_g + l_g^T y + y^T A_g y / 2``: one
+    product of the coefficients ``[k_g, l_g, A_g / 2]`` with the data's monomials ``[1, y, y y^T]``
+    (:func:`_monomials`, once per data set) instead of per-move arithmetic, and one of their
+    absolute values for the size."""
+    centre, Y, absY = monomials
     g, A = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
-    centre = np.mean(cur, axis=0)
-    y, delta = x - centre, centre - cur
+    delta = centre - cur
     Ad = np.einsum("gpq,gq->gp", A, delta)
     const = a0 + np.einsum("gp,gp->g", g + 0.5 * Ad, delta)
-    lin = g + Ad
-    M = (y[:, :, None] * y[:, None, :]).reshape(len(y), -1)  # (N, j^2)
-    Ag = A.reshape(len(A), -1)
-    bound = const[:, None] + lin @ y.T + 0.5 * (Ag @ M.T)
-    size = np.abs(const)[:, None] + np.abs(lin) @ np.abs(y).T + 0.5 * (np.abs(Ag) @ np.abs(M).T)
-    return bound, size
+    coef = np.hstack([const[:, None], g + Ad, 0.5 * A.reshape(len(A), -1)])
+    return coef @ Y.T, np.abs(coef) @ absY.T
 
 
 def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,

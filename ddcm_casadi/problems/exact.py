@@ -211,8 +211,8 @@ def _best_branch(base: np.ndarray, w: np.ndarray, P: np.ndarray, solvable: np.nd
     first such branch on ties, as the enumeration in order); ``inf`` and ``-1`` where none is."""
     if P.shape[0] * w.shape[1] <= ALL_BRANCHES_AT_ONCE:  # few columns: one product for every branch
         Pw = (P.reshape(-1, P.shape[2]) @ w).reshape(P.shape[0], P.shape[1], -1)
-        obj = np.where(np.all(Pw <= sign_tol, axis=1) & solvable[:, None],
-                       base + 0.5 * np.sum(w * Pw, axis=1), np.inf)
+        obj = np.where((np.max(Pw, axis=1, initial=-np.inf) <= sign_tol) & solvable[:, None],
+                       base + 0.5 * np.einsum("sik,ik->sk", Pw, w), np.inf)
         which = np.argmin(obj, axis=0)  # the first on ties
         best = obj[which, np.arange(w.shape[1])]
         return best, np.where(np.isfinite(best), which, -1)
@@ -352,13 +352,18 @@ class ExactEnumerator:
         _, d, w = self._imposed(np.asarray(params, float), self._bordered)
         return d, w
 
-    def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray) -> BorderedFamily:
+    def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray, *,
+               A2: np.ndarray | None = None) -> BorderedFamily:
         """The :class:`BorderedFamily` of the projections of ``P0 + D c`` from :meth:`imposed` of
-        ``P0`` (``d0``, ``w0``) and of the columns of ``D`` (``E``, ``W``)."""
+        ``P0`` (``d0``, ``w0``) and of the columns of ``D`` (``E``, ``W``). ``A2``: ``E^T W E``
+        (symmetric) where the caller has it (a family of some of the directions of a larger
+        one: its rows and columns), else computed."""
         b = self._bordered
-        Wd0, WE = self._weight @ d0, self._weight @ E
-        A2 = E.T @ WE
-        return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=0.5 * (A2 + A2.T), w0=w0, W=W, P=b.P,
+        Wd0 = self._weight @ d0
+        if A2 is None:
+            A2 = E.T @ (self._weight @ E)
+            A2 = 0.5 * (A2 + A2.T)
+        return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=A2, w0=w0, W=W, P=b.P,
                               solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
 
     def _solve_bordered(self, params: np.ndarray, b: _Bordered) -> ExactSolution:
