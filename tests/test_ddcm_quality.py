@@ -227,6 +227,25 @@ def test_single_moves_are_the_exact_projections_of_the_moved_assignments():
     assert abs(mine - own) <= ROUNDOFF * max(1.0, abs(own))
 
 
+def test_assignment_projection_is_the_exact_projection():
+    """The closed-form projection of an assignment from the step's solved directions (the greedy
+    trial's first projection) against the exact projection solved directly for its parameters."""
+    from ddcm_casadi.drivers.ddcm_search import assignment_projection
+
+    model = ladder.warren_truss(n_data=200)
+    problems = build_problems(model)
+    exact = ExactEnumerator(problems.projection)
+    data, rng = model.dataset, np.random.default_rng(7)
+    for step in (0, model.n_steps - 1):
+        for _ in range(5):
+            index = random_assignment(model, rng)
+            x, p, obj = assignment_projection(problems, exact, step, index)
+            ex = exact.solve(problems.projection_params(step, data.strain[index], data.stress[index]))
+            z, z_ref = np.concatenate([x, p]), np.concatenate([ex.x[:, 0], ex.p[:, 0]])
+            assert np.max(np.abs(z - z_ref)) <= ROUNDOFF * max(1.0, float(np.max(np.abs(z_ref))))
+            assert abs(obj - ex.objective[0]) <= ROUNDOFF * max(1.0, abs(ex.objective[0]))
+
+
 def _random_params(model, problems, rng, count):
     """Projection parameters of ``count`` random data assignments over the load steps."""
     cols = []
@@ -366,7 +385,7 @@ def test_greedy_trials_reuse_the_screened_exact_projection(monkeypatch, noise, s
     model = _noisy_warren_truss(noise, seed)
     opts = dict(restarts=1, restart_neighbours=10, improve="greedy")
     reused = _run(model, **opts)
-    monkeypatch.setattr(Projection, "exact_solution", lambda self, params, state: None)  # the formulation's solve
+    monkeypatch.setattr(Projection, "exact_solution", lambda self, params, state, known=None: None)  # the formulation's solve
     solved = _run(model, **opts)
     assert reused.converged and solved.converged
     assert np.array_equal(reused.array("data_index"), solved.array("data_index"))

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ddcm_casadi.drivers.ddcm_search import (
-    descent_threshold, point_ranges, random_assignment, single_moves, tolerant_argsort,
+    assignment_projection, descent_threshold, point_ranges, random_assignment, single_moves, tolerant_argsort,
 )
 from ddcm_casadi.drivers.records import Run, count
 
@@ -115,7 +115,9 @@ def greedy(solver, k: int, best: Run, warm: tuple, visited: set, tally: dict):
     objective and start over from it; at most ``greedy_budget`` reruns. The objective never
     increases. Returns the best run and the ``(x, p, state)`` it ended at."""
     budget = solver.options.greedy_budget
-    screened = solver.exact is not None and solver.options.greedy_screen
+    # Trials from the screen (exact objectives in closed form) start from their exact projection
+    # where that is the formulation's answer.
+    reuse = solver.exact is not None and solver.options.greedy_screen and solver.projection.enumerated
     trials = 0
     while trials < budget:
         improved = False
@@ -125,8 +127,10 @@ def greedy(solver, k: int, best: Run, warm: tuple, visited: set, tally: dict):
                 continue
             visited.add(key)
             # The screen evaluated the trial's exact projection in closed form: no formulation
-            # solve for it (where the exact projection is the formulation's answer).
-            run, state = solver.alternate(k, solver.scheme.states(trial), *warm, exact_first=screened)
+            # solve for it (where the exact projection is the formulation's answer), its state
+            # from the same closed forms where the step's directions are kept.
+            known = assignment_projection(solver.problems, solver.exact, k, trial) if reuse else None
+            run, state = solver.alternate(k, solver.scheme.states(trial), *warm, exact_first=reuse, known=known)
             trials += 1
             count(tally, run)
             visited.add(run.index.tobytes())

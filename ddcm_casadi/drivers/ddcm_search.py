@@ -20,6 +20,8 @@ Starts (:class:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions` ``start``):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -148,38 +150,76 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     pts = np.arange(m) if points is None else np.asarray(points)
     comps = (pts[:, None] * k + np.arange(k)).ravel()
     cols = np.concatenate([comps, m * k + comps])  # their strains, then their stresses
-
-    def directions(columns) -> np.ndarray:
-        zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
-        unit = np.zeros((2 * m * k, len(columns)))
-        unit[columns, np.arange(len(columns))] = 1.0
-        return problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero[:, None]  # one column each
-
-    solved = _all_directions(problems, exact, step, directions) if exact.bordered else None
+    solved = _all_directions(problems, exact, step) if exact.bordered else None
     if solved is None:
-        return exact.affine_family(problems.projection_params(step, cur_e.ravel(), cur_s.ravel()), directions(cols)), \
-            cur_e, cur_s
+        return exact.affine_family(problems.projection_params(step, cur_e.ravel(), cur_s.ravel()),
+                                   _directions(problems, step, cols)), cur_e, cur_s
     # P(index) = P(0) + D c(index): the imposed solutions of index and of the directions by linearity.
-    dz, wz, E, W, A2 = solved
     c = np.concatenate([cur_e.ravel(), cur_s.ravel()])
-    return exact.family(dz + E @ c, wz + W @ c, E[:, cols], W[:, cols], A2=A2[np.ix_(cols, cols)]), cur_e, cur_s
+    family = exact.family(solved.dz + solved.E @ c, solved.wz + solved.W @ c, solved.E[:, cols], solved.W[:, cols],
+                          A2=solved.A2[np.ix_(cols, cols)])
+    return family, cur_e, cur_s
 
 
-def _all_directions(problems, exact: ExactEnumerator, step: int, directions):
-    """``(d, mu)`` of the projection with every constraint imposed (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.imposed`)
-    for the zero assignment and for every direction of :func:`assignment_family` at ``step``,
-    and the directions' quadratic term ``A_2 = E^T W E``, solved once per problem and step (the
-    greedy search screens sweep after sweep), or None where they would exceed
-    :data:`DIRECTION_CACHE_VALUES` floats."""
+def assignment_projection(problems, exact: ExactEnumerator, step: int,
+                          index: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The exact projection ``(x, p, objective)`` (scaled) of the data assignment ``index`` at
+    ``step`` from the step's solved directions (:func:`_all_directions`, by linearity, as
+    :func:`assignment_family`): what :meth:`~ddcm_casadi.problems.exact.ExactEnumerator.solve`
+    gives for its parameters, to roundoff, without a solve. None where the directions are not
+    kept (no bordered form, a large model) or no branch is sign-feasible."""
+    solved = _all_directions(problems, exact, step) if exact.bordered else None
+    if solved is None:
+        return None
+    data = problems.model.dataset
+    c = np.concatenate([data.strain[index].ravel(), data.stress[index].ravel()])
+    ex = exact.from_imposed((solved.zz + solved.Z @ c)[:, None], (solved.dz + solved.E @ c)[:, None],
+                            (solved.wz + solved.W @ c)[:, None])
+    if not ex.found[0]:
+        return None
+    return ex.x[:, 0], ex.p[:, 0], float(ex.objective[0])
+
+
+def _directions(problems, step: int, columns: np.ndarray) -> np.ndarray:
+    """The columns ``D`` of :func:`assignment_family`'s ``P = P(0) + D c`` at ``step`` (``c``:
+    every point's strains, then stresses), one per entry of ``columns``."""
+    model = problems.model
+    mk = model.n_points * model.strain_components
+    zero = problems.projection_params(step, np.zeros(mk), np.zeros(mk))
+    unit = np.zeros((2 * mk, len(columns)))
+    unit[columns, np.arange(len(columns))] = 1.0
+    return problems.projection_params(step, unit[:mk], unit[mk:]) - zero[:, None]
+
+
+@dataclass(frozen=True)
+class _Directions:
+    """The projection with every constraint imposed for the zero assignment (``zz``, ``dz``,
+    ``wz``: unknowns, distance, multipliers) and for every direction of :func:`_directions`
+    (``Z``, ``E``, ``W``, one column each), and the directions' quadratic term ``A2 = E^T W E``."""
+
+    zz: np.ndarray
+    dz: np.ndarray
+    wz: np.ndarray
+    Z: np.ndarray
+    E: np.ndarray
+    W: np.ndarray
+    A2: np.ndarray
+
+
+def _all_directions(problems, exact: ExactEnumerator, step: int) -> _Directions | None:
+    """The :class:`_Directions` of ``step``, solved once per problem and step (the greedy search
+    screens sweep after sweep, :meth:`~ddcm_casadi.problems.exact.ExactEnumerator.imposed`), or
+    None where they would exceed :data:`DIRECTION_CACHE_VALUES` floats."""
     model = problems.model
     n = 2 * model.n_points * model.strain_components
-    if n * (2 * n + 2 * exact.nc + 2) > DIRECTION_CACHE_VALUES:  # d has 2 m k rows, A_2 is n x n
+    if (n + 1) * (n + 2 * exact.nc + exact.nz) + n * n > DIRECTION_CACHE_VALUES:
         return None
 
     def solve():
-        d, w = exact.imposed(np.column_stack([problems.projection_params(step, np.zeros(n // 2), np.zeros(n // 2)),
-                                              directions(np.arange(n))]))
-        return d[:, 0], w[:, 0], d[:, 1:], w[:, 1:], exact.family(d[:, 0], w[:, 0], d[:, 1:], w[:, 1:]).A2
+        z, d, w = exact.imposed(np.column_stack([problems.projection_params(step, np.zeros(n // 2), np.zeros(n // 2)),
+                                                 _directions(problems, step, np.arange(n))]))
+        A2 = exact.family(d[:, 0], w[:, 0], d[:, 1:], w[:, 1:]).A2
+        return _Directions(zz=z[:, 0], dz=d[:, 0], wz=w[:, 0], Z=z[:, 1:], E=d[:, 1:], W=w[:, 1:], A2=A2)
 
     return problems.projection.shared(("assignment_directions", step), solve)
 
@@ -191,7 +231,10 @@ def tolerant_argsort(values: np.ndarray, tol: float) -> np.ndarray:
     the order does not depend on which solver computed them."""
     values = np.asarray(values, dtype=float).ravel()
     idx = np.argsort(values, kind="stable")
-    group = np.cumsum(np.concatenate([[False], np.diff(values[idx]) > tol]))[:idx.size]
+    apart = np.diff(values[idx]) > tol
+    if apart.all():  # no near-ties (the usual case): the plain order
+        return idx
+    group = np.cumsum(np.concatenate([[False], apart]))
     return idx[np.lexsort((idx, group))]
 
 

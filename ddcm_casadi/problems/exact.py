@@ -345,12 +345,28 @@ class ExactEnumerator:
         """Whether the projection has the bordered form (``K`` nonsingular; built on first use)."""
         return self._bordered is not None
 
-    def imposed(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The distance ``d`` and the multipliers ``mu`` of the ``2 nc`` constraints of the projection
-        with every constraint imposed, per column of ``params`` (linear in them: the maps have no
-        constant terms). Needs the bordered form (:attr:`bordered`)."""
-        _, d, w = self._imposed(np.asarray(params, float), self._bordered)
-        return d, w
+    def imposed(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The unknowns ``z``, the distance ``d`` and the multipliers ``mu`` of the ``2 nc``
+        constraints of the projection with every constraint imposed, per column of ``params``
+        (linear in them: the maps have no constant terms). Needs the bordered form (:attr:`bordered`)."""
+        return self._imposed(np.asarray(params, float), self._bordered)
+
+    def from_imposed(self, z0: np.ndarray, d: np.ndarray, w: np.ndarray) -> ExactSolution:
+        """The exact projections (per column) from their projections with every constraint
+        imposed (:meth:`imposed`, or linear combinations of its columns): the best sign-feasible
+        branch, ``z = z0 + Z_c t`` with its freed constraints ``t = -P_s mu``."""
+        b = self._bordered
+        obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, self._weight @ d), w, b.P, b.solvable,
+                                  self.sign_tol)
+        found = which >= 0
+        cols = np.flatnonzero(found)
+        t = np.zeros((2 * self.nc, d.shape[1]))
+        t[:, cols] = -np.einsum("kij,jk->ik", b.P[which[cols]], w[:, cols])
+        z = np.where(found, z0 + b.Zc @ t, np.nan)
+        part = np.array(self.partitions, dtype=int).reshape(len(self.partitions), self.nc)
+        partition = np.zeros((self.nc, d.shape[1]), dtype=int)
+        partition[:, cols] = part[which[cols]].T
+        return ExactSolution(x=z[:self.nx], p=z[self.nx:], objective=obj, partition=partition, found=found)
 
     def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray, *,
                A2: np.ndarray | None = None) -> BorderedFamily:
@@ -367,18 +383,7 @@ class ExactEnumerator:
                               solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
 
     def _solve_bordered(self, params: np.ndarray, b: _Bordered) -> ExactSolution:
-        z0, d, w = self._imposed(params, b)
-        obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, self._weight @ d), w, b.P, b.solvable,
-                                  self.sign_tol)
-        found = which >= 0
-        cols = np.flatnonzero(found)
-        t = np.zeros((2 * self.nc, params.shape[1]))
-        t[:, cols] = -np.einsum("kij,jk->ik", b.P[which[cols]], w[:, cols])
-        z = np.where(found, z0 + b.Zc @ t, np.nan)
-        part = np.array(self.partitions, dtype=int).reshape(len(self.partitions), self.nc)
-        partition = np.zeros((self.nc, params.shape[1]), dtype=int)
-        partition[:, cols] = part[which[cols]].T
-        return ExactSolution(x=z[:self.nx], p=z[self.nx:], objective=obj, partition=partition, found=found)
+        return self.from_imposed(*self._imposed(params, b))
 
     def _constraints(self, part) -> sp.csc_matrix:
         part = np.asarray(part)
@@ -479,7 +484,7 @@ class ExactEnumerator:
         base = np.asarray(base, float).reshape(-1, 1)
         D = np.asarray(directions, float)
         if bordered and self.bordered:
-            d, w = self.imposed(np.hstack([base, D]))
+            _, d, w = self.imposed(np.hstack([base, D]))
             return self.family(d[:, 0], w[:, 0], d[:, 1:], w[:, 1:])
         R0, g0, q0, f0 = self._affine_parts(base)
         # The linear parts of R, g, grad f in the directions.
