@@ -298,14 +298,14 @@ def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
 def _monomials(problems, candidates: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""``(x0, Y, |Y|)`` of the data ``x = pairs(candidates)`` (``(N, j)``) for
     :func:`_shared_bound`: their centre ``x0`` (their mean, inside the data's range), and per datum
-    ``[1, y, y y^T]`` (``y = x - x0``; ``1 + j + j^2`` columns). Remembered per problem for a
+    (column) ``[1, y, y y^T]`` (``y = x - x0``; ``1 + j + j^2`` rows). Remembered per problem for a
     contiguous range of data (a whole data set, screened sweep after sweep)."""
     def build():
         x = pairs(candidates)
         centre = np.mean(x, axis=0)
         y = x - centre
-        Y = np.hstack([np.ones((len(y), 1)), y, (y[:, :, None] * y[:, None, :]).reshape(len(y), -1)])
-        return centre, Y, np.abs(Y)
+        Y = np.vstack([np.ones((1, len(y))), y.T, (y[:, :, None] * y[:, None, :]).reshape(len(y), -1).T])
+        return centre, Y, np.abs(Y)  # one row per monomial: contiguous for the products
 
     n = candidates.size
     if n and candidates[-1] - candidates[0] == n - 1 and np.all(np.diff(candidates) == 1):
@@ -328,7 +328,7 @@ def _shared_bound(a0: float, a1: np.ndarray, A2: np.ndarray, rows: np.ndarray,
     Ad = np.einsum("gpq,gq->gp", A, delta)
     const = a0 + np.einsum("gp,gp->g", g + 0.5 * Ad, delta)
     coef = np.hstack([const[:, None], g + Ad, 0.5 * A.reshape(len(A), -1)])
-    return coef @ Y.T, np.abs(coef) @ absY.T
+    return coef @ Y, np.abs(coef) @ absY
 
 
 def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,

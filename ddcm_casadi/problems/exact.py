@@ -94,6 +94,9 @@ def move_terms(a1: np.ndarray, A2: np.ndarray, rows: np.ndarray, d: np.ndarray) 
     group; ``d``: ``(G, N, j)``): two ``(G, N)`` arrays."""
     a1g, A2g = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
     j = rows.shape[1]
+    if d.shape[1] == 1:  # one move per group (the screen's survivors): two contractions
+        d1 = d[:, 0, :]
+        return np.einsum("gi,gi->g", d1, a1g)[:, None], 0.5 * np.einsum("gi,gij,gj->g", d1, A2g, d1)[:, None]
     if j > 4:  # many nonzeros per move: batched products
         return np.matmul(d, a1g[:, :, None])[..., 0], 0.5 * np.sum(d * np.matmul(d, A2g), axis=2)
     # Few (one-component points: 2): j^2 vector operations beat batched products of tiny matrices.
