@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ddcm_casadi.drivers.ddcm_search import (
-    assignment_projection, descent_threshold, point_ranges, random_assignment, single_moves, tolerant_argsort,
+    assignment_projection, descent_threshold, point_ranges, random_assignment, screened_moves, tolerant_argsort,
 )
 from ddcm_casadi.drivers.records import Run, count
 
@@ -64,7 +64,7 @@ def _next_nearest_moves(solver, best: Run, order: np.ndarray) -> list[np.ndarray
 def _screened_moves(solver, k: int, best: Run, order: np.ndarray) -> list[np.ndarray]:
     """Every move of a point of ``order`` to another datum of its set (or, past
     :data:`SCREEN_SIZE` moves, to one of its nearest data), screened by the exact objective of
-    its projection (closed forms, :func:`~ddcm_casadi.drivers.ddcm_search.single_moves`): the
+    its projection (closed forms, :func:`~ddcm_casadi.drivers.ddcm_search.screened_moves`): the
     moves that lower the objective, best first."""
     model, f = solver.problems.model, best.fields
     data = model.dataset
@@ -78,16 +78,16 @@ def _screened_moves(solver, k: int, best: Run, order: np.ndarray) -> list[np.nda
     else:
         pts = f["strain"].reshape(model.n_points, -1)[order], f["stress"].reshape(model.n_points, -1)[order]
         cand = data.k_nearest(pts[0].ravel(), pts[1].ravel(), max(2, per_point))
-    obj, mine = single_moves(solver.problems, solver.exact, k, best.index, order, cand, prune=True)
+    a, b, obj, mine = screened_moves(solver.problems, solver.exact, k, best.index, order, cand)
     # Row-major, so the sort keeps the order of a sort of every move; moves whose objectives agree to
     # the descent test's tolerance (mirror-symmetric moves) in that order.
     limit = descent_threshold(mine)
     descending = np.flatnonzero(obj < limit)
     moves = []
-    for a in descending[tolerant_argsort(obj.ravel()[descending], mine - limit)]:
-        i, b = divmod(int(a), cand.shape[1])
+    for j in descending[tolerant_argsort(obj[descending], mine - limit)]:
+        i = a[j]
         trial = best.index.copy()
-        trial[order[i]] = cand[i % cand.shape[0], b]
+        trial[order[i]] = cand[i % cand.shape[0], b[j]]
         moves.append(trial)
         if len(moves) == solver.options.greedy_neighbours:
             break

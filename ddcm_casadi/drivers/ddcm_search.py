@@ -260,39 +260,61 @@ def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray,
     ``prune``: a move whose lower bound, the projection without contact constraints
     (:meth:`~ddcm_casadi.problems.exact.BorderedFamily.relaxed`, one quadratic in the move's ``2 k``
     numbers), is above :func:`descent_threshold` is reported as ``inf`` without its branches:
-    it cannot descend. The moves that can are exactly those of the full screen.
+    it cannot descend (:func:`screened_moves`). The moves that can are exactly those of the full screen.
     """
+    shape = (len(points), candidates.shape[1])
+    if prune:
+        a, b, values, mine = screened_moves(problems, exact, step, index, points, candidates)
+        obj = np.full(shape, np.inf)
+        obj[a, b] = values
+        return obj, mine
+    family, cur, rows, pairs = _move_family(problems, exact, step, index, points)
+    return family.best_moves(rows, pairs(np.broadcast_to(candidates, shape)) - cur[:, None, :]), family.base()
+
+
+def _move_family(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray):
+    """The family of the moves of ``points`` from ``index`` (:func:`assignment_family`), their
+    current data ``(n, 2 k)``, their directions' rows ``(n, 2 k)`` and ``pairs(indices)``: data
+    indices to their strains and stresses side by side."""
     family, cur_e, cur_s = assignment_family(problems, exact, step, index, points)
     data, k = problems.model.dataset, problems.model.strain_components
     strain = data.strain.reshape(len(data), k)
     stress = data.stress.reshape(len(data), k)
-    n, n_c = len(points), candidates.shape[1]
-    points = np.asarray(points)
-    shared = candidates.shape[0] == 1 or bool(np.all(candidates == candidates[:1]))  # one data set for every point
-    candidates = np.broadcast_to(candidates, (n, n_c))
+    n = len(points)
 
-    def pairs(indices):  # the data's strains and stresses, side by side
+    def pairs(indices):
         return np.concatenate([strain[indices], stress[indices]], axis=-1)
 
-    cur = np.concatenate([cur_e[points], cur_s[points]], axis=1)  # (n, 2 k)
+    cur = np.concatenate([cur_e[points], cur_s[points]], axis=1)
     rows = np.concatenate([np.arange(k) + k * np.arange(n)[:, None], n * k + np.arange(k) + k * np.arange(n)[:, None]],
-                          axis=1)  # (n, 2 k): each point's strain, then stress, directions
+                          axis=1)  # each point's strain, then stress, directions
+    return family, cur, rows, pairs
+
+
+def screened_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray,
+                   candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    r"""The moves of :func:`single_moves` (``prune``) that its bound leaves in, with their exact
+    objectives: ``(a, b, objectives, objective of index)`` for the moves of ``points[a]`` to
+    ``candidates[a, b]`` (row-major order). Every move that can descend is among them."""
+    family, cur, rows, pairs = _move_family(problems, exact, step, index, points)
+    n, n_c = len(points), candidates.shape[1]
+    shared = candidates.shape[0] == 1 or bool(np.all(candidates == candidates[:1]))  # one data set for every point
     mine = family.base()
-    relaxed = family.relaxed() if prune and isinstance(family, BorderedFamily) else None
-    if relaxed is None:
-        return family.best_moves(rows, pairs(candidates) - cur[:, None, :]), mine
-    if shared:
-        bound, size = _shared_bound(*relaxed, rows, _monomials(problems, candidates[0], pairs), cur)
+    relaxed = family.relaxed() if isinstance(family, BorderedFamily) else None
+    if relaxed is None:  # no bound: every move
+        a, b = np.divmod(np.arange(n * n_c), n_c)
     else:
-        linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, pairs(candidates) - cur[:, None, :])
-        bound, size = relaxed[0] + linear + quadratic, abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic)
-    limit = descent_threshold(mine)
-    size *= PRUNE_MARGIN  # in place: the bound's test is limit + PRUNE_MARGIN (size + |limit|)
-    size += limit + PRUNE_MARGIN * abs(limit)
-    a, b = np.nonzero(bound <= size)  # far above the bound's roundoff
-    obj = np.full((n, n_c), np.inf)
-    obj[a, b] = family.best_moves(rows[a], (pairs(candidates[a, b]) - cur[a])[:, None, :])[:, 0]
-    return obj, mine
+        if shared:
+            bound, size = _shared_bound(*relaxed, rows, _monomials(problems, candidates[0], pairs), cur)
+        else:
+            linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, pairs(candidates) - cur[:, None, :])
+            bound, size = relaxed[0] + linear + quadratic, abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic)
+        limit = descent_threshold(mine)
+        size *= PRUNE_MARGIN  # in place: the bound's test is limit + PRUNE_MARGIN (size + |limit|)
+        size += limit + PRUNE_MARGIN * abs(limit)
+        a, b = np.nonzero(bound <= size)  # far above the bound's roundoff
+    chosen = candidates[0, b] if shared else candidates[a, b]
+    return a, b, family.best_moves(rows[a], (pairs(chosen) - cur[a])[:, None, :])[:, 0], mine
 
 
 def _monomials(problems, candidates: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
