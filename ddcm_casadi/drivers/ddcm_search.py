@@ -157,7 +157,7 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     # P(index) = P(0) + D c(index): the imposed solutions of index and of the directions by linearity.
     c = np.concatenate([cur_e.ravel(), cur_s.ravel()])
     family = exact.family(solved.dz + solved.E @ c, solved.wz + solved.W @ c, solved.E[:, cols], solved.W[:, cols],
-                          A2=solved.A2[np.ix_(cols, cols)])
+                          A2=solved.A2[cols[:, None], cols])
     return family, cur_e, cur_s
 
 
