@@ -221,6 +221,7 @@ class DDCMSolver:
                                                             exact=exact_first and outer == 1, known=known)
             if failed:
                 message = failed
+                f = problems.fields("mpcc", sol.x, sol.p, self.projection.last_params)  # what it returned
                 break
             x, p, state = sol.x, sol.p, sol.state
             t1 = time.perf_counter()
@@ -231,8 +232,7 @@ class DDCMSolver:
             if update.done:
                 converged, message = update.converged, update.message
                 break
-        f = problems.fields("mpcc", sol.x, sol.p, self.projection.last_params)
-        star = scheme.finish(star)
+        star = scheme.finish(star)  # f: the fields of the last projection
         distance = (float(0.5 * np.dot(problems.model.volumes, scheme.distance2(f["strain"], f["stress"], star)))
                     if sol.converged else float("inf"))
         run = Run(star=star, sol=sol, fields=f, distance=distance, converged=converged, message=message, outer=outer,
