@@ -20,9 +20,14 @@ from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.validation.quality_rungs import noisy_dataset, noisy_paper_bar
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.drivers import ddcm as ddcm_driver
-from ddcm_casadi.drivers.ddcm_search import descent_threshold, elastic_state, random_assignment, single_moves
+from ddcm_casadi.drivers.ddcm_search import (
+    descent_threshold, elastic_state, random_assignment, single_moves, tolerant_argsort,
+)
+from ddcm_casadi.drivers.ddcm_projection import Projection
+from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.validation import ladder
 from ddcm_casadi.drivers.path import DDCMSolver
+from ddcm_casadi.models import truss
 from ddcm_casadi.models.truss import bar_chain
 
 FB = "fischer_burmeister"
@@ -222,6 +227,25 @@ def test_single_moves_are_the_exact_projections_of_the_moved_assignments():
     assert abs(mine - own) <= ROUNDOFF * max(1.0, abs(own))
 
 
+def test_assignment_projection_is_the_exact_projection():
+    """The closed-form projection of an assignment from the step's solved directions (the greedy
+    trial's first projection) against the exact projection solved directly for its parameters."""
+    from ddcm_casadi.drivers.ddcm_search import assignment_projection
+
+    model = ladder.warren_truss(n_data=200)
+    problems = build_problems(model)
+    exact = ExactEnumerator(problems.projection)
+    data, rng = model.dataset, np.random.default_rng(7)
+    for step in (0, model.n_steps - 1):
+        for _ in range(5):
+            index = random_assignment(model, rng)
+            x, p, obj = assignment_projection(problems, exact, step, index)
+            ex = exact.solve(problems.projection_params(step, data.strain[index], data.stress[index]))
+            z, z_ref = np.concatenate([x, p]), np.concatenate([ex.x[:, 0], ex.p[:, 0]])
+            assert np.max(np.abs(z - z_ref)) <= ROUNDOFF * max(1.0, float(np.max(np.abs(z_ref))))
+            assert abs(obj - ex.objective[0]) <= ROUNDOFF * max(1.0, abs(ex.objective[0]))
+
+
 def _random_params(model, problems, rng, count):
     """Projection parameters of ``count`` random data assignments over the load steps."""
     cols = []
@@ -265,6 +289,8 @@ def test_pruned_screen_keeps_every_descending_move(build):
         full, mine = single_moves(problems, exact, step, index, points, cand)
         pruned, mine_pruned = single_moves(problems, exact, step, index, points, cand, prune=True)
         assert mine_pruned == mine
+        one_row, _ = single_moves(problems, exact, step, index, points, cand[:1], prune=True)  # shared, as one row
+        assert np.array_equal(one_row, pruned)
         limit = descent_threshold(mine)
         assert np.array_equal(pruned < limit, full < limit)
         kept = np.isfinite(pruned)
@@ -331,6 +357,43 @@ def test_certificate_against_brute_force(elements, n_data):
 def test_no_certificate_beyond_exact_max():
     r = _run(_chain(0.02, 7, elements=2, n_data=30), exact_max=899)
     assert all(s.global_optimum is None for s in r.steps)
+
+
+def test_tolerant_argsort_breaks_near_ties_by_position():
+    """Values within the tolerance of their sorted neighbour keep their positions' order, whatever
+    their last bits; values farther apart are sorted."""
+    values = np.array([3.0, 1.0 + 1e-15, 2.0, 1.0, 1.0 - 1e-15, 0.5])
+    assert tolerant_argsort(values, 1e-12).tolist() == [5, 1, 3, 4, 2, 0]
+    assert tolerant_argsort(values, 0.0).tolist() == [5, 4, 3, 1, 2, 0]
+    assert tolerant_argsort(np.array([]), 1.0).size == 0
+
+
+def _noisy_warren_truss(noise: float, seed: int, n_data: int = 2001):
+    """The quality benchmark's noisy Warren truss (3 contacts, mirror-symmetric members) on fewer data."""
+    data = noisy_dataset(noise, seed, n_data=n_data, c=200e9)
+    scale = 0.004 / 0.05  # the paper's strains onto the truss's range
+    return truss.warren_truss(panels=4, gap=0.002, contact_nodes=range(1, 4), load_factors=np.linspace(0.5, 3.0, 7),
+                              dataset=MaterialDataset(data.strain * scale, data.stress * scale, 200e9),
+                              name="noisy Warren truss")
+
+
+@pytest.mark.parametrize("noise, seed", [(0.01, 2), (0.05, 0)])
+def test_greedy_trials_reuse_the_screened_exact_projection(monkeypatch, noise, seed):
+    """A greedy trial's first projection is the exact one the screen evaluated (no formulation
+    solve): the same data assignments and objectives, to roundoff, as solving it with the
+    formulation and checking it by enumeration, with fewer Newton iterations."""
+    model = _noisy_warren_truss(noise, seed)
+    opts = dict(restarts=1, restart_neighbours=10, improve="greedy")
+    reused = _run(model, **opts)
+    monkeypatch.setattr(Projection, "exact_solution", lambda self, params, state, known=None: None)  # the formulation's solve
+    solved = _run(model, **opts)
+    assert reused.converged and solved.converged
+    assert np.array_equal(reused.array("data_index"), solved.array("data_index"))
+    assert np.array_equal(reused.array("projections"), solved.array("projections"))
+    d0, d1 = solved.array("distance"), reused.array("distance")
+    assert np.max(np.abs(d1 - d0)) <= ROUNDOFF * model.scales_for("ddcm")["energy"]
+    assert reused.array("improvements").sum() > 0  # trials ran
+    assert reused.array("iterations").sum() < solved.array("iterations").sum()
 
 
 def test_greedy_reaches_the_enumerated_optimum_on_one_element():

@@ -193,28 +193,35 @@ class DDCMSolver:
         start = "origin" if o.start == "elastic" and not self.affine else o.start
         return start_assignment(self.problems.model, start, k, np.random.default_rng((o.seed, k, 0)))
 
-    def project_data(self, k: int, strain_star, stress_star, warm: tuple, cost: dict):
+    def project_data(self, k: int, strain_star, stress_star, warm: tuple, cost: dict, *, exact: bool = False,
+                     known: tuple | None = None):
         """The ``Z_E`` projection of step ``k``'s material states
         (:meth:`~ddcm_casadi.drivers.ddcm_projection.Projection.project`)."""
-        return self.projection.project(k, strain_star, stress_star, warm, cost)
+        return self.projection.project(k, strain_star, stress_star, warm, cost, exact=exact, known=known)
 
     def _exact_projection(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """The exact projection (:meth:`~ddcm_casadi.drivers.ddcm_projection.Projection.exact_projection`)."""
         return self.projection.exact_projection(params)
 
-    def alternate(self, k: int, start: MaterialStates, x, p, state) -> tuple[Run, tuple]:
+    def alternate(self, k: int, start: MaterialStates, x, p, state, *, exact_first: bool = False,
+                  known: tuple | None = None) -> tuple[Run, tuple]:
         """The alternation of step ``k`` from the material states ``start`` (the Z_E solves
         warm-started from ``x, p, state``) until the scheme settles, a projection fails, or after
-        ``max_outer`` projections. Returns the run and the last ``(x, p, state)``."""
+        ``max_outer`` projections. ``exact_first``: the first projection is the exact one where that
+        is the formulation's answer (the greedy screen has evaluated it in closed form:
+        :meth:`~ddcm_casadi.drivers.ddcm_projection.Projection.exact_solution`; ``known``: its
+        ``(x, p, objective)`` where the caller has them). Returns the run and the last ``(x, p, state)``."""
         problems, scheme = self.problems, self.scheme
         scheme.begin(start)
         star = start
         cost, t_search = dict(inner=0, t_project=0.0), 0.0
         converged, message = False, "maximum outer iterations reached"
         for outer in range(1, self.max_outer + 1):
-            sol, is_global, err, failed = self.project_data(k, star.strain, star.stress, (x, p, state), cost)
+            sol, is_global, err, failed = self.project_data(k, star.strain, star.stress, (x, p, state), cost,
+                                                            exact=exact_first and outer == 1, known=known)
             if failed:
                 message = failed
+                f = problems.fields("mpcc", sol.x, sol.p, self.projection.last_params)  # what it returned
                 break
             x, p, state = sol.x, sol.p, sol.state
             t1 = time.perf_counter()
@@ -225,8 +232,7 @@ class DDCMSolver:
             if update.done:
                 converged, message = update.converged, update.message
                 break
-        f = problems.fields("mpcc", sol.x, sol.p, self.projection.last_params)
-        star = scheme.finish(star)
+        star = scheme.finish(star)  # f: the fields of the last projection
         distance = (float(0.5 * np.dot(problems.model.volumes, scheme.distance2(f["strain"], f["stress"], star)))
                     if sol.converged else float("inf"))
         run = Run(star=star, sol=sol, fields=f, distance=distance, converged=converged, message=message, outer=outer,

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ddcm_casadi.drivers.ddcm_search import descent_threshold, point_ranges, random_assignment, single_moves
+from ddcm_casadi.drivers.ddcm_search import (
+    assignment_projection, descent_threshold, point_ranges, random_assignment, screened_moves, tolerant_argsort,
+)
 from ddcm_casadi.drivers.records import Run, count
 
 #: Single-point moves screened per sweep of the greedy search (points x candidates).
@@ -62,25 +64,30 @@ def _next_nearest_moves(solver, best: Run, order: np.ndarray) -> list[np.ndarray
 def _screened_moves(solver, k: int, best: Run, order: np.ndarray) -> list[np.ndarray]:
     """Every move of a point of ``order`` to another datum of its set (or, past
     :data:`SCREEN_SIZE` moves, to one of its nearest data), screened by the exact objective of
-    its projection (closed forms, :func:`~ddcm_casadi.drivers.ddcm_search.single_moves`): the
+    its projection (closed forms, :func:`~ddcm_casadi.drivers.ddcm_search.screened_moves`): the
     moves that lower the objective, best first."""
     model, f = solver.problems.model, best.fields
     data = model.dataset
     offset, size = point_ranges(model)
     per_point = SCREEN_SIZE // len(order)
-    if np.all(size[order] <= per_point) and np.unique(size[order]).size == 1:
-        cand = offset[order][:, None] + np.arange(size[order[0]])[None, :]
+    sizes, offsets = size[order], offset[order]
+    if sizes[0] <= per_point and np.all(sizes == sizes[0]):
+        cand = offsets[0] + np.arange(sizes[0])[None, :]  # every point's own set: one row where they share it
+        if np.any(offsets != offsets[0]):
+            cand = offsets[:, None] + np.arange(sizes[0])[None, :]
     else:
         pts = f["strain"].reshape(model.n_points, -1)[order], f["stress"].reshape(model.n_points, -1)[order]
         cand = data.k_nearest(pts[0].ravel(), pts[1].ravel(), max(2, per_point))
-    obj, mine = single_moves(solver.problems, solver.exact, k, best.index, order, cand, prune=True)
-    # Row-major, so the stable sort keeps the order of a stable sort of every move.
-    descending = np.flatnonzero(obj < descent_threshold(mine))
+    a, b, obj, mine = screened_moves(solver.problems, solver.exact, k, best.index, order, cand)
+    # Row-major, so the sort keeps the order of a sort of every move; moves whose objectives agree to
+    # the descent test's tolerance (mirror-symmetric moves) in that order.
+    limit = descent_threshold(mine)
+    descending = np.flatnonzero(obj < limit)
     moves = []
-    for a in descending[np.argsort(obj.ravel()[descending], kind="stable")]:
-        i, b = divmod(int(a), cand.shape[1])
+    for j in descending[tolerant_argsort(obj[descending], mine - limit)]:
+        i = a[j]
         trial = best.index.copy()
-        trial[order[i]] = cand[i, b]
+        trial[order[i]] = cand[i % cand.shape[0], b[j]]
         moves.append(trial)
         if len(moves) == solver.options.greedy_neighbours:
             break
@@ -95,7 +102,8 @@ def greedy_moves(solver, k: int, best: Run) -> list[np.ndarray]:
     opts, model = solver.options, solver.problems.model
     f = best.fields
     local = model.volumes * model.dataset.distance2(f["strain"], f["stress"], best.index)
-    order = np.argsort(-local, kind="stable")[:opts.greedy_points or model.n_points]
+    # Mirror-symmetric points have equal distances but for roundoff: taken by position.
+    order = tolerant_argsort(-local, 1e-9 * float(np.sum(local)))[:opts.greedy_points or model.n_points]
     if solver.exact is None or not opts.greedy_screen:
         return _next_nearest_moves(solver, best, order)
     return _screened_moves(solver, k, best, order)
@@ -107,6 +115,9 @@ def greedy(solver, k: int, best: Run, warm: tuple, visited: set, tally: dict):
     objective and start over from it; at most ``greedy_budget`` reruns. The objective never
     increases. Returns the best run and the ``(x, p, state)`` it ended at."""
     budget = solver.options.greedy_budget
+    # Trials from the screen (exact objectives in closed form) start from their exact projection
+    # where that is the formulation's answer.
+    reuse = solver.exact is not None and solver.options.greedy_screen and solver.projection.enumerated
     trials = 0
     while trials < budget:
         improved = False
@@ -115,7 +126,11 @@ def greedy(solver, k: int, best: Run, warm: tuple, visited: set, tally: dict):
             if key in visited:
                 continue
             visited.add(key)
-            run, state = solver.alternate(k, solver.scheme.states(trial), *warm)
+            # The screen evaluated the trial's exact projection in closed form: no formulation
+            # solve for it (where the exact projection is the formulation's answer), its state
+            # from the same closed forms where the step's directions are kept.
+            known = assignment_projection(solver.problems, solver.exact, k, trial) if reuse else None
+            run, state = solver.alternate(k, solver.scheme.states(trial), *warm, exact_first=reuse, known=known)
             trials += 1
             count(tally, run)
             visited.add(run.index.tobytes())

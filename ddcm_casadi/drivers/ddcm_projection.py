@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ddcm_casadi.drivers.ddcm_search import global_optimum
+from ddcm_casadi.formulations.base import LocalSolution, Metrics
 
 
 class Projection:
@@ -53,6 +54,7 @@ class Projection:
         #: The parameters of the last projection (:meth:`project`): the fields of its solution
         #: are those of these parameters (a hard device's prescribed displacements).
         self.last_params: np.ndarray | None = None
+        self._metrics = Metrics(problem)
 
     def solve(self, params: np.ndarray, x0, p0, state):
         """Projection onto Z_E, restarted on the exact global branch if it may have stopped elsewhere.
@@ -128,17 +130,48 @@ class Projection:
                 cache["values"] += size
         return hit[0].copy(), hit[1].copy(), hit[2]
 
-    def project(self, k: int, strain_star, stress_star, warm: tuple, cost: dict):
+    @property
+    def enumerated(self) -> bool:
+        """Whether the exact projection is the formulation's own answer (:meth:`exact_solution`):
+        every projection is checked against the enumeration and the formulation enforces the
+        contact pairs exactly (no penalty's regularised contact)."""
+        return self.check and getattr(self.built, "penalty_stiffness", None) is None
+
+    def exact_solution(self, params: np.ndarray, state: dict | None, known: tuple | None = None):
+        """The exact projection (:meth:`exact_projection`, or ``known``: ``(x, p, objective)``
+        of ``params`` found by the caller) as the solution, without the formulation's solve, or
+        None where it is not the formulation's answer (not :attr:`enumerated`, or no
+        sign-feasible branch). What the checked formulation returns, to the formulation's
+        tolerance: a converged solve on another branch is restarted on this one. ``state`` (the
+        warm start's multipliers) is passed on as the solution's warm-start data. Returns
+        ``(solution, is_global, error)`` as :meth:`solve`."""
+        if not self.enumerated:
+            return None
+        x, p, objective = known if known is not None else self.exact_projection(params)
+        if not (np.isfinite(objective) and np.all(np.isfinite(x)) and np.all(np.isfinite(p))):
+            return None
+        residual, comp, pen, obj = self._metrics(x, p, params)
+        sol = LocalSolution(x=x, p=p, converged=True, iterations=0, outer_iterations=0, residual=residual,
+                            complementarity=comp, penetration=pen, objective=obj, state=dict(state or {}),
+                            message="exact projection (branch enumeration)")
+        return sol, True, 0.0
+
+    def project(self, k: int, strain_star, stress_star, warm: tuple, cost: dict, *, exact: bool = False,
+                known: tuple | None = None):
         """The ``Z_E`` projection of step ``k``'s material states (or of a sub-step of it, with
         :attr:`substep` set), warm-started from ``warm = (x, p, state)``: ``(solution, is_global,
         error, failure)``, ``failure`` the message of a projection that did not converge, else
-        ``""``. Adds its Newton iterations and seconds to ``cost["inner"]`` and ``cost["t_project"]``."""
+        ``""``. Adds its Newton iterations and seconds to ``cost["inner"]`` and ``cost["t_project"]``.
+        ``exact``: the exact projection where it is the formulation's answer (:meth:`exact_solution`;
+        for states whose exact projection the caller has evaluated: ``known``, its ``(x, p,
+        objective)`` where the caller has them too), else the formulation's solve."""
         t0 = time.perf_counter()
         params = self.problems.projection_params(k, strain_star, stress_star, self.previous)
         if self.substep is not None:
             params = self.substep(params)
         self.last_params = params
-        sol, is_global, err = self.solve(params, *warm)
+        given = self.exact_solution(params, warm[2], known) if exact else None
+        sol, is_global, err = given if given is not None else self.solve(params, *warm)
         cost["inner"] += sol.iterations
         cost["t_project"] += time.perf_counter() - t0
         failed = "" if sol.converged else f"Z_E projection did not converge: {sol.message}"

@@ -20,6 +20,8 @@ Starts (:class:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions` ``start``):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -148,39 +150,92 @@ def assignment_family(problems, exact: ExactEnumerator, step: int, index: np.nda
     pts = np.arange(m) if points is None else np.asarray(points)
     comps = (pts[:, None] * k + np.arange(k)).ravel()
     cols = np.concatenate([comps, m * k + comps])  # their strains, then their stresses
-
-    def directions(columns) -> np.ndarray:
-        zero = problems.projection_params(step, np.zeros(m * k), np.zeros(m * k))
-        unit = np.zeros((2 * m * k, len(columns)))
-        unit[columns, np.arange(len(columns))] = 1.0
-        return problems.projection_params(step, unit[:m * k], unit[m * k:]) - zero[:, None]  # one column each
-
-    solved = _all_directions(problems, exact, step, directions) if exact.bordered else None
+    solved = _all_directions(problems, exact, step) if exact.bordered else None
     if solved is None:
-        return exact.affine_family(problems.projection_params(step, cur_e.ravel(), cur_s.ravel()), directions(cols)), \
-            cur_e, cur_s
+        return exact.affine_family(problems.projection_params(step, cur_e.ravel(), cur_s.ravel()),
+                                   _directions(problems, step, cols)), cur_e, cur_s
     # P(index) = P(0) + D c(index): the imposed solutions of index and of the directions by linearity.
-    dz, wz, E, W = solved
     c = np.concatenate([cur_e.ravel(), cur_s.ravel()])
-    return exact.family(dz + E @ c, wz + W @ c, E[:, cols], W[:, cols]), cur_e, cur_s
+    family = exact.family(solved.dz + solved.E @ c, solved.wz + solved.W @ c, solved.E[:, cols], solved.W[:, cols],
+                          A2=solved.A2[cols[:, None], cols])
+    return family, cur_e, cur_s
 
 
-def _all_directions(problems, exact: ExactEnumerator, step: int, directions):
-    """``(d, mu)`` of the projection with every constraint imposed (:meth:`~ddcm_casadi.problems.exact.ExactEnumerator.imposed`)
-    for the zero assignment and for every direction of :func:`assignment_family` at ``step``,
-    solved once per problem and step (the greedy search screens sweep after sweep), or None
-    where they would exceed :data:`DIRECTION_CACHE_VALUES` floats."""
+def assignment_projection(problems, exact: ExactEnumerator, step: int,
+                          index: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The exact projection ``(x, p, objective)`` (scaled) of the data assignment ``index`` at
+    ``step`` from the step's solved directions (:func:`_all_directions`, by linearity, as
+    :func:`assignment_family`): what :meth:`~ddcm_casadi.problems.exact.ExactEnumerator.solve`
+    gives for its parameters, to roundoff, without a solve. None where the directions are not
+    kept (no bordered form, a large model) or no branch is sign-feasible."""
+    solved = _all_directions(problems, exact, step) if exact.bordered else None
+    if solved is None:
+        return None
+    data = problems.model.dataset
+    c = np.concatenate([data.strain[index].ravel(), data.stress[index].ravel()])
+    ex = exact.from_imposed((solved.zz + solved.Z @ c)[:, None], (solved.dz + solved.E @ c)[:, None],
+                            (solved.wz + solved.W @ c)[:, None])
+    if not ex.found[0]:
+        return None
+    return ex.x[:, 0], ex.p[:, 0], float(ex.objective[0])
+
+
+def _directions(problems, step: int, columns: np.ndarray) -> np.ndarray:
+    """The columns ``D`` of :func:`assignment_family`'s ``P = P(0) + D c`` at ``step`` (``c``:
+    every point's strains, then stresses), one per entry of ``columns``."""
+    model = problems.model
+    mk = model.n_points * model.strain_components
+    zero = problems.projection_params(step, np.zeros(mk), np.zeros(mk))
+    unit = np.zeros((2 * mk, len(columns)))
+    unit[columns, np.arange(len(columns))] = 1.0
+    return problems.projection_params(step, unit[:mk], unit[mk:]) - zero[:, None]
+
+
+@dataclass(frozen=True)
+class _Directions:
+    """The projection with every constraint imposed for the zero assignment (``zz``, ``dz``,
+    ``wz``: unknowns, distance, multipliers) and for every direction of :func:`_directions`
+    (``Z``, ``E``, ``W``, one column each), and the directions' quadratic term ``A2 = E^T W E``."""
+
+    zz: np.ndarray
+    dz: np.ndarray
+    wz: np.ndarray
+    Z: np.ndarray
+    E: np.ndarray
+    W: np.ndarray
+    A2: np.ndarray
+
+
+def _all_directions(problems, exact: ExactEnumerator, step: int) -> _Directions | None:
+    """The :class:`_Directions` of ``step``, solved once per problem and step (the greedy search
+    screens sweep after sweep, :meth:`~ddcm_casadi.problems.exact.ExactEnumerator.imposed`), or
+    None where they would exceed :data:`DIRECTION_CACHE_VALUES` floats."""
     model = problems.model
     n = 2 * model.n_points * model.strain_components
-    if n * (n + 2 * exact.nc + 2) > DIRECTION_CACHE_VALUES:  # d has 2 m k rows
+    if (n + 1) * (n + 2 * exact.nc + exact.nz) + n * n > DIRECTION_CACHE_VALUES:
         return None
 
     def solve():
-        d, w = exact.imposed(np.column_stack([problems.projection_params(step, np.zeros(n // 2), np.zeros(n // 2)),
-                                              directions(np.arange(n))]))
-        return d[:, 0], w[:, 0], d[:, 1:], w[:, 1:]
+        z, d, w = exact.imposed(np.column_stack([problems.projection_params(step, np.zeros(n // 2), np.zeros(n // 2)),
+                                                 _directions(problems, step, np.arange(n))]))
+        A2 = exact.family(d[:, 0], w[:, 0], d[:, 1:], w[:, 1:]).A2
+        return _Directions(zz=z[:, 0], dz=d[:, 0], wz=w[:, 0], Z=z[:, 1:], E=d[:, 1:], W=w[:, 1:], A2=A2)
 
     return problems.projection.shared(("assignment_directions", step), solve)
+
+
+def tolerant_argsort(values: np.ndarray, tol: float) -> np.ndarray:
+    """The indices that sort ``values`` ascending, values within ``tol`` of their neighbour in
+    the sorted order (chains of them) in the order of their indices: ties of roundoff (mirror-
+    symmetric points and moves) are broken by position, not by the last bits of the values, so
+    the order does not depend on which solver computed them."""
+    values = np.asarray(values, dtype=float).ravel()
+    idx = np.argsort(values, kind="stable")
+    apart = np.diff(values[idx]) > tol
+    if apart.all():  # no near-ties (the usual case): the plain order
+        return idx
+    group = np.cumsum(np.concatenate([[False], apart]))
+    return idx[np.lexsort((idx, group))]
 
 
 def descent_threshold(mine: float) -> float:
@@ -196,64 +251,106 @@ PRUNE_MARGIN = 1e-6
 def single_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray,
                  candidates: np.ndarray, *, prune: bool = False) -> tuple[np.ndarray, float]:
     r"""The exact projection's objective (scaled) of every assignment that differs from ``index``
-    at one point: ``points[a]`` moved to datum ``candidates[a, b]``; returns ``(objectives,
-    objective of index)`` with ``objectives`` shaped like ``candidates``. Only the moving points
+    at one point: ``points[a]`` moved to datum ``candidates[a, b]`` (``candidates`` with one row:
+    the same for every point); returns ``(objectives, objective of index)``, ``objectives``
+    ``(len(points), candidates.shape[1])``. Only the moving points
     enter the closed forms (``2 n k`` directions for ``n`` points, not ``2 m k``), and each move's
     ``c`` has ``2 k`` nonzeros.
 
     ``prune``: a move whose lower bound, the projection without contact constraints
     (:meth:`~ddcm_casadi.problems.exact.BorderedFamily.relaxed`, one quadratic in the move's ``2 k``
     numbers), is above :func:`descent_threshold` is reported as ``inf`` without its branches:
-    it cannot descend. The moves that can are exactly those of the full screen.
+    it cannot descend (:func:`screened_moves`). The moves that can are exactly those of the full screen.
     """
+    shape = (len(points), candidates.shape[1])
+    if prune:
+        a, b, values, mine = screened_moves(problems, exact, step, index, points, candidates)
+        obj = np.full(shape, np.inf)
+        obj[a, b] = values
+        return obj, mine
+    family, cur, rows, pairs = _move_family(problems, exact, step, index, points)
+    return family.best_moves(rows, pairs(np.broadcast_to(candidates, shape)) - cur[:, None, :]), family.base()
+
+
+def _move_family(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray):
+    """The family of the moves of ``points`` from ``index`` (:func:`assignment_family`), their
+    current data ``(n, 2 k)``, their directions' rows ``(n, 2 k)`` and ``pairs(indices)``: data
+    indices to their strains and stresses side by side."""
     family, cur_e, cur_s = assignment_family(problems, exact, step, index, points)
     data, k = problems.model.dataset, problems.model.strain_components
     strain = data.strain.reshape(len(data), k)
     stress = data.stress.reshape(len(data), k)
-    n, n_c = len(points), candidates.shape[1]
-    points = np.asarray(points)
+    n = len(points)
 
-    def pairs(indices):  # the data's strains and stresses, side by side
+    def pairs(indices):
         return np.concatenate([strain[indices], stress[indices]], axis=-1)
 
-    cur = np.concatenate([cur_e[points], cur_s[points]], axis=1)  # (n, 2 k)
+    cur = np.concatenate([cur_e[points], cur_s[points]], axis=1)
     rows = np.concatenate([np.arange(k) + k * np.arange(n)[:, None], n * k + np.arange(k) + k * np.arange(n)[:, None]],
-                          axis=1)  # (n, 2 k): each point's strain, then stress, directions
+                          axis=1)  # each point's strain, then stress, directions
+    return family, cur, rows, pairs
+
+
+def screened_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarray, points: np.ndarray,
+                   candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    r"""The moves of :func:`single_moves` (``prune``) that its bound leaves in, with their exact
+    objectives: ``(a, b, objectives, objective of index)`` for the moves of ``points[a]`` to
+    ``candidates[a, b]`` (row-major order). Every move that can descend is among them."""
+    family, cur, rows, pairs = _move_family(problems, exact, step, index, points)
+    n, n_c = len(points), candidates.shape[1]
+    shared = candidates.shape[0] == 1 or bool(np.all(candidates == candidates[:1]))  # one data set for every point
     mine = family.base()
-    relaxed = family.relaxed() if prune and isinstance(family, BorderedFamily) else None
-    if relaxed is None:
-        return family.best_moves(rows, pairs(candidates) - cur[:, None, :]), mine
-    if np.all(candidates == candidates[:1]):  # one data set for every point
-        bound, size = _shared_bound(*relaxed, rows, pairs(candidates[0]), cur)
+    relaxed = family.relaxed() if isinstance(family, BorderedFamily) else None
+    if relaxed is None:  # no bound: every move
+        a, b = np.divmod(np.arange(n * n_c), n_c)
     else:
-        linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, pairs(candidates) - cur[:, None, :])
-        bound, size = relaxed[0] + linear + quadratic, abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic)
-    limit = descent_threshold(mine)
-    a, b = np.nonzero(bound <= limit + PRUNE_MARGIN * (size + abs(limit)))  # far above the bound's roundoff
-    obj = np.full((n, n_c), np.inf)
-    obj[a, b] = family.best_moves(rows[a], (pairs(candidates[a, b]) - cur[a])[:, None, :])[:, 0]
-    return obj, mine
+        if shared:
+            bound, size = _shared_bound(*relaxed, rows, _monomials(problems, candidates[0], pairs), cur)
+        else:
+            linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, pairs(candidates) - cur[:, None, :])
+            bound, size = relaxed[0] + linear + quadratic, abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic)
+        limit = descent_threshold(mine)
+        size *= PRUNE_MARGIN  # in place: the bound's test is limit + PRUNE_MARGIN (size + |limit|)
+        size += limit + PRUNE_MARGIN * abs(limit)
+        a, b = np.nonzero(bound <= size)  # far above the bound's roundoff
+    chosen = candidates[0, b] if shared else candidates[a, b]
+    return a, b, family.best_moves(rows[a], (pairs(chosen) - cur[a])[:, None, :])[:, 0], mine
 
 
-def _shared_bound(a0: float, a1: np.ndarray, A2: np.ndarray, rows: np.ndarray, x: np.ndarray,
-                  cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _monomials(problems, candidates: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""``(x0, Y, |Y|)`` of the data ``x = pairs(candidates)`` (``(N, j)``) for
+    :func:`_shared_bound`: their centre ``x0`` (their mean, inside the data's range), and per datum
+    (column) ``[1, y, y y^T]`` (``y = x - x0``; ``1 + j + j^2`` rows). Remembered per problem for a
+    contiguous range of data (a whole data set, screened sweep after sweep)."""
+    def build():
+        x = pairs(candidates)
+        centre = np.mean(x, axis=0)
+        y = x - centre
+        Y = np.vstack([np.ones((1, len(y))), y.T, (y[:, :, None] * y[:, None, :]).reshape(len(y), -1).T])
+        return centre, Y, np.abs(Y)  # one row per monomial: contiguous for the products
+
+    n = candidates.size
+    if n and candidates[-1] - candidates[0] == n - 1 and np.all(np.diff(candidates) == 1):
+        return problems.projection.shared(("screen_monomials", int(candidates[0]), n), build)
+    return build()
+
+
+def _shared_bound(a0: float, a1: np.ndarray, A2: np.ndarray, rows: np.ndarray,
+                  monomials: tuple[np.ndarray, np.ndarray, np.ndarray], cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     r"""The quadratic ``a0 + a1^T c + c^T A2 c / 2`` of every move of point ``g`` (rows ``rows[g]``)
     from ``cur[g]`` to a datum ``x[i]`` of one shared set ``x`` (``(N, j)``), and the size of its
-    terms: two ``(G, N)`` arrays. About a centre ``x0`` (``x = x0 + y``,
-    ``c = y + delta_g``, ``delta_g = x0 - cur[g]``) it is ``k_g + l_g^T y + y^T A_g y / 2``: two
-    products with the data's monomials instead of per-move arithmetic (``x0``: the mean of the
-    current data, inside the data's range)."""
+    terms: two ``(G, N)`` arrays. About the data's centre ``x0`` (``x = x0 + y``,
+    ``c = y + delta_g``, ``delta_g = x0 - cur[g]``) it is ``k_g + l_g^T y + y^T A_g y / 2``: one
+    product of the coefficients ``[k_g, l_g, A_g / 2]`` with the data's monomials ``[1, y, y y^T]``
+    (:func:`_monomials`, once per data set) instead of per-move arithmetic, and one of their
+    absolute values for the size."""
+    centre, Y, absY = monomials
     g, A = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
-    centre = np.mean(cur, axis=0)
-    y, delta = x - centre, centre - cur
+    delta = centre - cur
     Ad = np.einsum("gpq,gq->gp", A, delta)
     const = a0 + np.einsum("gp,gp->g", g + 0.5 * Ad, delta)
-    lin = g + Ad
-    M = (y[:, :, None] * y[:, None, :]).reshape(len(y), -1)  # (N, j^2)
-    Ag = A.reshape(len(A), -1)
-    bound = const[:, None] + lin @ y.T + 0.5 * (Ag @ M.T)
-    size = np.abs(const)[:, None] + np.abs(lin) @ np.abs(y).T + 0.5 * (np.abs(Ag) @ np.abs(M).T)
-    return bound, size
+    coef = np.hstack([const[:, None], g + Ad, 0.5 * A.reshape(len(A), -1)])
+    return coef @ Y, np.abs(coef) @ absY
 
 
 def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,

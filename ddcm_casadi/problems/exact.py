@@ -94,6 +94,9 @@ def move_terms(a1: np.ndarray, A2: np.ndarray, rows: np.ndarray, d: np.ndarray) 
     group; ``d``: ``(G, N, j)``): two ``(G, N)`` arrays."""
     a1g, A2g = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
     j = rows.shape[1]
+    if d.shape[1] == 1:  # one move per group (the screen's survivors): two contractions
+        d1 = d[:, 0, :]
+        return np.einsum("gi,gi->g", d1, a1g)[:, None], 0.5 * np.einsum("gi,gij,gj->g", d1, A2g, d1)[:, None]
     if j > 4:  # many nonzeros per move: batched products
         return np.matmul(d, a1g[:, :, None])[..., 0], 0.5 * np.sum(d * np.matmul(d, A2g), axis=2)
     # Few (one-component points: 2): j^2 vector operations beat batched products of tiny matrices.
@@ -211,8 +214,8 @@ def _best_branch(base: np.ndarray, w: np.ndarray, P: np.ndarray, solvable: np.nd
     first such branch on ties, as the enumeration in order); ``inf`` and ``-1`` where none is."""
     if P.shape[0] * w.shape[1] <= ALL_BRANCHES_AT_ONCE:  # few columns: one product for every branch
         Pw = (P.reshape(-1, P.shape[2]) @ w).reshape(P.shape[0], P.shape[1], -1)
-        obj = np.where(np.all(Pw <= sign_tol, axis=1) & solvable[:, None],
-                       base + 0.5 * np.sum(w * Pw, axis=1), np.inf)
+        obj = np.where((np.max(Pw, axis=1, initial=-np.inf) <= sign_tol) & solvable[:, None],
+                       base + 0.5 * np.einsum("sik,ik->sk", Pw, w), np.inf)
         which = np.argmin(obj, axis=0)  # the first on ties
         best = obj[which, np.arange(w.shape[1])]
         return best, np.where(np.isfinite(best), which, -1)
@@ -345,35 +348,45 @@ class ExactEnumerator:
         """Whether the projection has the bordered form (``K`` nonsingular; built on first use)."""
         return self._bordered is not None
 
-    def imposed(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The distance ``d`` and the multipliers ``mu`` of the ``2 nc`` constraints of the projection
-        with every constraint imposed, per column of ``params`` (linear in them: the maps have no
-        constant terms). Needs the bordered form (:attr:`bordered`)."""
-        _, d, w = self._imposed(np.asarray(params, float), self._bordered)
-        return d, w
+    def imposed(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The unknowns ``z``, the distance ``d`` and the multipliers ``mu`` of the ``2 nc``
+        constraints of the projection with every constraint imposed, per column of ``params``
+        (linear in them: the maps have no constant terms). Needs the bordered form (:attr:`bordered`)."""
+        return self._imposed(np.asarray(params, float), self._bordered)
 
-    def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray) -> BorderedFamily:
-        """The :class:`BorderedFamily` of the projections of ``P0 + D c`` from :meth:`imposed` of
-        ``P0`` (``d0``, ``w0``) and of the columns of ``D`` (``E``, ``W``)."""
+    def from_imposed(self, z0: np.ndarray, d: np.ndarray, w: np.ndarray) -> ExactSolution:
+        """The exact projections (per column) from their projections with every constraint
+        imposed (:meth:`imposed`, or linear combinations of its columns): the best sign-feasible
+        branch, ``z = z0 + Z_c t`` with its freed constraints ``t = -P_s mu``."""
         b = self._bordered
-        Wd0, WE = self._weight @ d0, self._weight @ E
-        A2 = E.T @ WE
-        return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=0.5 * (A2 + A2.T), w0=w0, W=W, P=b.P,
-                              solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
-
-    def _solve_bordered(self, params: np.ndarray, b: _Bordered) -> ExactSolution:
-        z0, d, w = self._imposed(params, b)
         obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, self._weight @ d), w, b.P, b.solvable,
                                   self.sign_tol)
         found = which >= 0
         cols = np.flatnonzero(found)
-        t = np.zeros((2 * self.nc, params.shape[1]))
+        t = np.zeros((2 * self.nc, d.shape[1]))
         t[:, cols] = -np.einsum("kij,jk->ik", b.P[which[cols]], w[:, cols])
         z = np.where(found, z0 + b.Zc @ t, np.nan)
         part = np.array(self.partitions, dtype=int).reshape(len(self.partitions), self.nc)
-        partition = np.zeros((self.nc, params.shape[1]), dtype=int)
+        partition = np.zeros((self.nc, d.shape[1]), dtype=int)
         partition[:, cols] = part[which[cols]].T
         return ExactSolution(x=z[:self.nx], p=z[self.nx:], objective=obj, partition=partition, found=found)
+
+    def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray, *,
+               A2: np.ndarray | None = None) -> BorderedFamily:
+        """The :class:`BorderedFamily` of the projections of ``P0 + D c`` from :meth:`imposed` of
+        ``P0`` (``d0``, ``w0``) and of the columns of ``D`` (``E``, ``W``). ``A2``: ``E^T W E``
+        (symmetric) where the caller has it (a family of some of the directions of a larger
+        one: its rows and columns), else computed."""
+        b = self._bordered
+        Wd0 = self._weight @ d0
+        if A2 is None:
+            A2 = E.T @ (self._weight @ E)
+            A2 = 0.5 * (A2 + A2.T)
+        return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=A2, w0=w0, W=W, P=b.P,
+                              solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
+
+    def _solve_bordered(self, params: np.ndarray, b: _Bordered) -> ExactSolution:
+        return self.from_imposed(*self._imposed(params, b))
 
     def _constraints(self, part) -> sp.csc_matrix:
         part = np.asarray(part)
@@ -474,7 +487,7 @@ class ExactEnumerator:
         base = np.asarray(base, float).reshape(-1, 1)
         D = np.asarray(directions, float)
         if bordered and self.bordered:
-            d, w = self.imposed(np.hstack([base, D]))
+            _, d, w = self.imposed(np.hstack([base, D]))
             return self.family(d[:, 0], w[:, 0], d[:, 1:], w[:, 1:])
         R0, g0, q0, f0 = self._affine_parts(base)
         # The linear parts of R, g, grad f in the directions.
