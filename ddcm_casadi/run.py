@@ -191,7 +191,8 @@ def parameters(case: Case, cmp: Comparison) -> dict:
         also ``dimension``, ``n_nodes``, ``n_members``), ``data`` (:func:`describe_dataset`),
         ``ddcm_max_outer``, ``ddcm`` (the search options,
         :meth:`~ddcm_casadi.drivers.ddcm_options.DDCMOptions.describe`), ``min_substep`` (the
-        smallest sub-step of the step bisection, :mod:`~ddcm_casadi.drivers.substeps`) and
+        smallest sub-step of the step bisection, :mod:`~ddcm_casadi.drivers.substeps`), ``condense``
+        (the classical problem condensed on its contact pairs where that applies) and
         ``formulations`` (options with their problem-dependent defaults resolved, e.g. ``gamma_used``).
     """
     m = case.model
@@ -199,7 +200,7 @@ def parameters(case: Case, cmp: Comparison) -> dict:
     # A dict display, not keywords: a model record may not clash with the run's own keys.
     return {"case": case.source, **m.describe(), "data": describe_dataset(m.dataset),
             "ddcm_max_outer": case.ddcm_max_outer, "ddcm": case.ddcm_options.describe(),
-            "min_substep": case.min_substep, "formulations": forms}
+            "min_substep": case.min_substep, "condense": case.condense, "formulations": forms}
 
 
 def fields(cmp: Comparison) -> dict[str, dict[str, np.ndarray]] | None:
@@ -270,11 +271,12 @@ def results_document(case: Case, cmp: Comparison, *, files: Sequence[str],
 def compare_case(case: Case, formulations: Sequence[str], variants: Sequence[str], *,
                  progress: Progress | None = None, jobs: int | None = 1) -> Comparison:
     """Run the formulations ``formulations`` of a case in ``variants``, with the case's formulation
-    options, DDCM settings and step bisection (``min_substep``), in ``jobs`` processes (nothing
+    options, DDCM settings, step bisection (``min_substep``) and ``condense``, in ``jobs`` processes (nothing
     written)."""
     selection = {n: case.formulation_options.get(n, {}) for n in formulations}
     return compare(case.model, selection, variants=list(variants), ddcm_max_outer=case.ddcm_max_outer,
-                   ddcm=case.ddcm_options, progress=progress, jobs=jobs, min_substep=case.min_substep)
+                   ddcm=case.ddcm_options, progress=progress, jobs=jobs, min_substep=case.min_substep,
+                   condense=case.condense)
 
 
 def write_results(case: Case, cmp: Comparison, out_dir: str | Path, *, rows: list[dict] | None = None,

@@ -141,3 +141,23 @@ def test_pardiso_schur_complement_is_the_back_solved_delassus_matrix():
         x, y = schur.solve(rhs), lu.solve(rhs)
         assert x.shape == rhs.shape
         assert np.max(np.abs(x - y)) <= 1e6 * EPS * np.max(np.abs(y))
+
+
+def test_the_case_file_key_condense():
+    """The top-level ``condense`` of a case file reaches every classical run (``false``: the full
+    problem, which says so), is recorded in ``results.json``'s parameters, and a value that is not
+    a boolean is refused in one line."""
+    from ddcm_casadi.casefiles.config import case_from_dict
+    from ddcm_casadi.errors import InputError
+    from ddcm_casadi.run import compare_case, parameters
+
+    doc = {"bar": {"length": 1.0, "area": 1e-4, "youngs_modulus": 200e9}, "obstacle": {"positions": [1.01, 0.99]}}
+    for condense, path in ((True, "condensed (Delassus"), (False, "full (condensation off)")):
+        case = case_from_dict({**doc, "condense": condense})
+        assert case.condense is condense
+        cmp = compare_case(case, ["fischer_burmeister", "mpcc"], ["classical"])
+        assert all(row["projection_path"].startswith(path) for row in cmp.summary())
+        assert parameters(case, cmp)["condense"] is condense
+    assert case_from_dict(dict(doc)).condense is True
+    with pytest.raises(InputError, match=r"^condense must be true or false, not 'no'$"):
+        case_from_dict({**doc, "condense": "no"})

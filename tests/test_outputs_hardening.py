@@ -259,8 +259,9 @@ def test_ctrl_c_during_an_ipopt_solve_stops_the_run(tmp_path):
     about 4 s of IPOPT iterations, measured): ``interrupted``, exit 130, nothing in ``--out``."""
     argv = [sys.executable, "-m", "ddcm_casadi.commands.compare", "--config", str(CASES / "hertz2d.toml"),
             "--set", "mesh.divisions=[16,16]",
-            # the homotopy: the active-set branch NLPs end the whole run in a fraction of a second
-            "--set", "formulations.mpcc.active_set=false",
+            # the homotopy on the full problem: the active-set branch NLPs, or the problem condensed
+            # on its pairs, end the whole run in a fraction of a second
+            "--set", "formulations.mpcc.active_set=false", "--set", "condense=false",
             "--formulations", "mpcc", "--variants", "classical", "--no-plots", "--out", "out"]
     # the progress line of the first step (stderr is a pipe): IPOPT is at work
     returncode, text = interrupt_at(argv, tmp_path, r"classical/mpcc\s+step\s+1/5")

@@ -153,7 +153,8 @@ def test_ctrl_c_stops_every_process(tmp_path):
     reads stderr to its end, which a live worker would hold open)."""
     argv = [sys.executable, "-m", "ddcm_casadi.commands.compare", "--config", str(CASES / "hertz2d.toml"),
             "--set", "mesh.divisions=[16,16]",  # MPCC's steps 2-5 take about 4 s (measured)
-            "--set", "formulations.mpcc.active_set=false",  # by the homotopy (not the active set)
+            # by the homotopy (not the active set) on the full problem (not condensed on the pairs)
+            "--set", "formulations.mpcc.active_set=false", "--set", "condense=false",
             "--formulations", "mpcc,fischer_burmeister", "--variants", "classical", "--jobs", "2",
             "--no-plots", "--out", "out"]
     # the first step of the (slow) MPCC run: both processes are at work

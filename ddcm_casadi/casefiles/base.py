@@ -13,9 +13,11 @@ kind shares:
 - ``[formulations.NAME]``: options of one contact formulation (checked against the registry).
 
 Top-level keys (before any section), shared by every kind: ``kinematics`` (``"small"`` or
-``"finite"``, where the kind offers it) and ``min_substep`` (the smallest sub-step of the automatic
+``"finite"``, where the kind offers it), ``min_substep`` (the smallest sub-step of the automatic
 bisection of a failed load step, a fraction of a step, both variants; default 1/16, 0 or 1 turns
-it off: :mod:`ddcm_casadi.drivers.substeps`).
+it off: :mod:`ddcm_casadi.drivers.substeps`) and ``condense`` (``true``, the default: the classical
+problem is solved condensed on its contact pairs where that applies; ``false``: on the full
+problem, :func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical`).
 
 A model kind registers itself with :func:`register_case_kind` (its section, the keys of its
 sections and a ``parse`` function that builds the :class:`Case`); :func:`case_from_dict` checks
@@ -54,8 +56,9 @@ from ddcm_casadi.drivers.substeps import DEFAULT_MIN_SUBSTEP, check_min_substep
 
 #: Keys of the sections every kind shares (``None``: checked elsewhere, here against the registry).
 #: Top-level keys (not sections): ``kinematics = "small" | "finite"`` (default the kind's first) and
-#: ``min_substep`` (the automatic step bisection of both variants, :mod:`ddcm_casadi.drivers.substeps`).
-TOP_LEVEL_KEYS = ("kinematics", "min_substep")
+#: ``min_substep`` (the automatic step bisection of both variants, :mod:`ddcm_casadi.drivers.substeps`)
+#: and ``condense`` (the classical problem condensed on its contact pairs where that applies).
+TOP_LEVEL_KEYS = ("kinematics", "min_substep", "condense")
 
 COMMON_SECTIONS: dict[str, set[str] | None] = {
     "data": {"path", "hookean", "c", "law", "grid", "samples"},
@@ -78,6 +81,9 @@ class Case:
     #: The top-level ``min_substep``: failed load steps are bisected down to this fraction of a
     #: step, in both variants (:mod:`ddcm_casadi.drivers.substeps`; 0 or 1: off).
     min_substep: float = DEFAULT_MIN_SUBSTEP
+    #: The top-level ``condense``: the classical problem condensed on its contact pairs where that
+    #: applies (:func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical`).
+    condense: bool = True
 
 
 #: ``parse(doc, *, base_dir, source, name) -> Case`` of a model kind.
@@ -328,10 +334,14 @@ def case_from_dict(doc: dict, *, base_dir: Path = Path("."), source: str = "<dic
                          f"(available: {', '.join(map(repr, kind.kinematics))})")
     ddcm = DDCMOptions.from_mapping(doc.get("ddcm", {}))  # checked before any work
     min_substep = check_min_substep(top.get("min_substep", DEFAULT_MIN_SUBSTEP))
+    condense = top.get("condense", True)
+    if not isinstance(condense, bool):
+        raise InputError(f"condense must be true or false, not {condense!r}")
     name = Path(source).stem if source != "<dict>" else None
     case = kind.parse(doc, base_dir=base_dir, source=source, name=name or kind.default_name)
     if kinematics != case.model.kinematics:
         case.model = dataclasses.replace(case.model, kinematics=kinematics)
     case.ddcm_options = ddcm
     case.min_substep = min_substep
+    case.condense = condense
     return case

@@ -65,6 +65,8 @@ pressure profiles for continua), all or none, in a folder locked against a secon
 --set KEY=VALUE overrides one value of the case file and is recorded in results.json.
 A load step that fails is retried in sub-steps (halved down to the top-level case key
 min_substep, default 0.0625 = 1/16 of a step; --set min_substep=0 turns it off).
+The classical problem is solved condensed on its contact pairs where that applies (--set
+condense=false: on the full problem; results.json says which path each run took).
 Large continua are announced before they are built, and refused when they cannot fit in memory.
 Exit status: 0 done, 2 bad input, 3 with --strict a step that did not converge, 130 Ctrl-C.
 """

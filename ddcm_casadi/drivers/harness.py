@@ -349,7 +349,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
             raise_on_failure: bool = False, ddcm_max_outer: int | None = None, ddcm_search: str | None = None,
             ddcm: DDCMOptions | None = None,
             progress: Callable[[str, str, StepResult], None] | None = None, jobs: int | None = 1,
-            min_substep: float = DEFAULT_MIN_SUBSTEP) -> Comparison:
+            min_substep: float = DEFAULT_MIN_SUBSTEP, condense: bool = True) -> Comparison:
     """Run every formulation in every variant along the model's load path.
 
     Parameters
@@ -381,6 +381,10 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
     min_substep : float
         A load step that fails is bisected automatically, in both variants, down to sub-steps of
         this fraction of a step (:mod:`ddcm_casadi.drivers.substeps`; default 1/16; 0 or 1: off).
+    condense : bool
+        Solve the classical problem condensed on its contact pairs where that applies (the
+        default; :func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical`, the same solutions to
+        round-off), or always on the full problem (``False``).
 
     Returns
     -------
@@ -413,7 +417,7 @@ def compare(model: ContactModel, formulations=None, *, variants: Iterable[str] =
         cb = (lambda s: progress(variant, form.name, s)) if progress else None
         t0 = time.perf_counter()
         if variant == "classical":
-            built = build_classical(form, problems)
+            built = build_classical(form, problems, reduce=condense)
             build = time.perf_counter() - t0
             r = solve_classical(problems, built, form.name, raise_on_failure=raise_on_failure, progress=cb,
                                 min_substep=min_substep)
