@@ -235,6 +235,12 @@ class StripSearch(CertifiedSearch):
         return cls._built(X, lambda a, b: X[a:b], base if base is not None and base.points is points else None)
 
     @classmethod
+    def from_rows(cls, rows, exact) -> "StripSearch":
+        """Built from blocks of a data set's rows (:meth:`_built`): neither the array of its
+        coordinates nor the exact KD-tree is made (``exact`` is not called)."""
+        return cls._built(rows, rows.read, None)
+
+    @classmethod
     def from_npy(cls, path) -> "StripSearch":
         """The search over the ``(N, 2)`` coordinates of a ``.npy`` file larger than memory: the
         file is read in blocks by plain reads (its pages stay in the operating system's page
@@ -480,6 +486,55 @@ class StripSearch(CertifiedSearch):
             todo = todo[ga <= radius[todo]]
             k0, k1 = k1, k1 + max(1, k1 // self.RING_STEP)
         return index, best, radius
+
+    def k_nearest(self, queries, k: int) -> np.ndarray:
+        """The ``k`` nearest data of each query, nearest first (ties by data index), exactly and
+        without an exact search beside it: the ``k``-th nearest of ``2k`` data around the query's
+        key ``b`` in its strip (clipped to the data) is an upper bound ``r`` on the ``k``-th nearest
+        distance, and every datum within ``r`` is examined (:meth:`_within`) and ranked by exact
+        distances."""
+        q = np.ascontiguousarray(queries, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != self.points.shape[1]:
+            raise InputError(f"queries must be (n, {self.points.shape[1]}) coordinates, got shape {q.shape}")
+        n, size = q.shape[0], self.keys.shape[1]
+        k = min(int(k), size)
+        if k < 1:
+            return np.zeros((n, 0), dtype=np.intp)
+        a, b = self.axes
+        s = np.clip(np.floor((q[:, a] - self.low) / self.width), 0, self.lo_t.size - 1).astype(np.int64)
+        start = np.clip(self._position(s, q[:, b], right=False) - k, 0, max(size - 2 * k, 0))
+        pos = np.minimum(start[:, None] + np.arange(min(2 * k, size)), size - 1)
+        some = _distances(q, self._coordinates(pos))
+        radius = np.partition(some, k - 1, axis=1)[:, k - 1] * (1.0 + 1e-9)  # >= the k-th nearest distance
+        owner, flat = self._within(q, radius)
+        dist = _distances(q[owner], self._coordinates(flat)[:, None, :])[:, 0]
+        index = self.perm[flat].astype(np.intp)
+        order = np.lexsort((index, dist, owner))
+        owner, index = owner[order], index[order]
+        first = np.searchsorted(owner, np.arange(n))  # each query has at least k data within r
+        return index[first[:, None] + np.arange(k)]
+
+    def _within(self, q: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every datum whose keys are within ``radius`` of each query's (so every datum within
+        ``radius`` of it, the keys' rounding counted): the query and the datum's sorted
+        position, by query. In each strip ``t`` whose gap ``g_t`` along ``a`` is within the
+        radius, the keys ``b`` within ``sqrt(radius^2 - g_t^2)`` of ``q_b``."""
+        a, b = self.axes
+        strips = self.lo_t.size
+        reach = radius + self.delta[0] + self.width  # a datum's strip is its key's
+        s0 = np.clip(np.floor((q[:, a] - reach - self.low) / self.width), 0, strips - 1).astype(np.int64)
+        s1 = np.clip(np.floor((q[:, a] + reach - self.low) / self.width), 0, strips - 1).astype(np.int64)
+        span = s1 - s0 + 1
+        rows = np.repeat(np.arange(q.shape[0]), span)
+        t = np.repeat(s0 - (np.cumsum(span) - span), span) + np.arange(int(span.sum()))
+        g = self._strip_gap(t, q[rows, a])
+        near = g <= radius[rows]
+        rows, t, g = rows[near], t[near], g[near]
+        h = np.sqrt(radius[rows] ** 2 - g ** 2) + self.delta[1]
+        p0 = self._position(t, q[rows, b] - h, right=False)
+        counts = self._position(t, q[rows, b] + h, right=True) - p0
+        flat = np.repeat(p0 - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+        return np.repeat(rows, counts), flat
 
     def _window(self, q):
         """The first search: ``2 m`` data around ``q_b`` in the query's strip and its two neighbours."""
