@@ -18,7 +18,7 @@ from ddcm_casadi.data.files import is_npy, read_csv, read_npy
 from ddcm_casadi.data import limits
 from ddcm_casadi.data.limits import check_balance, searchable_coordinates
 from ddcm_casadi.data.metric import Metric
-from ddcm_casadi.data.search import CHUNK, KDTreeSearch, NeighbourSearch, Rows, kd_tree, search_class, search_name
+from ddcm_casadi.data.search import KDTreeSearch, NeighbourSearch, Rows, kd_tree, search_class, search_name
 from ddcm_casadi.data import ann  # noqa: F401  (registers the certified searches)
 
 
@@ -54,12 +54,12 @@ FRAME_BLOCK = 1 << 18
 
 
 def _principal_frame(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> tuple[np.ndarray, ...]:
-    r"""The centre ``m`` and principal axes ``V`` of the data's scaled coordinates ``x_j``, and
-    their least and largest values (``lo``, ``hi``: the data's bounding box),
-    (:func:`~ddcm_casadi.data.limits.searchable_coordinates`, checked block by block), from one pass
-    over blocks of rows: with a shift ``x_0`` (the first block's mean, against cancellation),
-    ``S = sum (x_j - x_0)``, ``G = sum (x_j - x_0)(x_j - x_0)^T``, ``m = x_0 + S / N`` and ``V`` the
-    eigenvectors of ``G - S S^T / N = sum (x_j - m)(x_j - m)^T``, largest last.
+    r"""The centre ``m`` and principal axes ``V`` of the data's scaled coordinates ``x_j``
+    (:func:`~ddcm_casadi.data.limits.searchable_coordinates`, checked block by block) and their
+    least and largest values ``lo``, ``hi`` (the data's box), from one pass over blocks of rows:
+    with a shift ``x_0`` (the first block's mean, against cancellation), ``S = sum (x_j - x_0)``,
+    ``G = sum (x_j - x_0)(x_j - x_0)^T``, ``m = x_0 + S / N`` and ``V`` the eigenvectors of
+    ``G - S S^T / N = sum (x_j - m)(x_j - m)^T`` (the largest last).
 
     Raises
     ------
@@ -111,7 +111,8 @@ class MaterialDataset:
     search of the others but ``strips``) one float64 array of the search's coordinates (``16 k``
     bytes) and the tree (about 15 bytes); the warm search's graph 36 bytes more. The strip search
     (``strips``, one component) is built from blocks of the coordinates (12 bytes a point, neither
-    the array nor the tree): a float32 file of 1e9 points is searched in 12 GB. The KD-tree's coordinates stay float64:
+    the array nor the tree): a float32 file of 1e9 points is searched in 12 GB. The KD-tree's
+    coordinates stay float64:
     near the ends of a principal axis a float32 step is ``2^-24`` of the data's extent along it,
     as wide as the spacing of ``2^24 = 1.7e7`` points equally spaced along it (at 1e8 points some
     6 data share each step, so a float32 search would return ties to be re-ranked in float64),

@@ -10,6 +10,10 @@ The interface (:class:`NeighbourSearch`):
 
 - ``build(points, *, base=None)``: the backend over the ``(N, d)`` coordinates (``base``: an
   exact search over the same points that the backend may reuse instead of building its own);
+- ``from_rows(rows, exact)``: the backend over a data set's coordinates made on demand
+  (:class:`Rows`); by default ``build`` over them in one array, reusing the data set's exact
+  search ``exact()``; the strip search is built from blocks of rows instead, so a data set of
+  1e9 points needs neither the array (16 GB) nor the KD-tree;
 - ``nearest(queries, *, previous=None, stats=None)``: the index of the datum nearest each query,
   optionally warm-started from a previous assignment ``previous``;
 - ``k_nearest(queries, k)``: the ``k`` nearest, nearest first;

@@ -115,7 +115,8 @@ class DDCMSolver:
         # law's cone has no finite set of pieces), once per problem (not timed with the steps):
         # the solvers of the formulations of one model share them.
         self.coverage = problems.projection.shared(
-            ("data_coverage", self.options.search), lambda: DataCoverage(model.dataset, model.n_points, self.options.search))
+            ("data_coverage", self.options.search),
+            lambda: DataCoverage(model.dataset, model.n_points, self.options.search))
         self.affine = bool(problems.projection.affine)
         self.enumerate_pairs = enumerate_pairs
         enumerable = self.affine and not model.frictional and model.n_contacts <= enumerate_pairs
