@@ -7,6 +7,7 @@ range of its search coordinates, the balance of its metric) is :mod:`ddcm_casadi
 from __future__ import annotations
 
 import math
+import mmap
 import os
 from dataclasses import dataclass, field
 
@@ -42,6 +43,21 @@ def check_positive(name: str, value: float) -> float:
     return positive(value, name)
 
 
+def _mapping(values: np.ndarray) -> mmap.mmap | None:
+    """The memory map under an array (a view of a memory-mapped ``.npy`` file), else ``None``."""
+    while isinstance(values, np.ndarray):
+        values = values.base
+    return values if isinstance(values, mmap.mmap) else None
+
+
+def _release(*arrays: np.ndarray) -> None:
+    """Leave the pages of memory-mapped arrays to the page cache (``MADV_DONTNEED`` on their
+    mapping: the pages stay cached, shared and clean, but leave this process's resident set), so
+    passes over a 1e9-point file do not add the file's 8 GB to the process's memory."""
+    for mapping in {id(m): m for m in map(_mapping, arrays) if m is not None}.values():
+        mapping.madvise(mmap.MADV_DONTNEED)
+
+
 def _stored(values) -> np.ndarray:
     """Data values as stored: float64 and float32 arrays as given (no copy), others as float64."""
     a = np.asarray(values)
@@ -72,6 +88,7 @@ def _principal_frame(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> 
     shift, total, gram = None, np.zeros(d), np.zeros((d, d))
     for a in range(0, n, FRAME_BLOCK):
         X, low, high = searchable_coordinates(metric, strain[a:a + FRAME_BLOCK], stress[a:a + FRAME_BLOCK], first=a)
+        _release(strain, stress)
         lo, hi = np.minimum(lo, low), np.maximum(hi, high)
         if shift is None:
             shift = np.array([X[:, i].mean() for i in range(d)])  # by columns: faster than along axis 0
@@ -164,8 +181,15 @@ class MaterialDataset:
         mean, axes, lo, hi = _principal_frame(metric, strain, stress)
         object.__setattr__(self, "_frame", (mean, axes))
         object.__setattr__(self, "box", (lo, hi))
-        object.__setattr__(self, "_rows", Rows(strain.shape[0], 2 * k,
-                                               lambda index: self.coordinates(strain[index], stress[index])))
+        object.__setattr__(self, "_rows", Rows(strain.shape[0], 2 * k, self._rows_of))
+
+    def _rows_of(self, index) -> np.ndarray:
+        """The search coordinates of the data ``index`` (a slice or an index array, :class:`Rows`);
+        a block read from a memory-mapped file leaves its pages to the page cache (:func:`_release`)."""
+        X = self.coordinates(self.strain[index], self.stress[index])
+        if isinstance(index, slice):
+            _release(self.strain, self.stress)
+        return X
 
     @property
     def k(self) -> int:
