@@ -50,14 +50,13 @@ def _mapping(values: np.ndarray) -> mmap.mmap | None:
     return values if isinstance(values, mmap.mmap) else None
 
 
-def _advise(*arrays: np.ndarray, option: int, least: int = 0) -> None:
-    """``madvise(option)`` on the mappings of memory-mapped arrays of at least ``least`` bytes
-    (arrays in memory: nothing). ``MADV_DONTNEED`` leaves their pages to the page cache (they stay
-    cached, shared and clean, but leave this process's resident set), so passes over a 1e9-point
-    file do not add the file's 8 GB to the process's memory; ``MADV_RANDOM`` stops the kernel's
-    fault-around (a fault maps its own page, not the 64 KB around it), for scattered gathers."""
+def _release(*arrays: np.ndarray, least: int = 0) -> None:
+    """Leave the pages of memory-mapped arrays (mappings of at least ``least`` bytes) to the page
+    cache (``MADV_DONTNEED`` on their mapping: the pages stay cached, shared and clean, but leave
+    this process's resident set), so passes over a 1e9-point file do not add the file's 8 GB to
+    the process's memory."""
     for mapping in {id(m): m for m in map(_mapping, arrays) if m is not None and len(m) >= least}.values():
-        mapping.madvise(option)
+        mapping.madvise(mmap.MADV_DONTNEED)
 
 
 def _stored(values) -> np.ndarray:
@@ -66,11 +65,12 @@ def _stored(values) -> np.ndarray:
     return a if a.dtype in (np.float64, np.float32) else a.astype(np.float64)
 
 
-#: Data gathered from a memory-mapped file between two releases of its pages (a page each: at
-#: most 1 GB of them in the process).
-RELEASE_ROWS = 1 << 18
-#: Files from this size on are not kept mapped by a search's gathers (at 1e8 points, 0.8 GB,
-#: releases every 2^14 data made 1e5 states 5x slower: every gather faulted again).
+#: Data gathered from a memory-mapped file between two releases of its pages: each fault maps
+#: the 64 KB around it too (the kernel's fault-around), so at most 1 GB in the process (the
+#: gathers of 1e5 states' searches from an 8 GB file mapped 11 GB without the releases).
+RELEASE_ROWS = 1 << 14
+#: Files from this size on are not kept mapped by a search's gathers (at 1e8 points, 0.8 GB, the
+#: releases made 1e5 states 5x slower: every gather faulted again).
 RELEASE_BYTES = 1 << 32
 #: Rows per block of the data set's pass that fixes its frame (a block of 2^18 rows of 12
 #: coordinates is 25 MB of temporaries).
@@ -96,7 +96,7 @@ def _principal_frame(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> 
     shift, total, gram = None, np.zeros(d), np.zeros((d, d))
     for a in range(0, n, FRAME_BLOCK):
         X, low, high = searchable_coordinates(metric, strain[a:a + FRAME_BLOCK], stress[a:a + FRAME_BLOCK], first=a)
-        _advise(strain, stress, option=mmap.MADV_DONTNEED)
+        _release(strain, stress)
         lo, hi = np.minimum(lo, low), np.maximum(hi, high)
         if shift is None:
             shift = np.array([X[:, i].mean() for i in range(d)])  # by columns: faster than along axis 0
@@ -151,7 +151,6 @@ class MaterialDataset:
     #: <ddcm_casadi.data.metric.Metric.coordinates>`, before centring and rotation), ``(2k,)`` each.
     box: tuple = field(init=False, repr=False, default=())
     _rows: Rows | None = field(init=False, repr=False, default=None)
-    _gathered: list = field(init=False, repr=False, default_factory=lambda: [0])  # since the last release
 
     def __post_init__(self) -> None:
         if isinstance(self.c, str):
@@ -194,27 +193,14 @@ class MaterialDataset:
 
     def _rows_of(self, index) -> np.ndarray:
         """The search coordinates of the data ``index`` (a slice or an index array, :class:`Rows`).
-        From a memory-mapped file (:func:`_advise`): a block of a build's pass is read with the
-        kernel's readahead and fault-around and its pages then left to the page cache; scattered
-        data are gathered a page each (``MADV_RANDOM``: with fault-around, the gathers of 1e5
-        states' searches from an 8 GB file mapped 11 GB), and from a file of
-        :data:`RELEASE_BYTES` or more their pages are left to the page cache every
-        :data:`RELEASE_ROWS` data."""
-        pair = (self.strain, self.stress)
-        if isinstance(index, slice):
-            _advise(*pair, option=mmap.MADV_NORMAL)
+        From a memory-mapped file, the pages read are left to the page cache (:func:`_release`)
+        after a block of a build's pass, and, from a file of :data:`RELEASE_BYTES` or more, after
+        every :data:`RELEASE_ROWS` data a search gathers."""
+        if isinstance(index, slice) or index.size <= RELEASE_ROWS:
             X = self.coordinates(self.strain[index], self.stress[index])
-            _advise(*pair, option=mmap.MADV_DONTNEED)
+            _release(self.strain, self.stress, least=0 if isinstance(index, slice) else RELEASE_BYTES)
             return X
-        if index.size > RELEASE_ROWS:
-            return np.concatenate([self._rows_of(index[a:a + RELEASE_ROWS]) for a in range(0, index.size, RELEASE_ROWS)])
-        _advise(*pair, option=mmap.MADV_RANDOM)
-        X = self.coordinates(self.strain[index], self.stress[index])
-        self._gathered[0] += index.size
-        if self._gathered[0] >= RELEASE_ROWS:
-            _advise(*pair, option=mmap.MADV_DONTNEED, least=RELEASE_BYTES)
-            self._gathered[0] = 0
-        return X
+        return np.concatenate([self._rows_of(index[a:a + RELEASE_ROWS]) for a in range(0, index.size, RELEASE_ROWS)])
 
     @property
     def k(self) -> int:
