@@ -1,8 +1,8 @@
 """Certified nearest-datum search at scale: the strip search (one-component data), faiss's IVF
 (the extra ``ann``) and the exact KD-tree, on one machine in one run.
 
-    python benchmarks/ann_search.py N [--components 1|6] [--backends strips,kdtree,ann]
-                                      [--queries 100000] [--out DIR]
+    python benchmarks/ann_search.py N [--components 1|6] [--backends strips,dataset,kdtree,ann]
+                                      [--queries 100000] [--out DIR] [--data-dir DIR]
 
 Each backend runs in a fresh process (its peak memory is its own): ``N`` points of a noisy linear
 law in the search's coordinates (:func:`law_data`; float32 for ``strips`` and ``ann``, float64
@@ -10,12 +10,20 @@ for the KD-tree, which is float64 only), then ``--queries`` states near the data
 (:func:`states`). The strip search reads its data from a float32 ``.npy`` file written beforehand
 in a temporary folder (``--tmp``, default ``/tmp``) by another process (:func:`law_file`), as a
 set larger than memory would be: the file's pages stay in the page cache, outside the measured
-process. Its answers on a sample of 200 states are checked against an exact search that shares
-nothing with it (:func:`slab_check`). Measured (wall and CPU seconds: on a shared machine the
-process may get a fraction of a core, and CPU seconds are what it needed): build seconds;
-seconds to answer every state exactly (the certified search widened until every answer is
-certified); the share certified by the first search and its seconds; the memory of the structure (bytes a point beside the data) and the process's peak
-resident memory above the imports (Linux ``VmHWM``), data included. Prints a table and writes
+process (``--data-dir`` keeps the file, and reuses one of ``N`` points written there before).
+Its answers on a sample of 200 states are checked against an exact search that shares nothing
+with it (:func:`slab_check`). ``dataset`` is the same file reached as a DDCM user reaches it:
+:meth:`MaterialDataset.from_npy <ddcm_casadi.MaterialDataset.from_npy>` (the file's columns as
+strain and stress, ``c = 1``, so its scaled coordinates are the file's values) and its
+``strips`` search (``[ddcm] search = "strips"``), built from blocks of the data set's
+coordinates (one more pass for its frame; float32 keys of float64 coordinates, re-ranked from
+the file), without the KD-tree or a float64 copy; its build seconds include the data set's.
+Measured (wall and CPU seconds: on a shared machine the process may get a fraction of a core,
+and CPU seconds are what it needed): build seconds; seconds to answer every state exactly (the
+certified search widened until every answer is certified); the share certified by the first
+search and its seconds; the memory of the structure (bytes a point beside the data) and the
+process's peak resident memory above the imports (Linux ``VmHWM``), data included; the load
+average of the machine before and after (``os.getloadavg``, 1 minute). Prints a table and writes
 ``DIR/ann_search_N_k.json`` (atomically).
 """
 
@@ -23,6 +31,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import mmap
+import os
 import subprocess
 import sys
 import tempfile
@@ -31,12 +41,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ddcm_casadi.data.ann import IVFSearch, StripSearch
+from ddcm_casadi.data.ann import Certificate, IVFSearch, StripSearch
+from ddcm_casadi.data.dataset import MaterialDataset
 from ddcm_casadi.data.metric import Metric
 from ddcm_casadi.data.search import KDTreeSearch
 from ddcm_casadi.io import write_json_atomic
 
-BACKENDS = {"strips": StripSearch, "ann": IVFSearch, "kdtree": KDTreeSearch}
+BACKENDS = {"strips": StripSearch, "dataset": StripSearch, "ann": IVFSearch, "kdtree": KDTreeSearch}
+#: The backends that search the float32 data file of :func:`law_file` (one component).
+FROM_FILE = ("strips", "dataset")
 
 
 def law_blocks(n: int, components: int, *, seed: int = 0, noise: float = 0.01):
@@ -125,6 +138,17 @@ def slab_check(path: Path, Q: np.ndarray, distance: np.ndarray) -> np.ndarray:
     return best
 
 
+def gathered(X: np.memmap, index: np.ndarray) -> np.ndarray:
+    """``X[index]`` (float64) of a memory-mapped file by chunks, each chunk's pages then left to
+    the page cache (``MADV_DONTNEED``): each fault maps the 64 KB around it, so 1e5 random rows
+    of an 8 GB file would map 6 GB into the process."""
+    out = np.empty((index.size, X.shape[1]))
+    for a in range(0, index.size, 4096):
+        out[a:a + 4096] = X[index[a:a + 4096]]
+        X._mmap.madvise(mmap.MADV_DONTNEED)
+    return out
+
+
 def states(X: np.ndarray, n: int, *, seed: int = 1, spread: float = 0.05) -> np.ndarray:
     """``n`` query states near the data: random data points moved by Gaussian steps of
     ``spread`` times the data's standard deviation along each axis (float64)."""
@@ -157,6 +181,7 @@ def _structure_bytes(search) -> int:
 def measure(backend: str, n: int, components: int, queries: int, data: Path | None = None) -> dict:
     """One backend at one size (run in a fresh process by :func:`main`); ``data``: the folder of
     :func:`law_file` (the strip search over the file)."""
+    load = os.getloadavg()[0]
     base = _status("VmRSS:")
     _reset_peak()
     if data is not None:
@@ -165,9 +190,15 @@ def measure(backend: str, n: int, components: int, queries: int, data: Path | No
         X = law_data(n, components, dtype=np.float64 if backend == "kdtree" else np.float32)
         Q = states(X, queries)
     t0, c0 = time.perf_counter(), time.process_time()
-    search = StripSearch.from_npy(data / "law.npy") if data is not None else BACKENDS[backend].build(X)
+    if backend == "dataset":  # the DDCM user's path: the data set's frame, then its strip search
+        dataset = MaterialDataset.from_npy(data / "law.npy", c=1.0)
+        search = dataset.search("strips")
+        Q = dataset.coordinates(Q[:, 0], Q[:, 1])
+    else:
+        search = StripSearch.from_npy(data / "law.npy") if data is not None else BACKENDS[backend].build(X)
     build, build_cpu = time.perf_counter() - t0, time.process_time() - c0
     row = dict(backend=backend, points=n, components=components, coordinates=X.shape[1], queries=queries,
+               load_before=load,
                build_seconds=build, build_cpu_seconds=build_cpu, data_bytes=int(X.nbytes),
                structure_bytes=_structure_bytes(search), peak_build_bytes=_status("VmHWM:") - base)
     if backend == "kdtree":
@@ -188,8 +219,13 @@ def measure(backend: str, n: int, components: int, queries: int, data: Path | No
                    median_distance=float(np.median(cert.distance)))
     row["peak_bytes"] = _status("VmHWM:") - base
     row["structure_bytes_per_point"] = row["structure_bytes"] / n
+    row["load_after"] = os.getloadavg()[0]
     if data is not None:  # agreement with an exact search on a sample, first search and widened
         pick = np.random.default_rng(2).choice(queries, min(queries, 200), replace=False)
+        if backend == "dataset":  # the answers' distances in the file's own coordinates
+            Q = np.load(data / "states.npy")
+            cert, first = (Certificate(c.index, np.sqrt(np.einsum("ij,ij->i", *(2 * [gathered(X, c.index) - Q]))),
+                                       c.bound, c.certified) for c in (cert, first))
         t0 = time.perf_counter()
         truth = slab_check(data / "law.npy", Q[pick], cert.distance[pick])
         tol = 10 * 2.0 ** -53  # the two float64 distances' roundoff (2 coordinates)
@@ -201,7 +237,7 @@ def measure(backend: str, n: int, components: int, queries: int, data: Path | No
     return row
 
 
-COLUMNS = ("backend", "points", "coordinates", "build_seconds", "build_cpu_seconds", "query_seconds",
+COLUMNS = ("backend", "points", "coordinates", "load_before", "build_seconds", "build_cpu_seconds", "query_seconds",
            "query_cpu_seconds", "first_seconds", "first_cpu_seconds",
            "first_certified", "certified", "agreement", "structure_bytes_per_point", "peak_build_bytes",
            "peak_bytes")
@@ -215,18 +251,32 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def run(n: int, components: int, backends, queries: int, tmp: str = "/tmp") -> list[dict]:
+def _written(folder: Path, n: int, queries: int) -> bool:
+    """Whether ``folder`` holds the data file of ``n`` points and ``queries`` states (:func:`law_file`)."""
+    try:
+        return (np.load(folder / "law.npy", mmap_mode="r").shape == (n, 2)
+                and np.load(folder / "states.npy", mmap_mode="r").shape == (queries, 2))
+    except (OSError, ValueError):
+        return False
+
+
+def run(n: int, components: int, backends, queries: int, tmp: str = "/tmp", data_dir: str | None = None) -> list[dict]:
     """Each backend in a fresh process; a failure (e.g. faiss missing) is a row with ``error``.
-    The one-component strip search reads a float32 file written by another process."""
+    The one-component strip search reads a float32 file written by another process (in
+    ``data_dir``, kept and reused, if given)."""
     rows = []
     for backend in backends:
-        with tempfile.TemporaryDirectory(dir=tmp) as folder:
+        with tempfile.TemporaryDirectory(dir=tmp) as scratch:
+            folder = Path(data_dir or scratch)
             extra, made = [], None
-            if backend == "strips" and components == 1:
-                t0 = time.perf_counter()
-                subprocess.run([sys.executable, __file__, str(n), "--write", folder, "--queries", str(queries)],
-                               check=True)
-                made, extra = time.perf_counter() - t0, ["--data", folder]
+            if backend in FROM_FILE and components == 1:
+                if not _written(folder, n, queries):
+                    folder.mkdir(parents=True, exist_ok=True)
+                    t0 = time.perf_counter()
+                    subprocess.run([sys.executable, __file__, str(n), "--write", str(folder), "--queries",
+                                    str(queries)], check=True)
+                    made = time.perf_counter() - t0
+                extra = ["--data", str(folder)]
             r = subprocess.run([sys.executable, __file__, str(n), "--components", str(components), "--one", backend,
                                 "--queries", str(queries), *extra], capture_output=True, text=True)
         if r.returncode == 0:
@@ -243,10 +293,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("n", type=float, help="data points (1e8 is accepted)")
     ap.add_argument("--components", type=int, choices=(1, 6), default=1)
-    ap.add_argument("--backends", default=None, help="default: strips,kdtree (1 component), ann,kdtree (6)")
+    ap.add_argument("--backends", default=None, help="default: strips,dataset,kdtree (1 component), ann,kdtree (6)")
     ap.add_argument("--queries", type=int, default=100_000)
     ap.add_argument("--out", default="results")
     ap.add_argument("--tmp", default="/tmp", help="folder of the strip search's temporary data file")
+    ap.add_argument("--data-dir", default=None, help="keep the data file here (and reuse one written before)")
     ap.add_argument("--one", choices=tuple(BACKENDS), help=argparse.SUPPRESS)
     ap.add_argument("--data", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--write", type=Path, help=argparse.SUPPRESS)
@@ -258,8 +309,8 @@ def main(argv=None) -> int:
     if args.one:
         print(json.dumps(measure(args.one, n, args.components, args.queries, args.data)))
         return 0
-    backends = (args.backends or ("strips,kdtree" if args.components == 1 else "ann,kdtree")).split(",")
-    rows = run(n, args.components, backends, args.queries, args.tmp)
+    backends = (args.backends or ("strips,dataset,kdtree" if args.components == 1 else "ann,kdtree")).split(",")
+    rows = run(n, args.components, backends, args.queries, args.tmp, args.data_dir)
     Path(args.out).mkdir(parents=True, exist_ok=True)
     print(table(rows))
     write_json_atomic(Path(args.out) / f"ann_search_{n:.0e}_{args.components}.json", rows)

@@ -764,7 +764,8 @@ def data_size(n_data: int, components: int, *, states: int, warm: bool) -> dict:
 
 def certified_search(n_data: int, components: int, backends: str | None = None) -> list[dict]:
     """The certified searches (``benchmarks/ann_search.py``: the strip search for one component,
-    over a float32 file, faiss's IVF for six, where installed) against the exact KD-tree, each
+    over a float32 file, alone and through ``MaterialDataset`` (``dataset``), faiss's IVF for six,
+    where installed) against the exact KD-tree, each
     backend in a fresh process: build seconds, seconds for 1e5 states near the data answered
     exactly, the share certified by the first search, agreement with an exact search on 200
     states (strips), memory. The floor is the KD-tree's search of the same states (``nan``

@@ -46,8 +46,6 @@ else a factor and back-solves.
 from __future__ import annotations
 
 import atexit
-import ctypes
-import functools
 import importlib
 import importlib.util
 import os
@@ -62,6 +60,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.heap import release_heap
 
 
 #: Bytes per stored material datum and Mandel component (strain and stress, 8 bytes each, about
@@ -538,27 +537,6 @@ def abandoned_work() -> bool:
     (:func:`ddcm_casadi.commands.base.run_guarded`)."""
     _ABANDONED[:] = [done for done in _ABANDONED if not done.is_set()]
     return bool(_ABANDONED)
-
-
-@functools.cache
-def _malloc_trim() -> Callable[[int], int] | None:
-    """glibc's ``malloc_trim``, or ``None`` (another C library)."""
-    try:
-        return ctypes.CDLL(None).malloc_trim
-    except (OSError, AttributeError):
-        return None
-
-
-def release_heap() -> None:
-    """Give the free pages of the C heap back to the system (glibc's ``malloc_trim(0)``; nothing
-    where the C library has none). A freed factor and a build's freed temporaries stay in the
-    process's heap otherwise, in holes that later arrays of other sizes do not fill: at 1e5
-    points, releasing after the reference scales' factor and the reduction's temporaries took the
-    DDCM run's peak from 0.63 to 0.56 GB (``docs/performance.md``). A few milliseconds; called
-    after a large factor is dropped and after a reduction is built, not in a loop."""
-    trim = _malloc_trim()
-    if trim is not None:
-        trim(0)
 
 
 class _ThreadOwned:

@@ -5,13 +5,16 @@ from __future__ import annotations
 
 import builtins
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from ddcm_casadi import formulations
+from ddcm_casadi.casefiles.config import load_case
 from ddcm_casadi.data.ann import U64, IVFSearch, StripSearch
 from ddcm_casadi.data.dataset import MaterialDataset
-from ddcm_casadi.data.search import SEARCHES, search_class
+from ddcm_casadi.data.search import SEARCHES, KDTreeSearch, search_class
 from ddcm_casadi.drivers.ddcm import DDCMSolver
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.errors import InputError
@@ -20,6 +23,7 @@ from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.validation.quality_rungs import noisy_dataset
 
 RNG = np.random.default_rng(28)
+CASES = Path(__file__).resolve().parents[1] / "examples" / "cases"
 
 
 def _brute(X: np.ndarray, Q: np.ndarray) -> np.ndarray:
@@ -81,6 +85,20 @@ def test_certificate_is_sound_and_the_search_exact(cloud, backend):
     np.testing.assert_allclose(found, truth, rtol=tol, atol=0)
 
 
+@pytest.mark.parametrize("cloud", [c for c in _clouds() if c != "12 coordinates"])
+@pytest.mark.parametrize("k", [1, 4, 9])
+def test_strips_k_nearest_are_the_kd_tree_s(cloud, k):
+    """The strip search's own k nearest (no exact search beside it) are the KD-tree's: the same
+    distances, nearest first (ties may differ in index)."""
+    X, Q = _clouds()[cloud]
+    got = StripSearch.build(X).k_nearest(Q, k)
+    want = KDTreeSearch.build(np.asarray(X, dtype=np.float64)).k_nearest(Q, k)
+    X = X.astype(np.float64)
+    distance = [np.sqrt(np.einsum("ijk,ijk->ij", X[i] - Q[:, None], X[i] - Q[:, None])) for i in (got, want)]
+    np.testing.assert_allclose(distance[0], distance[1], rtol=_tolerance(2), atol=0)
+    assert np.all(np.diff(distance[0], axis=1) >= 0) and all(len(set(row)) == k for row in got)
+
+
 def test_strips_first_search_certifies_most_states_near_the_data():
     """Near a band of data the first window certifies most answers (the certificate is not
     vacuous), and all of those at the exact distance."""
@@ -125,8 +143,8 @@ def test_bad_input_is_one_line():
         StripSearch.build(np.zeros((5, 1)))
     with pytest.raises(InputError, match=r"^queries must be \(n, 2\) coordinates"):
         StripSearch.build(np.zeros((5, 2))).certified(np.zeros((3, 3)))
-    with pytest.raises(InputError, match="k_nearest through an exact search"):
-        StripSearch.build(np.zeros((5, 2))).k_nearest(np.zeros((1, 2)), 2)
+    with pytest.raises(InputError, match=r"^queries must be \(n, 2\) coordinates"):
+        StripSearch.build(np.zeros((5, 2))).k_nearest(np.zeros((1, 3)), 2)
 
 
 @pytest.mark.parametrize("search", [b.name for b in _searches()])
@@ -225,3 +243,39 @@ def test_strip_build_with_more_groups_than_sixteen_bits(monkeypatch):
     found = search.nearest(Q)
     d = np.sqrt(np.einsum("ij,ij->i", X[found] - Q, X[found] - Q))
     np.testing.assert_allclose(d, _brute(X, Q), rtol=_tolerance(2), atol=0)
+
+
+def test_a_float32_data_file_reaches_the_strip_search_through_a_case_file(tmp_path):
+    """A float32 ``.npy`` data file chosen in a case file with ``[ddcm] search = "strips"``: the
+    data set keeps the file's float32 values (no float64 copy), the strip search is built from
+    blocks of its coordinates without the array of them or the KD-tree, and the DDCM path (data
+    assignment, displacements, pressures, distances, iterations) is the exact KD-tree's over the
+    same file (the strip search's answers are exact: every one certified or widened)."""
+    noisy = noisy_dataset(0.05, 1, n_data=3000)
+    np.save(tmp_path / "noisy.npy", np.column_stack([noisy.strain, noisy.stress]).astype(np.float32))
+    case = (CASES / "bar_stops.toml").read_text()
+    case = case.replace(case[case.index("hookean = "):case.index("\n", case.index("hookean = "))], 'path = "noisy.npy"')
+    paths = {}
+    for search in ("kdtree", "strips"):
+        (tmp_path / f"{search}.toml").write_text(case.replace("[ddcm]", f'[ddcm]\nsearch = "{search}"', 1))
+        loaded = load_case(tmp_path / f"{search}.toml")
+        data = loaded.model.dataset
+        assert data.strain.dtype == np.float32 and not data.strain.flags.owndata and not data._searches
+        problems = build_problems(loaded.model)
+        solver = DDCMSolver(problems, formulations.get("fischer_burmeister").build(problems.projection),
+                            options=loaded.ddcm_options)
+        paths[search] = solver.solve()
+        assert set(data._searches) == {search} and (search == "kdtree") == (data._rows._array is not None)
+    for field in ("data_index", "outer_iterations", "u", "p", "distance"):
+        np.testing.assert_array_equal(paths["strips"].array(field), paths["kdtree"].array(field), err_msg=field)
+
+
+def test_data_set_coordinates_read_in_blocks_equal_those_gathered():
+    """The strip search's keys come from blocks of rows and its re-ranking from gathered rows:
+    the two must agree bit for bit (its bound counts only the float32 rounding of the keys)."""
+    noisy = noisy_dataset(0.05, 2, n_data=5000)
+    data = MaterialDataset(noisy.strain.astype(np.float32), noisy.stress.astype(np.float32), noisy.c)
+    rows = data._rows
+    pick = RNG.integers(0, len(data), (70, 3))
+    assert np.array_equal(rows[pick], rows.read(0, len(data))[pick])
+    assert np.array_equal(rows.read(17, 4000), rows.array()[17:4000])

@@ -144,7 +144,7 @@ def test_npy_file_limits_and_paths(tmp_path, monkeypatch):
     with pytest.raises(InputError, match=r"needs \(N, 2\)"):
         MaterialDataset.from_npy(tmp_path / "d.npy", c=200e9)
     assert len(MaterialDataset.from_npy(tmp_path / "d.npy", c=Metric(D3))) == 50
-    monkeypatch.setattr(limits, "MAX_DATA_POINTS", 49)
+    monkeypatch.setattr(limits, "MAX_MAPPED_DATA_POINTS", 49)
     with pytest.raises(InputError, match="50 points, more than 49"):
         MaterialDataset.from_npy(tmp_path / "d.npy", c=D3)
     with pytest.raises(InputError, match="directory"):

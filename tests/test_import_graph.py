@@ -135,7 +135,7 @@ LAYERS = {
     "outputs": {"drivers", "models", "data", "problems"},
     "validation": {"casefiles", "drivers", "formulations", "loops", "problems", "models", "data", "cases"},
 }
-CORE = {"errors", "registry", "inputs", "io", "linalg", "factor_updates", "evaluate", "parallel", "version"}
+CORE = {"errors", "registry", "inputs", "io", "linalg", "heap", "factor_updates", "evaluate", "parallel", "version"}
 
 
 def _layer(module: str) -> str:

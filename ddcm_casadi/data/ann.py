@@ -32,6 +32,7 @@ import numpy as np
 
 from ddcm_casadi.data.search import CHUNK, NeighbourSearch, _count, register_search
 from ddcm_casadi.errors import InputError
+from ddcm_casadi.heap import kept_heap
 
 #: Unit roundoff of float32 and float64 (round to nearest).
 U32 = 2.0 ** -24
@@ -97,7 +98,7 @@ class CertifiedSearch(NeighbourSearch):
             for a in range(0, todo.size, CHUNK):
                 rows = todo[a:a + CHUNK]
                 found = self._search(q[rows], level, dist[rows])
-                better = found[1] <= dist[rows]  # a widened search keeps the best seen
+                better = found[1] < dist[rows]  # a widened search keeps the best seen (ties: the first)
                 index[rows[better]], dist[rows[better]] = found[0][better], found[1][better]
                 bound[rows] = found[2]
             todo = todo[~_is_certified(dist[todo], bound[todo])]
@@ -106,7 +107,8 @@ class CertifiedSearch(NeighbourSearch):
     def _search(self, q: np.ndarray, level: int, reach: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Best examined index, its exact distance and the bound on the rest, at widening
         ``level`` (0: the first search; each level examines more), ``reach`` the best distance
-        found so far (``inf`` at level 0)."""
+        found so far (``inf`` at level 0). Where none is nearer than ``reach`` the index may be
+        any: :meth:`certified` keeps the one it has unless a strictly nearer one is returned."""
         raise NotImplementedError
 
     def nearest(self, queries, *, previous=None, stats=None) -> np.ndarray:
@@ -235,6 +237,12 @@ class StripSearch(CertifiedSearch):
         return cls._built(X, lambda a, b: X[a:b], base if base is not None and base.points is points else None)
 
     @classmethod
+    def from_rows(cls, rows, exact) -> "StripSearch":
+        """Built from blocks of a data set's rows (:meth:`_built`): neither the array of its
+        coordinates nor the exact KD-tree is made (``exact`` is not called)."""
+        return cls._built(rows, rows.read, None)
+
+    @classmethod
     def from_npy(cls, path) -> "StripSearch":
         """The search over the ``(N, 2)`` coordinates of a ``.npy`` file larger than memory: the
         file is read in blocks by plain reads (its pages stay in the operating system's page
@@ -263,6 +271,13 @@ class StripSearch(CertifiedSearch):
 
     @classmethod
     def _built(cls, X, read, base) -> "StripSearch":
+        """The search over ``X`` (its ``shape`` and ``dtype``) read by blocks ``read(a, b)``
+        (:meth:`_passes`), with glibc's heap kept (:func:`~ddcm_casadi.heap.kept_heap`)."""
+        with kept_heap():
+            return cls._passes(X, read, base)
+
+    @classmethod
+    def _passes(cls, X, read, base) -> "StripSearch":
         """The build: one pass for the extremes, one for the strip counts, one that deals the
         data to groups of consecutive strips (a counting sort, O(N)), and a sort within each
         group of at most :attr:`GROUP` data (strip, then key ``b``). Beside the result (12 bytes
@@ -389,11 +404,12 @@ class StripSearch(CertifiedSearch):
         if level == 0:
             parts = [self._window(q[c:c + self.BLOCK]) for c in range(0, q.shape[0], self.BLOCK)]
             return tuple(np.concatenate(p) for p in zip(*parts))
-        first = self._window(q)
-        far = ~np.isfinite(first[1])
+        # from the first search's best (kept by certified() unless a nearer one is found)
+        index, radius = np.zeros(q.shape[0], dtype=np.intp), np.array(reach, dtype=np.float64)
+        far = ~np.isfinite(radius)
         if far.any():  # nothing in the first window: start from a datum of the nearest filled strip
-            first[0][far], first[1][far] = self._some_datum(q[far])
-        return self._rings(q, first[0], first[1])
+            index[far], radius[far] = self._some_datum(q[far])
+        return self._rings(q, index, radius)
 
     def _some_datum(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """A datum of the filled strip nearest each query's and its distance (an upper bound on
@@ -430,10 +446,13 @@ class StripSearch(CertifiedSearch):
         (ring ``k``: strips ``s - k`` and ``s + k``; several rings a pass, :attr:`RING_STEP`):
         in strip ``t``, unless its box ``[lo_t, hi_t] x [b_lo_t, b_hi_t]`` is farther than the
         radius, the keys ``b`` within ``sqrt(radius^2 - g_t^2)`` of ``q_b``; the radius shrinks
-        to the best distance found. A query stops when the strips beyond its ring are farther
-        than its radius, so what is left is farther than the answer: certified, ``B = radius``
-        (enlarged by a relative ``1e-9`` so that the float64 distances of the examined data stay
-        below it)."""
+        to the best distance found. Each pass first probes, in each strip whose box is within
+        the radius, the two data around ``q_b`` (one bisection), and shrinks the radius to the
+        best of them before it scans: a query far from the data (in the sparse tails) starts
+        from a radius many strips wide, and the scans of those strips would examine every datum
+        within it. A query stops when the strips beyond its ring are farther than its radius,
+        so what is left is farther than the answer: certified, ``B = radius`` (enlarged by a
+        relative ``1e-9`` so that the float64 distances of the examined data stay below it)."""
         a, b = self.axes
         strips = self.lo_t.size
         grow = 1.0 + 1e-9
@@ -443,6 +462,27 @@ class StripSearch(CertifiedSearch):
         s = np.clip(np.floor((qa - self.low) / self.width), 0, strips - 1).astype(np.int64)
         todo = np.arange(q.shape[0])
         k0, k1 = 0, 1
+
+        def improve(owner: np.ndarray, flat: np.ndarray) -> None:
+            # the nearest of each query's run of examined data, where nearer than its best
+            diff = self._coordinates(flat) - q[owner]
+            dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+            starts = np.flatnonzero(np.diff(owner, prepend=-1))
+            low = np.repeat(np.minimum.reduceat(dist, starts), np.diff(starts, append=dist.size))
+            win = np.flatnonzero(dist == low)  # each run's nearest (ties: the first of the run)
+            win = win[np.diff(owner[win], prepend=-1) != 0]
+            win = win[dist[win] < best[owner[win]]]
+            index[owner[win]], best[owner[win]] = self.perm[flat[win]], dist[win]
+            radius[owner[win]] = dist[win] * grow
+
+        def within(rows: np.ndarray, t: np.ndarray):
+            # the strips whose box is within the radius, and their gaps along a
+            g = self._strip_gap(t, qa[rows])
+            with np.errstate(invalid="ignore"):  # empty strips: inf - inf, and g = inf
+                gb = np.maximum(self.b_lo_t[t] - qb[rows], qb[rows] - self.b_hi_t[t]) - self.delta[1]
+            near = np.hypot(g, np.maximum(gb, 0.0)) <= radius[rows]
+            return rows[near], t[near], g[near]
+
         while todo.size:
             # rings k0 .. k1 - 1 in one pass, k1 growing by k1 / RING_STEP: fewer passes for a
             # query many strips from its nearest, while the radius still shrinks between them
@@ -450,28 +490,19 @@ class StripSearch(CertifiedSearch):
             ks = ks if k0 == 0 else np.concatenate([-ks, ks])
             t = (s[todo][:, None] + ks).ravel()
             keep = (t >= 0) & (t < strips)
-            rows, t = np.repeat(todo, ks.size)[keep], t[keep]
-            g = self._strip_gap(t, qa[rows])
-            with np.errstate(invalid="ignore"):  # empty strips: inf - inf, and g = inf
-                gb = np.maximum(self.b_lo_t[t] - qb[rows], qb[rows] - self.b_hi_t[t]) - self.delta[1]
-            near = np.hypot(g, np.maximum(gb, 0.0)) <= radius[rows]  # the strip's box within the radius
-            rows, t, g = rows[near], t[near], g[near]
+            rows, t, g = within(np.repeat(todo, ks.size)[keep], t[keep])
+            if rows.size and k0 > 0:  # the probe (ring 0 is the first search's own strip)
+                p = self._position(t, qb[rows], right=False)
+                pair = np.clip(p[:, None] + np.array([-1, 0]), self.offsets[t][:, None],
+                               self.offsets[t + 1][:, None] - 1)
+                improve(np.repeat(rows, 2), pair.ravel())
+                rows, t, g = within(rows, t)
             h = np.sqrt(radius[rows] ** 2 - g ** 2) + self.delta[1]
             p0 = self._position(t, qb[rows] - h, right=False)
             counts = self._position(t, qb[rows] + h, right=True) - p0
             flat = np.repeat(p0 - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
             if flat.size:
-                owner = np.repeat(rows, counts)  # in runs, one a query (rows are by query)
-                diff = self._coordinates(flat) - q[owner]
-                dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-                starts = np.flatnonzero(np.diff(owner, prepend=-1))
-                low = np.repeat(np.minimum.reduceat(dist, starts), np.diff(starts, append=dist.size))
-                win = np.flatnonzero(dist == low)  # each run's nearest (ties: the first of the run)
-                win = win[np.diff(owner[win], prepend=-1) != 0]
-                better = dist[win] < best[owner[win]]
-                win = win[better]
-                index[owner[win]], best[owner[win]] = self.perm[flat[win]], dist[win]
-                radius[owner[win]] = dist[win] * grow
+                improve(np.repeat(rows, counts), flat)  # in runs, one a query (rows are by query)
             # strips beyond ring k1 - 1: at least this far along a
             right_t, left_t = s[todo] + k1, s[todo] - k1
             ga = np.minimum(
@@ -480,6 +511,55 @@ class StripSearch(CertifiedSearch):
             todo = todo[ga <= radius[todo]]
             k0, k1 = k1, k1 + max(1, k1 // self.RING_STEP)
         return index, best, radius
+
+    def k_nearest(self, queries, k: int) -> np.ndarray:
+        """The ``k`` nearest data of each query, nearest first (ties by data index), exactly and
+        without an exact search beside it: the ``k``-th nearest of ``2k`` data around the query's
+        key ``b`` in its strip (clipped to the data) is an upper bound ``r`` on the ``k``-th nearest
+        distance, and every datum within ``r`` is examined (:meth:`_within`) and ranked by exact
+        distances."""
+        q = np.ascontiguousarray(queries, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != self.points.shape[1]:
+            raise InputError(f"queries must be (n, {self.points.shape[1]}) coordinates, got shape {q.shape}")
+        n, size = q.shape[0], self.keys.shape[1]
+        k = min(int(k), size)
+        if k < 1:
+            return np.zeros((n, 0), dtype=np.intp)
+        a, b = self.axes
+        s = np.clip(np.floor((q[:, a] - self.low) / self.width), 0, self.lo_t.size - 1).astype(np.int64)
+        start = np.clip(self._position(s, q[:, b], right=False) - k, 0, max(size - 2 * k, 0))
+        pos = np.minimum(start[:, None] + np.arange(min(2 * k, size)), size - 1)
+        some = _distances(q, self._coordinates(pos))
+        radius = np.partition(some, k - 1, axis=1)[:, k - 1] * (1.0 + 1e-9)  # >= the k-th nearest distance
+        owner, flat = self._within(q, radius)
+        dist = _distances(q[owner], self._coordinates(flat)[:, None, :])[:, 0]
+        index = self.perm[flat].astype(np.intp)
+        order = np.lexsort((index, dist, owner))
+        owner, index = owner[order], index[order]
+        first = np.searchsorted(owner, np.arange(n))  # each query has at least k data within r
+        return index[first[:, None] + np.arange(k)]
+
+    def _within(self, q: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every datum whose keys are within ``radius`` of each query's (so every datum within
+        ``radius`` of it, the keys' rounding counted): the query and the datum's sorted
+        position, by query. In each strip ``t`` whose gap ``g_t`` along ``a`` is within the
+        radius, the keys ``b`` within ``sqrt(radius^2 - g_t^2)`` of ``q_b``."""
+        a, b = self.axes
+        strips = self.lo_t.size
+        reach = radius + self.delta[0] + self.width  # a datum's strip is its key's
+        s0 = np.clip(np.floor((q[:, a] - reach - self.low) / self.width), 0, strips - 1).astype(np.int64)
+        s1 = np.clip(np.floor((q[:, a] + reach - self.low) / self.width), 0, strips - 1).astype(np.int64)
+        span = s1 - s0 + 1
+        rows = np.repeat(np.arange(q.shape[0]), span)
+        t = np.repeat(s0 - (np.cumsum(span) - span), span) + np.arange(int(span.sum()))
+        g = self._strip_gap(t, q[rows, a])
+        near = g <= radius[rows]
+        rows, t, g = rows[near], t[near], g[near]
+        h = np.sqrt(radius[rows] ** 2 - g ** 2) + self.delta[1]
+        p0 = self._position(t, q[rows, b] - h, right=False)
+        counts = self._position(t, q[rows, b] + h, right=True) - p0
+        flat = np.repeat(p0 - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+        return np.repeat(rows, counts), flat
 
     def _window(self, q):
         """The first search: ``2 m`` data around ``q_b`` in the query's strip and its two neighbours."""

@@ -7,6 +7,7 @@ range of its search coordinates, the balance of its metric) is :mod:`ddcm_casadi
 from __future__ import annotations
 
 import math
+import mmap
 import os
 from dataclasses import dataclass, field
 
@@ -16,9 +17,9 @@ from ddcm_casadi.errors import InputError
 from ddcm_casadi.inputs import positive
 from ddcm_casadi.data.files import is_npy, read_csv, read_npy
 from ddcm_casadi.data import limits
-from ddcm_casadi.data.limits import searchable_coordinates
+from ddcm_casadi.data.limits import check_balance, searchable_coordinates
 from ddcm_casadi.data.metric import Metric
-from ddcm_casadi.data.search import CHUNK, KDTreeSearch, NeighbourSearch, kd_tree, search_class, search_name
+from ddcm_casadi.data.search import KDTreeSearch, NeighbourSearch, Rows, kd_tree, search_class, search_name
 from ddcm_casadi.data import ann  # noqa: F401  (registers the certified searches)
 
 
@@ -42,6 +43,71 @@ def check_positive(name: str, value: float) -> float:
     return positive(value, name)
 
 
+def _mapping(values: np.ndarray) -> mmap.mmap | None:
+    """The memory map under an array (a view of a memory-mapped ``.npy`` file), else ``None``."""
+    while isinstance(values, np.ndarray):
+        values = values.base
+    return values if isinstance(values, mmap.mmap) else None
+
+
+def _release(*arrays: np.ndarray, least: int = 0) -> None:
+    """Leave the pages of memory-mapped arrays (mappings of at least ``least`` bytes) to the page
+    cache (``MADV_DONTNEED`` on their mapping: the pages stay cached, shared and clean, but leave
+    this process's resident set), so passes over a 1e9-point file do not add the file's 8 GB to
+    the process's memory."""
+    for mapping in {id(m): m for m in map(_mapping, arrays) if m is not None and len(m) >= least}.values():
+        mapping.madvise(mmap.MADV_DONTNEED)
+
+
+def _stored(values) -> np.ndarray:
+    """Data values as stored: float64 and float32 arrays as given (no copy), others as float64."""
+    a = np.asarray(values)
+    return a if a.dtype in (np.float64, np.float32) else a.astype(np.float64)
+
+
+#: Data gathered from a memory-mapped file between two releases of its pages: each fault maps
+#: the 64 KB around it too (the kernel's fault-around), so at most 1 GB in the process (the
+#: gathers of 1e5 states' searches from an 8 GB file mapped 11 GB without the releases).
+RELEASE_ROWS = 1 << 14
+#: Files from this size on are not kept mapped by a search's gathers (at 1e8 points, 0.8 GB, the
+#: releases made 1e5 states 5x slower: every gather faulted again).
+RELEASE_BYTES = 1 << 32
+#: Rows per block of the data set's pass that fixes its frame (a block of 2^18 rows of 12
+#: coordinates is 25 MB of temporaries).
+FRAME_BLOCK = 1 << 18
+
+
+def _principal_frame(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> tuple[np.ndarray, ...]:
+    r"""The centre ``m`` and principal axes ``V`` of the data's scaled coordinates ``x_j``
+    (:func:`~ddcm_casadi.data.limits.searchable_coordinates`, checked block by block) and their
+    least and largest values ``lo``, ``hi`` (the data's box), from one pass over blocks of rows:
+    with a shift ``x_0`` (the first block's mean, against cancellation), ``S = sum (x_j - x_0)``,
+    ``G = sum (x_j - x_0)(x_j - x_0)^T``, ``m = x_0 + S / N`` and ``V`` the eigenvectors of
+    ``G - S S^T / N = sum (x_j - m)(x_j - m)^T`` (the largest last).
+
+    Raises
+    ------
+    InputError
+        NaN or infinite values, coordinates out of range, or a metric out of balance with the data.
+    """
+    n = strain.shape[0]
+    d = 2 * metric.k
+    lo, hi = np.full(d, np.inf), np.full(d, -np.inf)
+    shift, total, gram = None, np.zeros(d), np.zeros((d, d))
+    for a in range(0, n, FRAME_BLOCK):
+        X, low, high = searchable_coordinates(metric, strain[a:a + FRAME_BLOCK], stress[a:a + FRAME_BLOCK], first=a)
+        _release(strain, stress)
+        lo, hi = np.minimum(lo, low), np.maximum(hi, high)
+        if shift is None:
+            shift = np.array([X[:, i].mean() for i in range(d)])  # by columns: faster than along axis 0
+        X -= shift
+        total += [X[:, i].sum() for i in range(d)]
+        gram += X.T @ X
+    check_balance(metric, lo, hi)
+    _, axes = np.linalg.eigh(gram - np.outer(total, total) / n)
+    return shift + total / n, axes, lo, hi
+
+
 @dataclass(frozen=True, eq=False)
 class MaterialDataset:
     """A material data set ``Z_D = {(strain*_j, stress*_j)}`` with its metric.
@@ -61,10 +127,14 @@ class MaterialDataset:
 
     Notes
     -----
-    Storage per point: the data as given (float64 arrays are not copied; a memory-mapped
-    ``.npy`` file, :meth:`from_npy`, stays in the page cache), one float64 array of the search's
-    coordinates (``16 k`` bytes) that the KD-tree keeps without a copy, and the tree (about 15
-    bytes); the warm search's graph adds 36 bytes when first used. The coordinates stay float64:
+    Storage per point: the data as given (float64 and float32 arrays are not copied; a
+    memory-mapped ``.npy`` file, :meth:`from_npy`, stays in the page cache), and what the searches
+    used hold, each built on first use (:meth:`search`): the KD-tree (``kdtree``, and the exact
+    search of the others but ``strips``) one float64 array of the search's coordinates (``16 k``
+    bytes) and the tree (about 15 bytes); the warm search's graph 36 bytes more. The strip search
+    (``strips``, one component) is built from blocks of the coordinates (12 bytes a point, neither
+    the array nor the tree): a float32 file of 1e9 points is searched in 12 GB. The KD-tree's
+    coordinates stay float64:
     near the ends of a principal axis a float32 step is ``2^-24`` of the data's extent along it,
     as wide as the spacing of ``2^24 = 1.7e7`` points equally spaced along it (at 1e8 points some
     6 data share each step, so a float32 search would return ties to be re-ranked in float64),
@@ -77,6 +147,10 @@ class MaterialDataset:
     metric: Metric = field(init=False, repr=False)
     _searches: dict = field(init=False, repr=False, default_factory=dict)
     _frame: tuple = field(init=False, repr=False, default=())
+    #: The least and largest scaled coordinates of the data (:meth:`Metric.coordinates
+    #: <ddcm_casadi.data.metric.Metric.coordinates>`, before centring and rotation), ``(2k,)`` each.
+    box: tuple = field(init=False, repr=False, default=())
+    _rows: Rows | None = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
         if isinstance(self.c, str):
@@ -90,9 +164,8 @@ class MaterialDataset:
         else:
             metric = Metric(self.c)
         k = metric.k
-        # No copies: float64 arrays (memory-mapped files included) are kept as given.
-        strain = np.asarray(self.strain, dtype=float)
-        stress = np.asarray(self.stress, dtype=float)
+        # No copies: float64 and float32 arrays (memory-mapped files included) are kept as given.
+        strain, stress = _stored(self.strain), _stored(self.stress)
         if k == 1:  # a view where ravel() would copy a strided column
             strain, stress = (a if a.ndim == 1 else a.reshape(-1) for a in (strain, stress))
         if strain.size == 0:
@@ -102,28 +175,32 @@ class MaterialDataset:
         if k > 1 and (strain.ndim != 2 or strain.shape[1] != k):
             raise InputError(f"material data set: a {k} x {k} metric needs {k} strain and {k} stress "
                              f"components per point, got shape {strain.shape}")
-        if not all(np.isfinite(a.min()) and np.isfinite(a.max()) for a in (strain, stress)):  # NaN propagates
-            raise InputError("material data set contains NaN or infinite values")
         object.__setattr__(self, "metric", metric)
         object.__setattr__(self, "c", metric.c if k == 1 else metric.matrix)
         object.__setattr__(self, "strain", strain)
         object.__setattr__(self, "stress", stress)
-        # The tree works in the principal axes of the scaled data (a rotation: distances are
+        # The search works in the principal axes of the scaled data (a rotation: distances are
         # unchanged). Data along a line (a Hookean set) then fill thin slabs instead of fat
         # diagonal boxes, and a state far from the data no longer visits every box its search
         # ball crosses: measured at 1e6 points, 1.9 s -> 6 ms for 9 000 states 1e4 spacings away.
-        # The one array of coordinates is centred and rotated in place, and the tree keeps it
-        # (no copy): at 1e8 points each float64 temporary would be another 1.6 GB.
-        X = searchable_coordinates(metric, strain, stress)
-        mean = X.mean(axis=0)
-        X -= mean
-        _, axes = np.linalg.eigh(X.T @ X)
-        for a in range(0, X.shape[0], CHUNK):
-            X[a:a + CHUNK] = X[a:a + CHUNK] @ axes
+        # The frame comes from one pass over blocks (checked, summed); the coordinates are then
+        # made on demand (Rows): in one array only for a backend that needs it (the KD-tree),
+        # never for one built from blocks (the strip search over a 1e9-point float32 file).
+        mean, axes, lo, hi = _principal_frame(metric, strain, stress)
         object.__setattr__(self, "_frame", (mean, axes))
-        # The exact KD-tree is always built (the other backends and k_nearest use it); the
-        # others on first use (:meth:`search`).
-        self._searches["kdtree"] = KDTreeSearch(kd_tree(X))
+        object.__setattr__(self, "box", (lo, hi))
+        object.__setattr__(self, "_rows", Rows(strain.shape[0], 2 * k, self._rows_of))
+
+    def _rows_of(self, index) -> np.ndarray:
+        """The search coordinates of the data ``index`` (a slice or an index array, :class:`Rows`).
+        From a memory-mapped file, the pages read are left to the page cache (:func:`_release`)
+        after a block of a build's pass, and, from a file of :data:`RELEASE_BYTES` or more, after
+        every :data:`RELEASE_ROWS` data a search gathers."""
+        if isinstance(index, slice) or index.size <= RELEASE_ROWS:
+            X = self.coordinates(self.strain[index], self.stress[index])
+            _release(self.strain, self.stress, least=0 if isinstance(index, slice) else RELEASE_BYTES)
+            return X
+        return np.concatenate([self._rows_of(index[a:a + RELEASE_ROWS]) for a in range(0, index.size, RELEASE_ROWS)])
 
     @property
     def k(self) -> int:
@@ -135,9 +212,21 @@ class MaterialDataset:
 
     def coordinates(self, strain, stress) -> np.ndarray:
         """The search's coordinates of states ``(strain, stress)``: scaled (Euclidean distance is
-        the metric's), centred and rotated to the data's principal axes (:mod:`ddcm_casadi.data.search`)."""
+        the metric's), centred and rotated to the data's principal axes (:mod:`ddcm_casadi.data.search`).
+        Row by row the same arithmetic whatever the number of rows (elementwise, or einsum's own
+        loop: no BLAS kernel chosen by size), so a datum's coordinates read in a block equal those
+        gathered."""
         mean, axes = self._frame
-        return np.ascontiguousarray((self.metric.coordinates(strain, stress) - mean) @ axes)
+        X = self.metric.coordinates(strain, stress)
+        X -= mean
+        if X.shape[1] > 2:
+            return np.einsum("ij,jk->ik", X, axes)
+        # one component: by columns, 5x faster than einsum here (2.3 against 11 ns a row)
+        out = np.empty_like(X)
+        for j in range(2):
+            np.multiply(X[:, 0], axes[0, j], out=out[:, j])
+            out[:, j] += X[:, 1] * axes[1, j]
+        return out
 
     def distance2(self, strain, stress, index) -> np.ndarray:
         """Squared DDCM distance ``d^2`` between states and the data points ``index``."""
@@ -152,9 +241,16 @@ class MaterialDataset:
         name = search_name(name)
         backend = self._searches.get(name)
         if backend is None:
-            tree = self._searches["kdtree"]
-            backend = self._searches[name] = search_class(name).build(tree.points, base=tree)
+            backend = self._searches[name] = search_class(name).from_rows(self._rows, self._exact)
         return backend
+
+    def _exact(self) -> KDTreeSearch:
+        """The exact KD-tree over the coordinates in one float64 array (``16 k`` bytes a point and
+        the tree's 16), built on first use (:meth:`search`, :meth:`k_nearest`) and kept."""
+        tree = self._searches.get("kdtree")
+        if tree is None:
+            tree = self._searches["kdtree"] = KDTreeSearch(kd_tree(self._rows.array()))
+        return tree
 
     def nearest(self, strain, stress, *, search: str = "kdtree", previous=None, stats: dict | None = None) -> np.ndarray:
         """Indices of the data points nearest to each state ``(strain, stress)`` (vectorised), by
@@ -162,10 +258,10 @@ class MaterialDataset:
         accumulates ``queries`` and ``fallbacks`` (:meth:`NeighbourSearch.nearest`)."""
         return self.search(search).nearest(self.coordinates(strain, stress), previous=previous, stats=stats)
 
-    def k_nearest(self, strain, stress, k: int) -> np.ndarray:
+    def k_nearest(self, strain, stress, k: int, *, search: str = "kdtree") -> np.ndarray:
         """Indices of the ``k`` data points nearest to each state, nearest first: ``(n, k)``
-        (``k`` is capped at the data set's size)."""
-        return self._searches["kdtree"].k_nearest(self.coordinates(strain, stress), k)
+        (``k`` is capped at the data set's size), by the backend ``search``."""
+        return self.search(search).k_nearest(self.coordinates(strain, stress), k)
 
     def describe(self) -> dict:
         """Size, metric and strain range, for results files."""
@@ -300,7 +396,7 @@ class MaterialDataset:
         ------
         InputError
             Missing, unreadable, empty, not ``.npy``, truncated, not real-valued, of another
-            shape, or with more than :data:`~ddcm_casadi.data.limits.MAX_DATA_POINTS` points.
+            shape, or with more than :data:`~ddcm_casadi.data.limits.MAX_MAPPED_DATA_POINTS` points.
         """
         strain, stress = read_npy(path, c=_reading_metric(c, components))
         return cls(strain, stress, c)
@@ -413,15 +509,15 @@ class PointData:
                                                     stats=stats) + self.offsets[k]
         return out
 
-    def k_nearest(self, strain, stress, k: int) -> np.ndarray:
+    def k_nearest(self, strain, stress, k: int, *, search: str = "kdtree") -> np.ndarray:
         """The ``k`` nearest data of each point in its own set (global indices, nearest first;
-        ``k`` capped at the smallest set's size)."""
+        ``k`` capped at the smallest set's size), by the backend ``search``."""
         strain, stress = self._per_point(strain), self._per_point(stress)
         k = min(int(k), min(len(d) for d in self.datasets))
         out = np.empty((strain.shape[0], k), dtype=np.intp)
         for j, pts in enumerate(self._groups):
             if pts.size:
-                out[pts] = self.datasets[j].k_nearest(strain[pts], stress[pts], k) + self.offsets[j]
+                out[pts] = self.datasets[j].k_nearest(strain[pts], stress[pts], k, search=search) + self.offsets[j]
         return out
 
     def nearest_warm(self, strain, stress, previous, *, stats: dict | None = None) -> np.ndarray:

@@ -95,18 +95,19 @@ class DataCoverage:
         The model's data (one set shared by every point, or one set per material).
     n_points : int
         Material points of the model.
+    search : str
+        The data search backend of its nearest data (:meth:`MaterialDataset.search
+        <ddcm_casadi.data.dataset.MaterialDataset.search>`): the run's, so that a set searched
+        without the KD-tree (``strips``) is checked without it too.
     """
 
-    def __init__(self, dataset, n_points: int) -> None:
+    def __init__(self, dataset, n_points: int, search: str = "kdtree") -> None:
         self.dataset = dataset
         self.n_points = int(n_points)
         _, self.material = dataset.point_materials(self.n_points)
         self.k = dataset.datasets[0].k
-        # Per data set: its bounding box in scaled coordinates.
-        self._boxes = []
-        for d in dataset.datasets:
-            X = d.metric.coordinates(d.strain, d.stress)
-            self._boxes.append((X.min(axis=0), X.max(axis=0)))
+        self.search = search
+        self._boxes = [d.box for d in dataset.datasets]  # in scaled coordinates
         self._neighbourhoods: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
 
     def _per_point(self, a) -> np.ndarray:
@@ -148,7 +149,7 @@ class DataCoverage:
 
     def _check_set(self, s: int, d, strain: np.ndarray, stress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self._boxes[s]
-        j = d.nearest(strain, stress)
+        j = d.nearest(strain, stress, search=self.search)
         X = d.metric.coordinates(strain, stress)
         h, tangent = self._neighbourhood(s, d, j)
         along = np.linalg.norm(np.einsum("mij,mj->mi", tangent, X - d.metric.coordinates(d.strain[j], d.stress[j])),
@@ -214,19 +215,20 @@ class DataCoverage:
         if index.size > _FEW:
             # many points share their nearest datum (on a continuum, most do): each datum once
             unique, inverse = np.unique(index, return_inverse=True)
-            h, tangent = neighbourhood(d, unique)
+            h, tangent = neighbourhood(d, unique, self.search)
             return h[inverse], tangent[inverse]
         key = (s, index.tobytes())
         hit = self._neighbourhoods.get(key)
         if hit is None:
-            hit = neighbourhood(d, index)
+            hit = neighbourhood(d, index, self.search)
             if len(self._neighbourhoods) < _REMEMBERED:
                 self._neighbourhoods[key] = hit
         return hit
 
 
-def neighbourhood(d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The local spacing and the tangent space of the data set ``d`` at each datum ``index``.
+def neighbourhood(d, index: np.ndarray, search: str = "kdtree") -> tuple[np.ndarray, np.ndarray]:
+    """The local spacing and the tangent space of the data set ``d`` at each datum ``index``
+    (its nearest data by the backend ``search``).
 
     From the ``K = 4k`` nearest distinct data of the datum (``k`` strain components; the datum
     itself and its duplicates are left out), in scaled coordinates:
@@ -255,7 +257,7 @@ def neighbourhood(d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = index.size
     if len(d) <= K:
         return np.full(n, np.inf), np.zeros((n, k, 2 * k))
-    near = d.k_nearest(d.strain[index], d.stress[index], K + _DUPLICATES)
+    near = d.k_nearest(d.strain[index], d.stress[index], K + _DUPLICATES, search=search)
     X = d.metric.coordinates(d.strain[near.ravel()], d.stress[near.ravel()]).reshape(n, near.shape[1], 2 * k)
     Y = X - d.metric.coordinates(d.strain[index], d.stress[index])[:, None, :]
     dist = np.linalg.norm(Y, axis=2)

@@ -159,7 +159,7 @@ def read_npy(path: str | os.PathLike, *, c) -> tuple[np.ndarray, np.ndarray]:
     ------
     InputError
         Missing, unreadable, empty, not ``.npy``, truncated, not real-valued, of another
-        shape, or with more than :data:`~ddcm_casadi.data.limits.MAX_DATA_POINTS` points.
+        shape, or with more than :data:`~ddcm_casadi.data.limits.MAX_MAPPED_DATA_POINTS` points.
     """
     path = input_file(path, "data file")
     k = _components(c)
@@ -172,8 +172,8 @@ def read_npy(path: str | os.PathLike, *, c) -> tuple[np.ndarray, np.ndarray]:
                  f"of each)" if table.ndim == 2 and table.shape[1] % 2 == 0 and table.shape[1] != 2 * k else "")
         raise InputError(f"data file {path} holds an array of shape {table.shape}{found}; it needs (N, {2 * k}) "
                          f"with N >= 1 and the columns {cols}")
-    if table.shape[0] > limits.MAX_DATA_POINTS:
-        raise InputError(f"data file {path} holds {table.shape[0]} points, more than {limits.MAX_DATA_POINTS}")
+    if table.shape[0] > limits.MAX_MAPPED_DATA_POINTS:
+        raise InputError(f"data file {path} holds {table.shape[0]} points, more than {limits.MAX_MAPPED_DATA_POINTS}")
     return table[:, :k], table[:, k:]
 
 

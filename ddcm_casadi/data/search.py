@@ -10,6 +10,10 @@ The interface (:class:`NeighbourSearch`):
 
 - ``build(points, *, base=None)``: the backend over the ``(N, d)`` coordinates (``base``: an
   exact search over the same points that the backend may reuse instead of building its own);
+- ``from_rows(rows, exact)``: the backend over a data set's coordinates made on demand
+  (:class:`Rows`); by default ``build`` over them in one array, reusing the data set's exact
+  search ``exact()``; the strip search is built from blocks of rows instead, so a data set of
+  1e9 points needs neither the array (16 GB) nor the KD-tree;
 - ``nearest(queries, *, previous=None, stats=None)``: the index of the datum nearest each query,
   optionally warm-started from a previous assignment ``previous``;
 - ``k_nearest(queries, k)``: the ``k`` nearest, nearest first;
@@ -29,7 +33,7 @@ The first two are exact:
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import ClassVar
+from typing import Callable, ClassVar
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -38,6 +42,45 @@ from ddcm_casadi.errors import InputError
 
 #: Rows per block where a pass over the data would otherwise allocate a full-size temporary.
 CHUNK = 1 << 16
+
+
+class Rows:
+    """The ``(N, d)`` float64 coordinates of a data set, computed on demand from its stored data
+    (:class:`~ddcm_casadi.data.dataset.MaterialDataset`): by index (``rows[idx]``, any shape of
+    ``idx``; a slice reads a block), never all at once unless :meth:`array` is called.
+
+    Parameters
+    ----------
+    n, dim : int
+        Rows and coordinates.
+    rows_of : callable
+        ``rows_of(index)``, ``index`` a slice or a 1-D integer array: those rows, ``(m, dim)``
+        float64; the same values for a row whichever way it is asked for.
+    """
+
+    dtype = np.dtype(np.float64)
+
+    def __init__(self, n: int, dim: int, rows_of: Callable[[slice | np.ndarray], np.ndarray]) -> None:
+        self.shape, self._of, self._array = (int(n), int(dim)), rows_of, None
+
+    def read(self, a: int, b: int) -> np.ndarray:
+        """The rows ``a:b``."""
+        return self._of(slice(a, b))
+
+    def __getitem__(self, index) -> np.ndarray:
+        if isinstance(index, slice):
+            return self._of(index)
+        index = np.asarray(index)
+        return self._of(index.ravel()).reshape(index.shape + (self.shape[1],))
+
+    def array(self) -> np.ndarray:
+        """All rows in one float64 array (made once, by blocks, and kept)."""
+        if self._array is None:
+            X = np.empty(self.shape)
+            for a in range(0, self.shape[0], CHUNK):
+                X[a:a + CHUNK] = self.read(a, a + CHUNK)
+            self._array = X
+        return self._array
 
 
 class NeighbourSearch(ABC):
@@ -63,6 +106,15 @@ class NeighbourSearch(ABC):
     def build(cls, points: np.ndarray, *, base: "NeighbourSearch | None" = None) -> "NeighbourSearch":
         """The search over ``points`` ``(N, d)`` (kept, not copied); ``base``, an exact search over
         the same array, may be reused."""
+
+    @classmethod
+    def from_rows(cls, rows: Rows, exact: Callable[[], "NeighbourSearch"]) -> "NeighbourSearch":
+        """The search over a data set's coordinates given as :class:`Rows`; ``exact()`` is the data
+        set's exact search over ``rows.array()`` (built on its first call, then kept). By default
+        :meth:`build` over that array, reusing the exact search; a backend built from blocks of
+        rows overrides it and never asks for the array (nor the KD-tree)."""
+        base = exact()
+        return cls.build(base.points, base=base)
 
     @property
     @abstractmethod

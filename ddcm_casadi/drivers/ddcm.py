@@ -115,7 +115,8 @@ class DDCMSolver:
         # law's cone has no finite set of pieces), once per problem (not timed with the steps):
         # the solvers of the formulations of one model share them.
         self.coverage = problems.projection.shared(
-            ("data_coverage",), lambda: DataCoverage(model.dataset, model.n_points))
+            ("data_coverage", self.options.search),
+            lambda: DataCoverage(model.dataset, model.n_points, self.options.search))
         self.affine = bool(problems.projection.affine)
         self.enumerate_pairs = enumerate_pairs
         enumerable = self.affine and not model.frictional and model.n_contacts <= enumerate_pairs
@@ -191,7 +192,7 @@ class DDCMSolver:
         if k == 0 and o.initial is not None:
             return np.asarray(o.initial, dtype=np.intp)
         start = "origin" if o.start == "elastic" and not self.affine else o.start
-        return start_assignment(self.problems.model, start, k, np.random.default_rng((o.seed, k, 0)))
+        return start_assignment(self.problems.model, start, k, np.random.default_rng((o.seed, k, 0)), o.search)
 
     def project_data(self, k: int, strain_star, stress_star, warm: tuple, cost: dict, *, exact: bool = False,
                      known: tuple | None = None):

@@ -38,10 +38,10 @@ def point_ranges(model) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(data.offsets, dtype=np.intp)[material], sizes[material]
 
 
-def origin_assignment(model) -> np.ndarray:
-    """Every point at the datum nearest the zero state."""
+def origin_assignment(model, search: str = "kdtree") -> np.ndarray:
+    """Every point at the datum nearest the zero state (by the data search ``search``)."""
     origin = np.zeros(model.n_points * model.strain_components)
-    return model.dataset.nearest(origin, origin)
+    return model.dataset.nearest(origin, origin, search=search)
 
 
 def random_assignment(model, rng: np.random.Generator) -> np.ndarray:
@@ -109,13 +109,14 @@ def elastic_state(model, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return u, strain, stress
 
 
-def start_assignment(model, start: str, step: int, rng: np.random.Generator) -> np.ndarray:
-    """The initial assignment ``start`` ("origin", "elastic" or "random") at load step ``step``."""
+def start_assignment(model, start: str, step: int, rng: np.random.Generator, search: str = "kdtree") -> np.ndarray:
+    """The initial assignment ``start`` ("origin", "elastic" or "random") at load step ``step``
+    (the nearest data by the data search ``search``: an exact one, so any gives the same)."""
     if start == "origin":
-        return origin_assignment(model)
+        return origin_assignment(model, search)
     if start == "elastic":
         _, strain, stress = elastic_state(model, step)
-        return model.dataset.nearest(strain, stress)
+        return model.dataset.nearest(strain, stress, search=search)
     return random_assignment(model, rng)
 
 

@@ -43,8 +43,9 @@ from scipy.sparse.csgraph import connected_components
 
 from ddcm_casadi.linalg import (
     SCHUR_MIN_SIZE, SOLVE_BLOCK, SingularMatrix, definite_solver_name, delassus_solver, factorize_definite,
-    factorize_with_delassus, numerically_symmetric, release_heap,
+    factorize_with_delassus, numerically_symmetric,
 )
+from ddcm_casadi.heap import release_heap
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
