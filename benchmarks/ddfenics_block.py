@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -43,6 +42,7 @@ from ddcm_casadi.casefiles.config import case_from_dict
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.drivers.ddcm_reduced import build_projection
 from ddcm_casadi.drivers.path import DDCMSolver
+from ddcm_casadi.heap import peak_resident_bytes
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.problems.build import build_problems
 
@@ -91,7 +91,7 @@ def ours(divisions: int, work: Path) -> dict:
                 solve_seconds=path.solve_seconds, seconds_per_iteration=path.solve_seconds / its,
                 projection_seconds_per_iteration=step.projection_seconds / its,
                 search_seconds_per_iteration=step.search_seconds / its, setup_seconds=setup,
-                peak_memory_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+                peak_memory_bytes=peak_resident_bytes(),
                 converged=bool(path.converged), distance=distance(model, step),
                 projection_path=path.projection_path)
 

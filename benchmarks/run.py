@@ -57,6 +57,7 @@ import scipy.sparse.linalg as spla
 from ddcm_casadi import MaterialDataset, compare, paper_bar
 from ddcm_casadi import formulations as registry
 from ddcm_casadi import linalg
+from ddcm_casadi.heap import peak_resident_bytes
 from ddcm_casadi.factor_updates import ReferenceFactor
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.linalg import factorize, solver_name
@@ -239,12 +240,6 @@ BUILD_MODELS = {
 }
 
 
-def peak_memory_bytes() -> int:
-    """The peak resident set of this process (Linux ``VmHWM``), in bytes."""
-    with open("/proc/self/status") as fh:
-        return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:")) * 1024
-
-
 def built_problems(model) -> ProblemPair:
     """:func:`build_problems` with both problems built (they are built on first use): the
     ``problem_build`` stage of :func:`build_record`, as it was before they were."""
@@ -277,7 +272,7 @@ def build_record(family: str, unknowns: int, repeats: int) -> dict:
         t = time.perf_counter()
         out = fn()
         stages[name] = time.perf_counter() - t
-        peaks[name] = peak_memory_bytes()
+        peaks[name] = peak_resident_bytes()
         return out
 
     model = stage("model", lambda: BUILD_MODELS[family](unknowns))
@@ -296,7 +291,7 @@ def build_record(family: str, unknowns: int, repeats: int) -> dict:
     x, p = np.zeros(problems.projection.n_x), np.zeros(problems.projection.n_pairs)
     low = iteration_floor(problems, built, model.n_steps - 1, x, p, assigned, assigned, repeats)
     n = int(built.newton_system().unknowns.size)
-    peak = peak_memory_bytes()
+    peak = peak_resident_bytes()
     run_builds = dict(ddcm_run_build_seconds=stages["model"] + stages["problem_build"] + stages["reduced_build"]
                       + stages["ddcm_setup"])
     if "classical_build" in stages:
@@ -369,7 +364,7 @@ def continuum_record(unknowns: int, repeats: int, solver: str = "superlu") -> di
     linalg.use_solver(solver)
     model = BUILD_MODELS["2-D continuum"](unknowns)
     rec = ddcm_iteration(model, repeats)
-    peak = peak_memory_bytes()
+    peak = peak_resident_bytes()
     suffix = "" if solver == "superlu" else f", {solver}"
     return dict(name=f"DDCM iteration, 2-D continuum: {model.name}{suffix}", **rec, peak_memory_bytes=peak)
 
@@ -401,7 +396,7 @@ def reduction_record(unknowns: int, contact: bool, repeats: int, full: bool) -> 
     divisions = max(4, round((unknowns / 34) ** 0.5))
     model = continuum_block(divisions) if contact else pressed_block(divisions)
     rec = ddcm_iteration(model, repeats)
-    peak = peak_memory_bytes()
+    peak = peak_resident_bytes()
     out = dict(name=f"reduced DDCM iteration, 2-D continuum {'with' if contact else 'without'} contact: {model.name}",
                **rec, peak_memory_bytes=peak)
     if full:
@@ -500,7 +495,7 @@ def stiffness_solver_3d(dofs: int, solver: str, repeats: int) -> list[dict]:
     problems = build_problems(model)
     K = build_projection(registry.get("fischer_burmeister"), problems).reduction.K_u
     rhs = np.cos(np.arange(2 * K.shape[0])).reshape(-1, 2)
-    base = peak_memory_bytes()
+    base = peak_resident_bytes()
     reset_peak_memory()
     with open("/proc/self/status") as fh:
         resident = next(int(line.split()[1]) for line in fh if line.startswith("VmRSS:")) * 1024
@@ -525,8 +520,8 @@ def stiffness_solver_3d(dofs: int, solver: str, repeats: int) -> list[dict]:
     return [dict(name=f"K_C set-up and solve pair, 3-D block: {model.name}, {solver}", unknowns=int(K.shape[0]),
                  data_points=0, seconds=setup, floor_seconds=float("nan"), ratio=float("nan"), setup_seconds=setup,
                  solve_pair_seconds=pair, relative_residual=residual, nnz=int(K.nnz), **extra,
-                 peak_memory_bytes=max(base, peak_memory_bytes()),
-                 solver_memory_bytes=peak_memory_bytes() - resident)]
+                 peak_memory_bytes=max(base, peak_resident_bytes()),
+                 solver_memory_bytes=peak_resident_bytes() - resident)]
 
 
 def reduction_record_3d(dofs: int, contact: bool, repeats: int, solver: str) -> list[dict]:
@@ -542,7 +537,7 @@ def reduction_record_3d(dofs: int, contact: bool, repeats: int, solver: str) -> 
         linalg.use_solver(solver)
     model = block_3d(divisions_3d(dofs), contact)
     rec = ddcm_iteration(model, repeats)
-    peak = peak_memory_bytes()
+    peak = peak_resident_bytes()
     return [dict(name=f"reduced DDCM iteration, 3-D block {'with' if contact else 'without'} contact: {model.name}, "
                       f"{solver}", **rec,
                  dofs=rec["unknowns"] - model.n_points * model.strain_components - model.n_contacts,

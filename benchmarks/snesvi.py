@@ -45,6 +45,7 @@ import scipy.sparse as sp
 from ddcm_casadi import formulations as registry
 from ddcm_casadi import linalg
 from ddcm_casadi.drivers.ddcm_reduced import build_classical
+from ddcm_casadi.heap import peak_resident_bytes
 from ddcm_casadi.drivers.path import solve_classical
 from ddcm_casadi.io import prepare_output_dir, write_bytes_atomic, write_json_atomic
 from ddcm_casadi.problems.build import build_problems
@@ -62,12 +63,6 @@ LARGE_PEER_TUNINGS = ((0, "cholesky"),)
 #: The solutions agree when ``u`` and ``p`` differ by at most this relative to ``max |u|``, ``max p``.
 AGREEMENT = 1e-10
 DEFAULT_PEER = "/work/venv-petsc/bin/python"
-
-
-def peak_memory_bytes() -> int:
-    """The peak resident set of this process (Linux ``VmHWM``), in bytes."""
-    with open("/proc/self/status") as fh:
-        return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM:")) * 1024
 
 
 def hertz_model(divisions: int):
@@ -119,7 +114,7 @@ def ours(divisions: int, solver: str, problem: str | None, solution: str, conden
                 steps=model.n_steps, seconds=seconds, build_seconds=build, condensation_seconds=condensation,
                 path=res.projection_path, converged=bool(res.converged),
                 newton_iterations=int(res.array("iterations").sum()), factorisations=stats["factorizations"],
-                updates=stats["updates"], solver=solver, peak_memory_bytes=peak_memory_bytes())
+                updates=stats["updates"], solver=solver, peak_memory_bytes=peak_resident_bytes())
 
 
 #: The solvers to run (``--solvers``; empty: every one that runs here).

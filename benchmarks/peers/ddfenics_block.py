@@ -20,7 +20,6 @@ cell order (``ASSIGNMENT.npy``).
 """
 
 import json
-import resource
 import sys
 import time
 
@@ -33,6 +32,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import ddfenicsx as dd
+
+
+def peak_resident_bytes() -> int:
+    """The peak resident set of this process (Linux ``VmHWM``; not ``ru_maxrss``, which a process
+    started by a large parent inherits from it), in bytes."""
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) * 1024 for line in fh if line.startswith("VmHWM:"))
 
 
 def main(problem_path: str, result_path: str, assignment_path: str) -> None:
@@ -78,7 +84,7 @@ def main(problem_path: str, result_path: str, assignment_path: str) -> None:
                   equilibrium_seconds=t_equilibrium, data_seconds=t_data,
                   seconds_per_iteration=(t_equilibrium + t_data) / max(int(iterations), 1),
                   loop_seconds_per_iteration=total / max(int(iterations), 1),
-                  peak_memory_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+                  peak_memory_bytes=peak_resident_bytes(),
                   distance=float(search.global_dist))
     np.save(assignment_path, assignment)
     with open(result_path, "w") as f:
