@@ -135,7 +135,7 @@ class Projection:
         """Whether the exact projection is the formulation's own answer (:meth:`exact_solution`):
         every projection is checked against the enumeration and the formulation enforces the
         contact pairs exactly (no penalty's regularised contact)."""
-        return self.check and getattr(self.built, "penalty_stiffness", None) is None
+        return self.check and self.built.penalty_stiffness is None
 
     def exact_solution(self, params: np.ndarray, state: dict | None, known: tuple | None = None):
         """The exact projection (:meth:`exact_projection`, or ``known``: ``(x, p, objective)``
