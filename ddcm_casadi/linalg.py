@@ -52,7 +52,7 @@ import os
 import queue
 import sys
 import threading
-from typing import Callable, Protocol
+from typing import Callable, Iterator, Protocol
 
 import casadi as ca
 import numpy as np
@@ -312,21 +312,28 @@ def _superlu(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
 PERTURBED_REFINEMENT = 2
 
 
+def _upper_with_diagonal(A: sp.spmatrix) -> sp.csr_matrix:
+    """The upper triangle of the symmetric ``A`` with every diagonal entry stored, zeros too
+    (PARDISO's symmetric storage requires them), indices sorted."""
+    U = sp.triu(A, k=1, format="coo")
+    index = np.arange(A.shape[0])
+    M = sp.csr_matrix((np.concatenate([U.data, A.diagonal()]),
+                       (np.concatenate([U.row, index]), np.concatenate([U.col, index]))), shape=A.shape)
+    M.sort_indices()
+    return M
+
+
 class _PardisoFactor:
     """A PARDISO factorisation (``pypardiso``), freed with the object."""
 
     def __init__(self, A: sp.csc_matrix, symmetric: bool) -> None:
         import pypardiso
 
-        if symmetric:  # the upper triangle, with every diagonal entry stored (PARDISO requires it)
-            U = sp.triu(A, k=1, format="coo")
-            n = A.shape[0]
-            index = np.arange(n)
-            M = sp.csr_matrix((np.concatenate([U.data, A.diagonal()]),
-                               (np.concatenate([U.row, index]), np.concatenate([U.col, index]))), shape=A.shape)
+        if symmetric:
+            M = _upper_with_diagonal(A)
         else:
             M = A.tocsr()
-        M.sort_indices()
+            M.sort_indices()
         self._matrix = M
         self._solver = pypardiso.PyPardisoSolver(mtype=-2 if symmetric else 11)
         self._solver.set_iparm(18, -1)  # report the factor's nonzeros
@@ -801,6 +808,16 @@ def factorize_definite(A: sp.spmatrix, *, near_null: np.ndarray | None = None) -
 SOLVE_BLOCK = 4
 
 
+def solved_columns(solve: Callable[[np.ndarray], np.ndarray], columns: sp.spmatrix
+                   ) -> Iterator[tuple[slice, np.ndarray]]:
+    """``solve`` (a kept factor's) applied to the columns of ``columns``, :data:`SOLVE_BLOCK` at a
+    time: yields each block's column slice and its solutions (``n x`` block)."""
+    columns = sp.csc_matrix(columns)
+    for j in range(0, columns.shape[1], SOLVE_BLOCK):
+        block = columns[:, j:j + SOLVE_BLOCK].toarray()
+        yield slice(j, j + block.shape[1]), np.asarray(solve(block), float).reshape(block.shape)
+
+
 class _PardisoSchur:
     r"""PARDISO's partial factorisation of ``[[A, C^T], [C, 0]]`` (``A`` symmetric positive
     definite, ``mtype = -2``, Schur variables the last ``nc``): the factor of ``A`` and, from the
@@ -820,13 +837,7 @@ class _PardisoSchur:
         import pypardiso
 
         n, nc = A.shape[0], C.shape[0]
-        U = sp.triu(sp.bmat([[A, sp.csr_matrix(C).T], [sp.csr_matrix(C), None]]), format="coo")
-        index = np.arange(n, n + nc)  # PARDISO's symmetric storage needs every diagonal entry stored
-        M = sp.csr_matrix((np.concatenate([U.data, np.zeros(nc)]), (np.concatenate([U.row, index]),
-                                                                      np.concatenate([U.col, index]))),
-                          shape=(n + nc, n + nc))
-        del U  # the temporaries go before PARDISO allocates its factor (the peak memory)
-        M.sort_indices()
+        M = _upper_with_diagonal(sp.bmat([[A, sp.csr_matrix(C).T], [sp.csr_matrix(C), None]], format="csr"))
         self.n, self.nc = n, nc
         self._data = M.data
         self._ia, self._ja = M.indptr.astype(np.int32) + 1, M.indices.astype(np.int32) + 1  # one-based
@@ -923,8 +934,6 @@ def factorize_with_delassus(A: sp.spmatrix, C: sp.spmatrix, *, near_null: np.nda
         return factor, factor.schur
     factor = factorize_definite(A, near_null=near_null)
     D = np.empty((C.shape[0], C.shape[0]))
-    Ct = C.T.tocsc()
-    for j in range(0, C.shape[0], SOLVE_BLOCK):
-        block = Ct[:, j:j + SOLVE_BLOCK].toarray()
-        D[:, j:j + block.shape[1]] = C @ np.asarray(factor.solve(block), float).reshape(block.shape)
+    for cols, X in solved_columns(factor.solve, C.T):
+        D[:, cols] = C @ X
     return factor, 0.5 * (D + D.T)

@@ -42,8 +42,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ddcm_casadi.linalg import (
-    SCHUR_MIN_SIZE, SOLVE_BLOCK, SingularMatrix, definite_solver_name, delassus_solver, factorize_definite,
-    factorize_with_delassus, numerically_symmetric,
+    SCHUR_MIN_SIZE, SingularMatrix, definite_solver_name, delassus_solver, factorize_definite,
+    factorize_with_delassus, numerically_symmetric, solved_columns,
 )
 from ddcm_casadi.heap import release_heap
 from ddcm_casadi.problems.contract import ComplementarityProblem
@@ -78,6 +78,8 @@ def condition_limit(residual_tol: float) -> float:
     to spare above its roundoff floor ``cond eps``: ``0.1 residual_tol / eps``, at most
     :data:`MAX_CONDITION`."""
     return min(MAX_CONDITION, 0.1 * residual_tol / np.finfo(float).eps)
+
+
 #: Largest dense ``n x nc`` block kept (bytes); above, the full path is kept.
 MAX_DENSE_BYTES = 2 * 1024**3
 
@@ -204,6 +206,15 @@ def refusal(problem: ComplementarityProblem, *, max_pairs: int | None = None) ->
     return ""
 
 
+def _displacement_stiffness(problem: ComplementarityProblem, n: int, mk: int) -> sp.csc_matrix:
+    """``K_u = A_u^T W_e A_u`` from the distance's strain rows (those without stress entries;
+    constant where no free dof moves a point)."""
+    d, W = problem.distance.d, sp.csr_matrix(problem.distance.weight)
+    e_rows = np.flatnonzero(~_rows(d.z, slice(n, n + mk)))
+    A_u = d.z[e_rows][:, :n].tocsc()
+    return (A_u.T @ W[e_rows][:, e_rows] @ A_u).tocsc()
+
+
 def _operators(problem: ComplementarityProblem, n: int, mk: int) -> tuple:
     r"""The sparse operators of the reduction of ``problem`` (module docstring): ``(K_u, K_s,
     sigma0_P, M^-1 R_sigma^T, R_p, G, g_P)``, ``sigma_0 = sigma0_P P`` and ``g = g_P P``. In a
@@ -212,13 +223,8 @@ def _operators(problem: ComplementarityProblem, n: int, mk: int) -> tuple:
     before ``K_u`` is factorised, not held through the factorisation."""
     R, Gm, dist = problem.residual_map, problem.gap_map, problem.distance
     d, W = dist.d, sp.csr_matrix(dist.weight)
-    # the stress rows, and every other (strains; constant where no free dof moves a point)
-    on_s = _rows(d.z, slice(n, n + mk))
-    e_rows, s_rows = np.flatnonzero(~on_s), np.flatnonzero(on_s)
-    A_u = d.z[e_rows][:, :n].tocsc()
-    AtW = (A_u.T @ W[e_rows][:, e_rows]).tocsr()
-    K_u = (AtW @ A_u).tocsc()
-    del A_u, AtW
+    K_u = _displacement_stiffness(problem, n, mk)
+    s_rows = np.flatnonzero(_rows(d.z, slice(n, n + mk)))
     S_inv = block_inverse(d.z[s_rows][:, n:n + mk])
     sigma0 = (-(S_inv @ d.params[s_rows])).tocsr()  # sigma_0 = -S^-1 s, s = s_P P
     M_inv = (S_inv @ block_inverse(W[s_rows][:, s_rows]) @ S_inv.T).tocsr()  # (S^T W_s S)^-1
@@ -228,6 +234,7 @@ def _operators(problem: ComplementarityProblem, n: int, mk: int) -> tuple:
     del M_inv
     K_s = (R_s @ MRt).tocsc()
     return K_u, K_s, sigma0, MRt, R.z[:, n + mk:].tocsc(), Gm.z[:, :n].tocsr(), Gm.params.tocsr()
+
 
 class Reduction:
     r"""The reduction of one affine projection (module docstring), built once per model.
@@ -328,14 +335,12 @@ class Reduction:
         release_heap()  # the factorisation's working memory
 
     def _back_solves(self, solve, columns: sp.spmatrix) -> np.ndarray:
-        """``solve`` applied to the columns of ``columns``, :data:`SOLVE_BLOCK` at a time, into one
+        """``solve`` applied to the columns of ``columns``, :data:`~ddcm_casadi.linalg.SOLVE_BLOCK` at a time, into one
         column-major ``n x nc`` array (the recovery takes whole columns)."""
-        columns = sp.csc_matrix(columns)
         self.back_solves += columns.shape[1]
         out = np.empty((self.n, columns.shape[1]), order="F")
-        for j in range(0, columns.shape[1], SOLVE_BLOCK):
-            block = columns[:, j:j + SOLVE_BLOCK].toarray()
-            out[:, j:j + block.shape[1]] = np.asarray(solve(block), float).reshape(block.shape)
+        for cols, X in solved_columns(solve, columns):
+            out[:, cols] = X
         return out
 
     def _solve_s(self, rhs: np.ndarray) -> np.ndarray:
@@ -395,7 +400,7 @@ class Reduction:
     def K_u(self) -> sp.csc_matrix:
         """``A_u^T W_e A_u`` (a multiple of ``K_C``), assembled again on each use: not held
         beside its factor (14 MB at 1e5 points)."""
-        return _operators(self.problem, self.n, self.mk)[0]
+        return _displacement_stiffness(self.problem, self.n, self.mk)
 
     def condensed_params(self, params: np.ndarray, u0: np.ndarray, eta0: np.ndarray) -> np.ndarray:
         """The condensed problem's parameter vector: ``g_c = G u_0 + g`` and
