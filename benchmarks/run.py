@@ -1025,6 +1025,10 @@ def main(argv=None) -> int:
         records.append(rec)
         print(f"{rec['name']:<55} {rec['unknowns']:>8} {rec['data_points']:>9} {rec['seconds']:10.4g} s  "
               f"ratio {rec['ratio']:8.3g}", file=sys.stderr, flush=True)
+        # written after every record: a run stopped or killed late (the full run takes hours) keeps
+        # what it measured
+        write_json_atomic(out / "benchmarks.json", records)
+        write_bytes_atomic(out / "benchmarks.md", markdown(records).encode())
 
     for n in (300, 3000, 30000):
         model = stopped_bar(n, 10_000)
@@ -1144,8 +1148,6 @@ def main(argv=None) -> int:
         for rec in in_fresh_process("formulation_ratios", case, label=f"formulations on {case}", unknowns=0,
                                     env={"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}):
             log(rec)
-    write_json_atomic(out / "benchmarks.json", records)
-    write_bytes_atomic(out / "benchmarks.md", markdown(records).encode())
     print(f"wrote benchmarks.json and benchmarks.md to {out}", file=sys.stderr)
     return 0
 
