@@ -196,7 +196,12 @@ def parameters(case: Case, cmp: Comparison) -> dict:
         ``formulations`` (options with their problem-dependent defaults resolved, e.g. ``gamma_used``).
     """
     m = case.model
-    forms = {f.name: f.resolved_options(cmp.problems.classical) for f in cmp.formulations}
+    # the options depend on the model's contact stiffness, which both problems share: read them
+    # from a problem the runs built (a DDCM-only run never builds the classical problem)
+    ran = {variant for variant, _ in cmp.results}
+    problems = cmp.problems
+    problem = problems.classical if "classical" in ran or not problems.has("projection") else problems.projection
+    forms = {f.name: f.resolved_options(problem) for f in cmp.formulations}
     # A dict display, not keywords: a model record may not clash with the run's own keys.
     return {"case": case.source, **m.describe(), "data": describe_dataset(m.dataset),
             "ddcm_max_outer": case.ddcm_max_outer, "ddcm": case.ddcm_options.describe(),

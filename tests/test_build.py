@@ -108,3 +108,18 @@ def test_a_problem_the_model_has_not_is_none():
 
     pair = ProblemPair(model=_truss(), builders={})
     assert not pair.has("classical") and pair.classical is None and pair.projection is None
+
+
+def test_a_ddcm_run_records_its_options_without_the_classical_problem():
+    """``results.json``'s resolved options (the penalty's ``gamma_used``, from the contact stiffness
+    both problems share) come from a problem the runs built: a DDCM-only run's record builds no
+    classical problem, and gives the same ``gamma_used`` as a run of both variants."""
+    from ddcm_casadi import compare, run
+    from ddcm_casadi.casefiles.config import Case
+
+    model = _truss()
+    both = run.parameters(Case(model=model, source="t"), compare(model, ["penalty"]))
+    ddcm = compare(_truss(), ["penalty"], variants=["ddcm"])
+    params = run.parameters(Case(model=ddcm.model, source="t"), ddcm)
+    assert "classical" not in vars(ddcm.problems)
+    assert params["formulations"]["penalty"]["gamma_used"] == both["formulations"]["penalty"]["gamma_used"] > 0
