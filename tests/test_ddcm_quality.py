@@ -246,6 +246,60 @@ def test_assignment_projection_is_the_exact_projection():
             assert abs(obj - ex.objective[0]) <= ROUNDOFF * max(1.0, abs(ex.objective[0]))
 
 
+def test_params_projection_is_the_exact_projection_of_its_parameters():
+    """The check of a search's projection from the step's solved directions
+    (:func:`params_projection`) against the exact projection solved for the same parameters; a
+    parameter vector outside the directions' family (a sub-step's load) gets no closed form."""
+    from ddcm_casadi.drivers.ddcm_search import params_projection
+
+    model = ladder.warren_truss(n_data=200)
+    problems = build_problems(model)
+    exact = ExactEnumerator(problems.projection)
+    data, rng = model.dataset, np.random.default_rng(3)
+    for step in (0, model.n_steps - 1):
+        for _ in range(5):
+            index = random_assignment(model, rng)
+            params = problems.projection_params(step, data.strain[index], data.stress[index])
+            x, p, obj = params_projection(problems, exact, step, params)
+            ex = exact.solve(params)
+            z, z_ref = np.concatenate([x, p]), np.concatenate([ex.x[:, 0], ex.p[:, 0]])
+            assert np.max(np.abs(z - z_ref)) <= ROUNDOFF * max(1.0, float(np.max(np.abs(z_ref))))
+            assert abs(obj - ex.objective[0]) <= ROUNDOFF * max(1.0, abs(ex.objective[0]))
+        # another step's load: not of this step's family
+        other = problems.projection_params((step + 1) % model.n_steps, data.strain[index], data.stress[index])
+        assert params_projection(problems, exact, step, other) is None
+
+
+@pytest.mark.parametrize("noise, seed", [(0.01, 2), (0.05, 0)])
+def test_search_checks_from_closed_forms_give_the_same_states(monkeypatch, noise, seed):
+    """Restarts and greedy trials check their formulation solves against the step's closed forms
+    (``Projection.closed_form``) instead of a solve with the bordered matrix: the same data
+    assignments, projections and objectives (to roundoff) as checking with the enumerator's solve."""
+    model = _noisy_warren_truss(noise, seed)
+    opts = dict(restarts=1, restart_neighbours=10, improve="greedy")
+    calls = []
+    closed = DDCMSolver._closed_form
+
+    def counted(self, k):
+        form = closed(self, k)
+
+        def answer(params):
+            calls.append(form(params))
+            return calls[-1]
+        return answer
+
+    monkeypatch.setattr(DDCMSolver, "_closed_form", counted)
+    fast = _run(model, **opts)
+    assert sum(c is not None for c in calls) > 20  # the closed forms answered the search's checks
+    monkeypatch.setattr(DDCMSolver, "_closed_form", lambda self, k: None)  # the enumerator's solve
+    solved = _run(model, **opts)
+    assert fast.converged and solved.converged
+    assert np.array_equal(fast.array("data_index"), solved.array("data_index"))
+    assert np.array_equal(fast.array("projections"), solved.array("projections"))
+    d0, d1 = solved.array("distance"), fast.array("distance")
+    assert np.max(np.abs(d1 - d0)) <= ROUNDOFF * model.scales_for("ddcm")["energy"]
+
+
 def _random_params(model, problems, rng, count):
     """Projection parameters of ``count`` random data assignments over the load steps."""
     cols = []

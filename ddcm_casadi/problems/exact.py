@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -167,6 +168,7 @@ class BorderedFamily:
     solvable: np.ndarray  # (branches,) bool
     sign_tol: float
     relaxed_P: np.ndarray | None = None  # M^-1: every constraint dropped (None: that problem is singular)
+    relaxed_A2: np.ndarray | None = None  # the quadratic term of relaxed() where the caller has it
 
     def relaxed(self) -> tuple[float, np.ndarray, np.ndarray] | None:
         r"""``(a0, a1, A2)`` of the projection without any contact constraint (``R z = r`` only),
@@ -175,9 +177,13 @@ class BorderedFamily:
         semidefinite and ``K_R`` nonsingular, so its stationary point is its minimum)."""
         if self.relaxed_P is None:
             return None
-        Pw0, PW = self.relaxed_P @ self.w0, self.relaxed_P @ self.W
-        A2 = self.A2 + self.W.T @ PW
-        return self.a0 + 0.5 * float(self.w0 @ Pw0), self.a1 + self.W.T @ Pw0, 0.5 * (A2 + A2.T)
+        Pw0 = self.relaxed_P @ self.w0
+        if self.relaxed_A2 is None:
+            A2 = self.A2 + self.W.T @ (self.relaxed_P @ self.W)
+            A2 = 0.5 * (A2 + A2.T)
+        else:  # it does not depend on the family's base (P0): the step's, once
+            A2 = self.relaxed_A2
+        return self.a0 + 0.5 * float(self.w0 @ Pw0), self.a1 + self.W.T @ Pw0, A2
 
     def best(self, c, *, chunk: int = 1 << 20) -> np.ndarray:
         """As :meth:`AffineFamily.best`."""
@@ -214,9 +220,10 @@ def _best_branch(base: np.ndarray, w: np.ndarray, P: np.ndarray, solvable: np.nd
     first such branch on ties, as the enumeration in order); ``inf`` and ``-1`` where none is."""
     if P.shape[0] * w.shape[1] <= ALL_BRANCHES_AT_ONCE:  # few columns: one product for every branch
         Pw = (P.reshape(-1, P.shape[2]) @ w).reshape(P.shape[0], P.shape[1], -1)
-        obj = np.where((np.max(Pw, axis=1, initial=-np.inf) <= sign_tol) & solvable[:, None],
-                       base + 0.5 * np.einsum("sik,ik->sk", Pw, w), np.inf)
-        which = np.argmin(obj, axis=0)  # the first on ties
+        feasible = (Pw.max(axis=1) <= sign_tol) if P.shape[1] else np.ones((P.shape[0], w.shape[1]), dtype=bool)
+        feasible &= solvable[:, None]
+        obj = np.where(feasible, base + 0.5 * np.einsum("sik,ik->sk", Pw, w), np.inf)
+        which = obj.argmin(axis=0)  # the first on ties
         best = obj[which, np.arange(w.shape[1])]
         return best, np.where(np.isfinite(best), which, -1)
     best = np.full(w.shape[1], np.inf)
@@ -359,31 +366,49 @@ class ExactEnumerator:
         imposed (:meth:`imposed`, or linear combinations of its columns): the best sign-feasible
         branch, ``z = z0 + Z_c t`` with its freed constraints ``t = -P_s mu``."""
         b = self._bordered
-        obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, self._weight @ d), w, b.P, b.solvable,
-                                  self.sign_tol)
+        Wd = self._weight_diagonal[:, None] * d if self._weight_diagonal is not None else self._weight @ d
+        obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, Wd), w, b.P, b.solvable, self.sign_tol)
         found = which >= 0
+        if d.shape[1] == 1:  # one projection (a checked or a search's projection): no gathers
+            s = int(which[0])
+            z = z0 + b.Zc @ (-(b.P[s] @ w)) if s >= 0 else np.full(z0.shape, np.nan)
+            partition = self._partition_array[max(s, 0)][:, None] if s >= 0 else np.zeros((self.nc, 1), dtype=int)
+            return ExactSolution(x=z[:self.nx], p=z[self.nx:], objective=obj, partition=partition, found=found)
         cols = np.flatnonzero(found)
         t = np.zeros((2 * self.nc, d.shape[1]))
         t[:, cols] = -np.einsum("kij,jk->ik", b.P[which[cols]], w[:, cols])
         z = np.where(found, z0 + b.Zc @ t, np.nan)
-        part = np.array(self.partitions, dtype=int).reshape(len(self.partitions), self.nc)
         partition = np.zeros((self.nc, d.shape[1]), dtype=int)
-        partition[:, cols] = part[which[cols]].T
+        partition[:, cols] = self._partition_array[which[cols]].T
         return ExactSolution(x=z[:self.nx], p=z[self.nx:], objective=obj, partition=partition, found=found)
 
+    @cached_property
+    def _partition_array(self) -> np.ndarray:
+        """``(branches, nc)``: the partitions as an array."""
+        return np.array(self.partitions, dtype=int).reshape(len(self.partitions), self.nc)
+
+    @cached_property
+    def _weight_diagonal(self) -> np.ndarray | None:
+        """The distance's weight as a vector where it is diagonal (one-component points), else None."""
+        W = sp.csr_matrix(self._weight)
+        diag = W.diagonal()
+        return diag if W.nnz == np.count_nonzero(diag) else None
+
     def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray, *,
-               A2: np.ndarray | None = None) -> BorderedFamily:
+               A2: np.ndarray | None = None, relaxed_A2: np.ndarray | None = None) -> BorderedFamily:
         """The :class:`BorderedFamily` of the projections of ``P0 + D c`` from :meth:`imposed` of
         ``P0`` (``d0``, ``w0``) and of the columns of ``D`` (``E``, ``W``). ``A2``: ``E^T W E``
         (symmetric) where the caller has it (a family of some of the directions of a larger
-        one: its rows and columns), else computed."""
+        one: its rows and columns), else computed; ``relaxed_A2``: the quadratic term of
+        :meth:`BorderedFamily.relaxed` where the caller has it (the same for every ``P0``)."""
         b = self._bordered
-        Wd0 = self._weight @ d0
+        Wd0 = self._weight_diagonal * d0 if self._weight_diagonal is not None else self._weight @ d0
         if A2 is None:
             A2 = E.T @ (self._weight @ E)
             A2 = 0.5 * (A2 + A2.T)
         return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=A2, w0=w0, W=W, P=b.P,
-                              solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
+                              solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P,
+                              relaxed_A2=relaxed_A2 if b.relaxed_P is not None else None)
 
     def _solve_bordered(self, params: np.ndarray, b: _Bordered) -> ExactSolution:
         return self.from_imposed(*self._imposed(params, b))
