@@ -31,11 +31,15 @@ from ddcm_casadi.data.metric import block_diagonal
 
 
 def point_ranges(model) -> tuple[np.ndarray, np.ndarray]:
-    """Per material point: where its data set starts in the global index, and its size."""
-    data = model.dataset
-    _, material = data.point_materials(model.n_points)
-    sizes = np.array([len(d) for d in data.datasets], dtype=np.intp)
-    return np.asarray(data.offsets, dtype=np.intp)[material], sizes[material]
+    """Per material point: where its data set starts in the global index, and its size
+    (remembered per model: the greedy screen asks every sweep)."""
+    cached = model._cache.get("point_ranges")
+    if cached is None:
+        data = model.dataset
+        _, material = data.point_materials(model.n_points)
+        sizes = np.array([len(d) for d in data.datasets], dtype=np.intp)
+        cached = model._cache["point_ranges"] = (np.asarray(data.offsets, dtype=np.intp)[material], sizes[material])
+    return cached[0].copy(), cached[1].copy()
 
 
 def origin_assignment(model, search: str = "kdtree") -> np.ndarray:
@@ -358,7 +362,8 @@ def screened_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarra
             linear, quadratic = move_terms(relaxed[1], relaxed[2], rows, pairs(candidates) - cur[:, None, :])
             margin_bound = (relaxed[0] + linear + quadratic
                             - PRUNE_MARGIN * (abs(relaxed[0]) + np.abs(linear) + np.abs(quadratic)))
-        a, b = np.nonzero(margin_bound <= limit + PRUNE_MARGIN * abs(limit))
+        # row-major, as np.nonzero, at a third of its cost on the screen's 8 x 2001 moves
+        a, b = np.divmod(np.flatnonzero(margin_bound <= limit + PRUNE_MARGIN * abs(limit)), n_c)
     chosen = candidates[0, b] if shared else candidates[a, b]
     return a, b, family.best_moves(rows[a], (pairs(chosen) - cur[a])[:, None, :])[:, 0], mine
 
