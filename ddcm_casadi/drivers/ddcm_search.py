@@ -368,18 +368,18 @@ def screened_moves(problems, exact: ExactEnumerator, step: int, index: np.ndarra
     return a, b, family.best_moves(rows[a], (pairs(chosen) - cur[a])[:, None, :])[:, 0], mine
 
 
-def _monomials(problems, candidates: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray]:
-    r"""``(x0, [Y; |Y|])`` of the data ``x = pairs(candidates)`` (``(N, j)``) for
-    :func:`_shared_bound`: their centre ``x0`` (their mean, inside the data's range), and per datum
-    (column) the monomials ``Y = [1, y, y y^T]`` (``y = x - x0``; ``1 + j + j^2`` rows) over their
-    absolute values. Remembered per problem for a contiguous range of data (a whole data set,
-    screened sweep after sweep)."""
+def _monomials(problems, candidates: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""``(x0, Y, |Y|max)`` of the data ``x = pairs(candidates)`` (``(N, j)``) for
+    :func:`_shared_bound`: their centre ``x0`` (their mean, inside the data's range), per datum
+    (column) the monomials ``Y = [1, y, y y^T]`` (``y = x - x0``; ``1 + j + j^2`` rows), and the
+    largest absolute value of each monomial over the data. Remembered per problem for a
+    contiguous range of data (a whole data set, screened sweep after sweep)."""
     def build():
         x = pairs(candidates)
         centre = np.mean(x, axis=0)
         y = x - centre
         Y = np.vstack([np.ones((1, len(y))), y.T, (y[:, :, None] * y[:, None, :]).reshape(len(y), -1).T])
-        return centre, np.vstack([Y, np.abs(Y)])  # one row per monomial: contiguous for the product
+        return centre, Y, np.max(np.abs(Y), axis=1)  # one row per monomial: contiguous for the product
 
     n = candidates.size
     if n and candidates[-1] - candidates[0] == n - 1 and np.all(np.diff(candidates) == 1):
@@ -388,21 +388,25 @@ def _monomials(problems, candidates: np.ndarray, pairs) -> tuple[np.ndarray, np.
 
 
 def _shared_bound(a0: float, a1: np.ndarray, A2: np.ndarray, rows: np.ndarray,
-                  monomials: tuple[np.ndarray, np.ndarray], cur: np.ndarray) -> np.ndarray:
+                  monomials: tuple[np.ndarray, np.ndarray, np.ndarray], cur: np.ndarray) -> np.ndarray:
     r"""The quadratic ``a0 + a1^T c + c^T A2 c / 2`` of every move of point ``g`` (rows ``rows[g]``)
     from ``cur[g]`` to a datum ``x[i]`` of one shared set ``x`` (``(N, j)``), less
-    :data:`PRUNE_MARGIN` times the size of its terms: a ``(G, N)`` array. About the data's
-    centre ``x0`` (``x = x0 + y``, ``c = y + delta_g``, ``delta_g = x0 - cur[g]``) it is
-    ``k_g + l_g^T y + y^T A_g y / 2``: the coefficients ``[k_g, l_g, A_g / 2]`` times the data's
-    monomials ``Y = [1, y, y y^T]`` (:func:`_monomials`, once per data set) instead of per-move
-    arithmetic, the size their absolute values times ``|Y|``: one product with ``[Y; |Y|]``."""
-    centre, Y2 = monomials
+    :data:`PRUNE_MARGIN` times a bound of the size of its terms: a ``(G, N)`` array. About the
+    data's centre ``x0`` (``x = x0 + y``, ``c = y + delta_g``, ``delta_g = x0 - cur[g]``) it is
+    ``k_g + l_g^T y + y^T A_g y / 2``: one product of the coefficients ``[k_g, l_g, A_g / 2]``
+    with the data's monomials ``Y = [1, y, y y^T]`` (:func:`_monomials`, once per data set)
+    instead of per-move arithmetic; the size of the terms of point ``g``'s moves is at most
+    ``|[k_g, l_g, A_g / 2]|`` times the monomials' largest absolute values (one number per point:
+    a margin at most a few times the per-move one, far above roundoff either way)."""
+    centre, Y, largest = monomials
     g, A = a1[rows], A2[rows[:, :, None], rows[:, None, :]]  # (G, j), (G, j, j)
     delta = centre - cur
     Ad = np.einsum("gpq,gq->gp", A, delta)
     const = a0 + np.einsum("gp,gp->g", g + 0.5 * Ad, delta)
     coef = np.hstack([const[:, None], g + Ad, 0.5 * A.reshape(len(A), -1)])
-    return np.hstack([coef, -PRUNE_MARGIN * np.abs(coef)]) @ Y2
+    bound = coef @ Y
+    bound -= (PRUNE_MARGIN * (np.abs(coef) @ largest))[:, None]
+    return bound
 
 
 def global_optimum(problems, exact: ExactEnumerator, step: int, index: np.ndarray, *,
