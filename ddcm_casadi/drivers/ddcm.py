@@ -243,8 +243,12 @@ class DDCMSolver:
     def _closed_form(self, k: int) -> Callable[[np.ndarray], tuple | None] | None:
         """The exact projection of step ``k``'s parameters from the step's solved directions
         (:func:`~ddcm_casadi.drivers.ddcm_search.params_projection`), where every projection is
-        checked against an exact enumeration; else None."""
-        exact = self.exact if self.projection.check else None
+        checked against an exact enumeration and the greedy screen solves the directions for the
+        step anyway (``2 m k + 1`` right-hand sides: a few checks alone would not repay them);
+        else None."""
+        opts = self.options
+        screens = opts.improve == "greedy" and opts.greedy_screen
+        exact = self.exact if self.projection.check and screens else None
         if exact is None:
             return None
         return lambda params: params_projection(self.problems, exact, k, params)
