@@ -227,10 +227,14 @@ def test_single_moves_are_the_exact_projections_of_the_moved_assignments():
     assert abs(mine - own) <= ROUNDOFF * max(1.0, abs(own))
 
 
-def test_assignment_projection_is_the_exact_projection():
-    """The closed-form projection of an assignment from the step's solved directions (the greedy
-    trial's first projection) against the exact projection solved directly for its parameters."""
-    from ddcm_casadi.drivers.ddcm_search import assignment_projection
+@pytest.mark.parametrize("given", ["assignment", "parameters"])
+def test_closed_form_projection_is_the_exact_projection(given):
+    """The closed-form projection from the step's solved directions, of an assignment
+    (:func:`assignment_projection`: a greedy trial's first projection) or of a parameter vector
+    (:func:`params_projection`: the check of a search's projection), against the exact projection
+    solved directly for its parameters; a parameter vector outside the directions' family
+    (another step's load) gets no closed form."""
+    from ddcm_casadi.drivers.ddcm_search import assignment_projection, params_projection
 
     model = ladder.warren_truss(n_data=200)
     problems = build_problems(model)
@@ -239,11 +243,15 @@ def test_assignment_projection_is_the_exact_projection():
     for step in (0, model.n_steps - 1):
         for _ in range(5):
             index = random_assignment(model, rng)
-            x, p, obj = assignment_projection(problems, exact, step, index)
-            ex = exact.solve(problems.projection_params(step, data.strain[index], data.stress[index]))
+            params = problems.projection_params(step, data.strain[index], data.stress[index])
+            x, p, obj = (assignment_projection(problems, exact, step, index) if given == "assignment"
+                         else params_projection(problems, exact, step, params))
+            ex = exact.solve(params)
             z, z_ref = np.concatenate([x, p]), np.concatenate([ex.x[:, 0], ex.p[:, 0]])
             assert np.max(np.abs(z - z_ref)) <= ROUNDOFF * max(1.0, float(np.max(np.abs(z_ref))))
             assert abs(obj - ex.objective[0]) <= ROUNDOFF * max(1.0, abs(ex.objective[0]))
+        other = problems.projection_params((step + 1) % model.n_steps, data.strain[index], data.stress[index])
+        assert params_projection(problems, exact, step, other) is None
 
 
 def _random_params(model, problems, rng, count):
@@ -387,13 +395,44 @@ def test_greedy_trials_reuse_the_screened_exact_projection(monkeypatch, noise, s
     reused = _run(model, **opts)
     monkeypatch.setattr(Projection, "exact_solution", lambda self, params, state, known=None: None)  # the formulation's solve
     solved = _run(model, **opts)
-    assert reused.converged and solved.converged
-    assert np.array_equal(reused.array("data_index"), solved.array("data_index"))
-    assert np.array_equal(reused.array("projections"), solved.array("projections"))
-    d0, d1 = solved.array("distance"), reused.array("distance")
-    assert np.max(np.abs(d1 - d0)) <= ROUNDOFF * model.scales_for("ddcm")["energy"]
+    _assert_same_states(model, reused, solved)
     assert reused.array("improvements").sum() > 0  # trials ran
     assert reused.array("iterations").sum() < solved.array("iterations").sum()
+
+
+def _assert_same_states(model, fast, reference):
+    """Two paths of one search through the same states: the same data assignments and projection
+    counts, objectives equal to roundoff."""
+    assert fast.converged and reference.converged
+    assert np.array_equal(fast.array("data_index"), reference.array("data_index"))
+    assert np.array_equal(fast.array("projections"), reference.array("projections"))
+    d0, d1 = reference.array("distance"), fast.array("distance")
+    assert np.max(np.abs(d1 - d0)) <= ROUNDOFF * model.scales_for("ddcm")["energy"]
+
+
+@pytest.mark.parametrize("noise, seed", [(0.01, 2), (0.05, 0)])
+def test_search_checks_from_closed_forms_give_the_same_states(monkeypatch, noise, seed):
+    """Restarts and greedy trials check their formulation solves against the step's closed forms
+    (``Projection.closed_form``) instead of a solve with the bordered matrix: the same data
+    assignments, projections and objectives (to roundoff) as checking with the enumerator's solve."""
+    model = _noisy_warren_truss(noise, seed)
+    opts = dict(restarts=1, restart_neighbours=10, improve="greedy")
+    calls = []
+    closed = DDCMSolver._closed_form
+
+    def counted(self, k):
+        form = closed(self, k)
+
+        def answer(params):
+            calls.append(form(params))
+            return calls[-1]
+        return answer
+
+    monkeypatch.setattr(DDCMSolver, "_closed_form", counted)
+    fast = _run(model, **opts)
+    assert sum(c is not None for c in calls) > 20  # the closed forms answered the search's checks
+    monkeypatch.setattr(DDCMSolver, "_closed_form", lambda self, k: None)  # the enumerator's solve
+    _assert_same_states(model, fast, _run(model, **opts))
 
 
 def test_greedy_reaches_the_enumerated_optimum_on_one_element():

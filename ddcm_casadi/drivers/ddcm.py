@@ -49,7 +49,7 @@ from ddcm_casadi.drivers.checks import finish_step
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.drivers.ddcm_projection import Projection
 from ddcm_casadi.drivers.ddcm_reduced import path_description
-from ddcm_casadi.drivers.ddcm_search import point_ranges, start_assignment
+from ddcm_casadi.drivers.ddcm_search import params_projection, point_ranges, start_assignment
 from ddcm_casadi.drivers.records import (
     MaterialStates, PathResult, Run, StepResult, check_convergence, count, new_tally,
 )
@@ -240,6 +240,19 @@ class DDCMSolver:
                   inner=cost["inner"], t_project=cost["t_project"], t_search=t_search, error=err, is_global=is_global)
         return run, (x, p, state)
 
+    def _closed_form(self, k: int) -> Callable[[np.ndarray], tuple | None] | None:
+        """The exact projection of step ``k``'s parameters from the step's solved directions
+        (:func:`~ddcm_casadi.drivers.ddcm_search.params_projection`), where every projection is
+        checked against an exact enumeration and the greedy screen solves the directions for the
+        step anyway (``2 m k + 1`` right-hand sides: a few checks alone would not repay them);
+        else None."""
+        opts = self.options
+        screens = opts.improve == "greedy" and opts.greedy_screen
+        exact = self.exact if self.projection.check and screens else None
+        if exact is None:
+            return None
+        return lambda params: params_projection(self.problems, exact, k, params)
+
     def solve_step(self, k: int, start: MaterialStates, warm: tuple) -> tuple[StepResult, Run, tuple]:
         """Load step ``k`` from the material states ``start``, the Z_E solves warm-started from
         ``warm = (x, p, state)``: the alternation, then (for a scheme that assigns data) restarts,
@@ -248,11 +261,17 @@ class DDCMSolver:
         opts, tally = self.options, new_tally()
         best, best_warm = self.alternate(k, start, *warm)
         count(tally, best)
-        if self.scheme.assigns_data:
+        if self.scheme.assigns_data and (opts.restarts or opts.improve == "greedy"):
             visited = {start.key, best.star.key}
-            best, best_warm = ddcm_improve.restart(self, k, best, best_warm, warm, visited, tally)
-            if opts.improve == "greedy" and best.converged:
-                best, best_warm = ddcm_improve.greedy(self, k, best, best_warm, visited, tally)
+            # The search's many projections of one step are checked against the step's closed
+            # forms (one product each instead of a solve with the bordered matrix).
+            self.projection.closed_form = self._closed_form(k)
+            try:
+                best, best_warm = ddcm_improve.restart(self, k, best, best_warm, warm, visited, tally)
+                if opts.improve == "greedy" and best.converged:
+                    best, best_warm = ddcm_improve.greedy(self, k, best, best_warm, visited, tally)
+            finally:
+                self.projection.closed_form = None
         step = self._step_result(k, best, tally)
         if self.global_search and self.scheme.assigns_data and best.sol.converged:
             self.projection.certify(k, step)

@@ -54,6 +54,11 @@ class Projection:
         #: The parameters of the last projection (:meth:`project`): the fields of its solution
         #: are those of these parameters (a hard device's prescribed displacements).
         self.last_params: np.ndarray | None = None
+        #: Set by the driver while it searches a step beyond its first run (restarts, greedy):
+        #: the exact projection of a parameter vector from closed forms kept for the step
+        #: (:func:`~ddcm_casadi.drivers.ddcm_search.params_projection`), or None where they do
+        #: not apply; :meth:`exact_projection` then needs no solve.
+        self.closed_form: Callable[[np.ndarray], tuple | None] | None = None
         self._metrics = Metrics(problem)
 
     def solve(self, params: np.ndarray, x0, p0, state):
@@ -116,8 +121,13 @@ class Projection:
         Remembered per problem (within ``cache_values``): the DDCM runs of the formulations of
         one model visit the same data assignments (the paper's bar: the same 46 projections for
         each of the four), and the enumeration's answer does not depend on the formulation.
-        Copies are returned, so that no caller can change a remembered answer.
+        Copies are returned, so that no caller can change a remembered answer. Where
+        :attr:`closed_form` answers, its answer (fresh arrays, not remembered).
         """
+        if self.closed_form is not None:
+            hit = self.closed_form(params)
+            if hit is not None:
+                return hit
         cache = self.problems.projection.shared(("exact_projections",), lambda: {"values": 0, "items": {}})
         key = params.tobytes()
         hit = cache["items"].get(key)

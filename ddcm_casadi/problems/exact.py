@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -163,10 +164,10 @@ class BorderedFamily:
     A2: np.ndarray       # (r, r)
     w0: np.ndarray       # (2 nc,)
     W: np.ndarray        # (2 nc, r)
-    P: np.ndarray        # (branches, 2 nc, 2 nc)
-    solvable: np.ndarray  # (branches,) bool
+    branches: Branches
     sign_tol: float
     relaxed_P: np.ndarray | None = None  # M^-1: every constraint dropped (None: that problem is singular)
+    relaxed_A2: np.ndarray | None = None  # the quadratic term of relaxed() where the caller has it
 
     def relaxed(self) -> tuple[float, np.ndarray, np.ndarray] | None:
         r"""``(a0, a1, A2)`` of the projection without any contact constraint (``R z = r`` only),
@@ -175,9 +176,13 @@ class BorderedFamily:
         semidefinite and ``K_R`` nonsingular, so its stationary point is its minimum)."""
         if self.relaxed_P is None:
             return None
-        Pw0, PW = self.relaxed_P @ self.w0, self.relaxed_P @ self.W
-        A2 = self.A2 + self.W.T @ PW
-        return self.a0 + 0.5 * float(self.w0 @ Pw0), self.a1 + self.W.T @ Pw0, 0.5 * (A2 + A2.T)
+        Pw0 = self.relaxed_P @ self.w0
+        if self.relaxed_A2 is None:
+            A2 = self.A2 + self.W.T @ (self.relaxed_P @ self.W)
+            A2 = 0.5 * (A2 + A2.T)
+        else:  # it does not depend on the family's base (P0): the step's, once
+            A2 = self.relaxed_A2
+        return self.a0 + 0.5 * float(self.w0 @ Pw0), self.a1 + self.W.T @ Pw0, A2
 
     def best(self, c, *, chunk: int = 1 << 20) -> np.ndarray:
         """As :meth:`AffineFamily.best`."""
@@ -186,13 +191,13 @@ class BorderedFamily:
         for a in range(0, c.shape[1], chunk):
             cc = c[:, a:a + chunk]
             w = self.w0[:, None] + ((cc.T @ self.W.T).T if sp.issparse(cc) else self.W @ cc)
-            out[a:a + chunk] = _best_branch(_quadratic(cc, self.a0, self.a1, self.A2), w, self.P, self.solvable,
+            out[a:a + chunk] = _best_branch(_quadratic(cc, self.a0, self.a1, self.A2), w, self.branches,
                                             self.sign_tol)[0]
         return out
 
     def base(self) -> float:
         """:meth:`best` at ``c = 0``: the exact projection's objective of ``P0``."""
-        return float(_best_branch(np.array([self.a0]), self.w0[:, None], self.P, self.solvable, self.sign_tol)[0][0])
+        return float(_best_branch(np.array([self.a0]), self.w0[:, None], self.branches, self.sign_tol)[0][0])
 
     def best_moves(self, rows: np.ndarray, d: np.ndarray) -> np.ndarray:
         """:meth:`best` of the columns with the nonzeros ``d[g, i]`` at ``rows[g]`` (:func:`move_terms`),
@@ -200,29 +205,62 @@ class BorderedFamily:
         linear, quadratic = move_terms(self.a1, self.A2, rows, d)
         w = self.w0[:, None, None] + np.einsum("mgj,gij->mgi", self.W[:, rows], d)  # (2 nc, G, N)
         G, N = linear.shape
-        return _best_branch((self.a0 + linear + quadratic).ravel(), w.reshape(-1, G * N), self.P, self.solvable,
+        return _best_branch((self.a0 + linear + quadratic).ravel(), w.reshape(-1, G * N), self.branches,
                             self.sign_tol)[0].reshape(G, N)
 
 
-#: Branches x columns up to which :func:`_best_branch` treats every branch at once.
-ALL_BRANCHES_AT_ONCE = 1 << 16
+#: Rows x columns up to which :func:`_best_branch` treats every branch at once.
+ALL_BRANCHES_AT_ONCE = 1 << 18
 
 
-def _best_branch(base: np.ndarray, w: np.ndarray, P: np.ndarray, solvable: np.ndarray, sign_tol: float):
+@dataclass(frozen=True)
+class Branches:
+    r"""The branches of the bordered form: ``P`` (``(branches, 2 nc, 2 nc)``, ``M_DD^-1`` embedded
+    at each branch's dropped rows ``D``) and which are ``solvable``; for :func:`_best_branch`, the
+    rows of ``P_s`` that are not zero (``P_s[D]``) of each solvable branch (``branch``, in order),
+    padded with zero rows to the most a branch drops (``rows``: ``(solvable branches, most, 2 nc)``),
+    and the constraint each row frees (``freed``; 0 for a padding row, whose product is 0)."""
+
+    P: np.ndarray
+    solvable: np.ndarray
+    rows: np.ndarray
+    freed: np.ndarray
+    branch: np.ndarray
+
+    @classmethod
+    def of(cls, P: np.ndarray, solvable: np.ndarray) -> "Branches":
+        branch = np.flatnonzero(solvable)
+        dropped = [np.flatnonzero(np.any(P[s] != 0, axis=1)) for s in branch]
+        most = max([1] + [d.size for d in dropped])
+        rows = np.zeros((branch.size, most, P.shape[2]))
+        freed = np.zeros((branch.size, most), dtype=np.intp)
+        for i, (s, d) in enumerate(zip(branch, dropped)):
+            rows[i, :d.size] = P[s, d]
+            freed[i, :d.size] = d
+        return cls(P=P, solvable=solvable, rows=rows, freed=freed, branch=branch)
+
+
+def _best_branch(base: np.ndarray, w: np.ndarray, branches: Branches, sign_tol: float):
     """``(objective, branch)`` per column of the bordered form: the smallest ``base + w^T P_s w / 2``
     over the solvable branches ``s`` whose freed constraints ``-P_s w`` are ``>= -sign_tol`` (the
-    first such branch on ties, as the enumeration in order); ``inf`` and ``-1`` where none is."""
-    if P.shape[0] * w.shape[1] <= ALL_BRANCHES_AT_ONCE:  # few columns: one product for every branch
-        Pw = (P.reshape(-1, P.shape[2]) @ w).reshape(P.shape[0], P.shape[1], -1)
-        obj = np.where((np.max(Pw, axis=1, initial=-np.inf) <= sign_tol) & solvable[:, None],
-                       base + 0.5 * np.einsum("sik,ik->sk", Pw, w), np.inf)
-        which = np.argmin(obj, axis=0)  # the first on ties
+    first such branch on ties, as the enumeration in order); ``inf`` and ``-1`` where none is.
+    Only the rows of ``P_s`` that are not zero enter (:class:`Branches`: for three pairs 81 of
+    the 162 rows)."""
+    B, most, n2 = branches.rows.shape
+    if not B:
+        return np.full(w.shape[1], np.inf), np.full(w.shape[1], -1)
+    if B * most * w.shape[1] <= ALL_BRANCHES_AT_ONCE:  # few columns: one product for every branch
+        Pw = (branches.rows.reshape(-1, n2) @ w).reshape(B, most, -1)
+        feasible = Pw.max(axis=1) <= sign_tol  # padding rows are 0: never above the tolerance
+        Pw *= w[branches.freed]
+        obj = np.where(feasible, base + 0.5 * Pw.sum(axis=1), np.inf)
+        which = obj.argmin(axis=0)  # the first on ties
         best = obj[which, np.arange(w.shape[1])]
-        return best, np.where(np.isfinite(best), which, -1)
+        return best, np.where(np.isfinite(best), branches.branch[which], -1)
     best = np.full(w.shape[1], np.inf)
     which = np.full(w.shape[1], -1)
-    for s in np.flatnonzero(solvable):
-        Pw = P[s] @ w
+    for s in branches.branch:
+        Pw = branches.P[s] @ w
         obj = base + 0.5 * np.einsum("ik,ik->k", w, Pw)
         better = np.all(Pw <= sign_tol, axis=0) & (obj < best)
         best[better], which[better] = obj[better], s
@@ -242,8 +280,7 @@ class _Bordered:
     lu: object
     Zc: np.ndarray       # (n_z, 2 nc): z of unit right-hand sides in the constraint rows
     M: np.ndarray        # (2 nc, 2 nc): their multipliers
-    P: np.ndarray        # (branches, 2 nc, 2 nc): M_DD^-1 embedded at each branch's dropped rows
-    solvable: np.ndarray  # (branches,) bool
+    branches: Branches   # M_DD^-1 embedded at each branch's dropped rows, and which are solvable
     relaxed_P: np.ndarray | None  # M^-1 (every constraint dropped), None if singular
 
 
@@ -332,7 +369,7 @@ class ExactEnumerator:
                 continue
             P[s][np.ix_(dropped, dropped)] = np.linalg.inv(MDD)
         relaxed = np.linalg.inv(M) if nc and np.linalg.cond(M) <= SINGULAR_CONDITION else None
-        return _Bordered(lu=lu, Zc=Y[:nz], M=M, P=P, solvable=solvable, relaxed_P=relaxed)
+        return _Bordered(lu=lu, Zc=Y[:nz], M=M, branches=Branches.of(P, solvable), relaxed_P=relaxed)
 
     def _imposed(self, params: np.ndarray, b: _Bordered) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The projection with every constraint imposed, per column of ``params``: ``(z0, d, mu)``,
@@ -359,31 +396,49 @@ class ExactEnumerator:
         imposed (:meth:`imposed`, or linear combinations of its columns): the best sign-feasible
         branch, ``z = z0 + Z_c t`` with its freed constraints ``t = -P_s mu``."""
         b = self._bordered
-        obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, self._weight @ d), w, b.P, b.solvable,
-                                  self.sign_tol)
+        Wd = self._weight_diagonal[:, None] * d if self._weight_diagonal is not None else self._weight @ d
+        obj, which = _best_branch(0.5 * np.einsum("ik,ik->k", d, Wd), w, b.branches, self.sign_tol)
         found = which >= 0
+        if d.shape[1] == 1:  # one projection (a checked or a search's projection): no gathers
+            s = int(which[0])
+            z = z0 + b.Zc @ (-(b.branches.P[s] @ w)) if s >= 0 else np.full(z0.shape, np.nan)
+            partition = self._partition_array[max(s, 0)][:, None] if s >= 0 else np.zeros((self.nc, 1), dtype=int)
+            return ExactSolution(x=z[:self.nx], p=z[self.nx:], objective=obj, partition=partition, found=found)
         cols = np.flatnonzero(found)
         t = np.zeros((2 * self.nc, d.shape[1]))
-        t[:, cols] = -np.einsum("kij,jk->ik", b.P[which[cols]], w[:, cols])
+        t[:, cols] = -np.einsum("kij,jk->ik", b.branches.P[which[cols]], w[:, cols])
         z = np.where(found, z0 + b.Zc @ t, np.nan)
-        part = np.array(self.partitions, dtype=int).reshape(len(self.partitions), self.nc)
         partition = np.zeros((self.nc, d.shape[1]), dtype=int)
-        partition[:, cols] = part[which[cols]].T
+        partition[:, cols] = self._partition_array[which[cols]].T
         return ExactSolution(x=z[:self.nx], p=z[self.nx:], objective=obj, partition=partition, found=found)
 
+    @cached_property
+    def _partition_array(self) -> np.ndarray:
+        """``(branches, nc)``: the partitions as an array."""
+        return np.array(self.partitions, dtype=int).reshape(len(self.partitions), self.nc)
+
+    @cached_property
+    def _weight_diagonal(self) -> np.ndarray | None:
+        """The distance's weight as a vector where it is diagonal (one-component points), else None."""
+        W = sp.csr_matrix(self._weight)
+        diag = W.diagonal()
+        return diag if W.nnz == np.count_nonzero(diag) else None
+
     def family(self, d0: np.ndarray, w0: np.ndarray, E: np.ndarray, W: np.ndarray, *,
-               A2: np.ndarray | None = None) -> BorderedFamily:
+               A2: np.ndarray | None = None, relaxed_A2: np.ndarray | None = None) -> BorderedFamily:
         """The :class:`BorderedFamily` of the projections of ``P0 + D c`` from :meth:`imposed` of
         ``P0`` (``d0``, ``w0``) and of the columns of ``D`` (``E``, ``W``). ``A2``: ``E^T W E``
         (symmetric) where the caller has it (a family of some of the directions of a larger
-        one: its rows and columns), else computed."""
+        one: its rows and columns), else computed; ``relaxed_A2``: the quadratic term of
+        :meth:`BorderedFamily.relaxed` where the caller has it (the same for every ``P0``)."""
         b = self._bordered
-        Wd0 = self._weight @ d0
+        Wd0 = self._weight_diagonal * d0 if self._weight_diagonal is not None else self._weight @ d0
         if A2 is None:
             A2 = E.T @ (self._weight @ E)
             A2 = 0.5 * (A2 + A2.T)
-        return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=A2, w0=w0, W=W, P=b.P,
-                              solvable=b.solvable, sign_tol=self.sign_tol, relaxed_P=b.relaxed_P)
+        return BorderedFamily(a0=0.5 * float(d0 @ Wd0), a1=E.T @ Wd0, A2=A2, w0=w0, W=W, branches=b.branches,
+                              sign_tol=self.sign_tol, relaxed_P=b.relaxed_P,
+                              relaxed_A2=relaxed_A2 if b.relaxed_P is not None else None)
 
     def _solve_bordered(self, params: np.ndarray, b: _Bordered) -> ExactSolution:
         return self.from_imposed(*self._imposed(params, b))
