@@ -17,8 +17,10 @@ its time counted with the solve; ``--also-full`` also solves on the full problem
 before and after). Each side runs in its own process
 (its own peak memory); the solutions must agree to :data:`AGREEMENT` (``u`` relative to
 ``max |u|``, ``p`` relative to ``max p``). Also the time of one factorisation and solve of ``K``
-with each solver on both sides (:func:`factor_times`, and the peer's ``factor`` mode). Every
-process runs with one thread (:data:`THREADS`).
+with each solver on both sides (:func:`factor_times`, and the peer's ``factor`` mode), and of
+ours with the Delassus matrix (what the condensed solve needs; issue 28's target: no slower than
+MUMPS's factorisation). Every process runs with one thread (:data:`THREADS`).
+``benchmarks/run.py`` takes one size at a time as a record (:func:`peer_record`).
 
 ``--full`` needs about 11 GB a process (PARDISO; SuperLU did not fit under a 16 GB address-space
 cap at 1e6): run it under the machine's memory lock. Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
