@@ -31,7 +31,10 @@ Issue 28: ``DDCM search cost`` records, restarts + greedy against plain DDCM on 
 benchmark's noisy truss, their time ratio measured in this run (:func:`search_cost`), and ``first
 DDCM solve`` records, a 2-D continuum of 2e4 points without and with contact (:func:`first_solve_record`);
 with ``$DDFENICS_PYTHON`` set, ``DDCM iteration against ddfenics`` records (``benchmarks/ddfenics_block.py``:
-5e3 points, and 1e5 in the full run; ratio = our seconds per iteration over ddfenics');
+5e3 points, and 1e5 in the full run; ratio = our seconds per iteration over ddfenics'); with
+``$DDCM_PETSC_PYTHON`` set, ``classical FB against PETSc SNESVI`` records (``benchmarks/snesvi.py``:
+1e4 unknowns, and 1e5 and 1e6 in the full run; ratio = ours condensed over SNESVI's best tuning,
+``factor_ratio`` = our factor of ``K`` with the Delassus matrix over MUMPS's factor of ``K``);
 ``solve / FB solve`` records, the augmented Lagrangian's and MPCC's solve time over
 Fischer-Burmeister's on the continuum examples, classical and DDCM (``hertz2d`` with ``--quick``,
 :data:`CONTINUUM_CASES` in the full run; :func:`formulation_ratios`).
@@ -1145,6 +1148,16 @@ def main(argv=None) -> int:
     else:
         for n in ((50,) if quick else (50, 224)):
             log(peer_record(n, peer))
+    # Issue 28, item 6: classical FB condensed on the contact pairs against PETSc SNESVI, where a
+    # Python with petsc4py is given ($DDCM_PETSC_PYTHON; benchmarks/snesvi.py).
+    import snesvi
+
+    petsc = os.environ.get("DDCM_PETSC_PYTHON")
+    if petsc is None:
+        print("no $DDCM_PETSC_PYTHON: the SNESVI comparison is left out", file=sys.stderr)
+    else:
+        for divisions in (snesvi.SIZES[:1] if quick else snesvi.FULL_SIZES):
+            log(snesvi.peer_record(divisions, petsc))
     # Issue 28, item 2: every formulation's solve time over Fischer-Burmeister's on the continuum
     # examples, classical and DDCM (one BLAS thread, a fresh process per case).
     for case in (("hertz2d",) if quick else CONTINUUM_CASES):

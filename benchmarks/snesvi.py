@@ -17,8 +17,10 @@ its time counted with the solve; ``--also-full`` also solves on the full problem
 before and after). Each side runs in its own process
 (its own peak memory); the solutions must agree to :data:`AGREEMENT` (``u`` relative to
 ``max |u|``, ``p`` relative to ``max p``). Also the time of one factorisation and solve of ``K``
-with each solver on both sides (:func:`factor_times`, and the peer's ``factor`` mode). Every
-process runs with one thread (:data:`THREADS`).
+with each solver on both sides (:func:`factor_times`, and the peer's ``factor`` mode), and of
+ours with the Delassus matrix (what the condensed solve needs; issue 28's target: no slower than
+MUMPS's factorisation). Every process runs with one thread (:data:`THREADS`).
+``benchmarks/run.py`` takes one size at a time as a record (:func:`peer_record`).
 
 ``--full`` needs about 11 GB a process (PARDISO; SuperLU did not fit under a 16 GB address-space
 cap at 1e6): run it under the machine's memory lock. Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
@@ -129,27 +131,36 @@ def solvers() -> list[str]:
     return [name for name in linalg.available_solvers() if name != "auto" and (not ONLY or name in ONLY)]
 
 
-def factor_times(divisions: int, repeats: int) -> dict:
-    """Seconds of one factorisation and solve of the free-dof stiffness ``K`` with each available
-    solver of :mod:`ddcm_casadi.linalg` (median of ``repeats``; loading a library untimed)."""
+def factor_times(divisions: int, repeats: int, names: list[str] | None = None) -> dict:
+    """Seconds of one factorisation and solve of the free-dof stiffness ``K`` with each solver of
+    ``names`` (default :func:`solvers`; ``"auto"`` left out: it is one of them), and of what the
+    condensed classical solve needs with the package's default (``"auto"``): the factor of ``K``
+    and the Delassus matrix ``G K^-1 G^T`` (:func:`~ddcm_casadi.linalg.factorize_with_delassus`)
+    and a solve (``delassus_seconds``). Median of ``repeats``; loading a library untimed."""
     model = hertz_model(divisions)
     K = sp.csc_matrix(model.stiffness())
+    G = sp.csr_matrix(model.gap_operator)
     b = np.cos(np.arange(K.shape[0]))
-    out = {}
     previous = linalg.solver_name()
+
+    def median(name: str, make) -> float:
+        linalg.use_solver(name)
+        linalg.factorize(2.0 * sp.identity(4, format="csc"))  # loads the library (MKL)
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            make().solve(b)
+            times.append(time.perf_counter() - t0)
+        return float(np.median(times))
+
     try:
-        for name in solvers():
-            linalg.use_solver(name)
-            linalg.factorize(2.0 * sp.identity(4, format="csc"))  # loads the library (MKL)
-            times = []
-            for _ in range(repeats):
-                t0 = time.perf_counter()
-                linalg.factorize(K).solve(b)
-                times.append(time.perf_counter() - t0)
-            out[name] = float(np.median(times))
+        out = {name: median(name, lambda: linalg.factorize(K)) for name in (names or solvers()) if name != "auto"}
+        delassus = median("auto", lambda: linalg.factorize_with_delassus(K, G)[0])
     finally:
         linalg.use_solver(previous)
-    return dict(dofs=int(K.shape[0]), nnz=int(K.nnz), seconds=out, default=linalg.chosen_solver(K.shape[0]))
+    return dict(dofs=int(K.shape[0]), nnz=int(K.nnz), contacts=int(G.shape[0]), seconds=out,
+                delassus_seconds=delassus, default=linalg.chosen_solver(K.shape[0]),
+                delassus_default=linalg.delassus_solver(K.shape[0]))
 
 
 #: Threads of every process (OpenMP, OpenBLAS, MKL): one, as both sides get on a 2-core machine
@@ -186,18 +197,23 @@ def difference(a: str, b: str) -> dict:
     return dict(u=du, p=dp, agree=bool(max(du, dp) <= AGREEMENT))
 
 
-def compare_size(divisions: int, python: str, tmp: str, repeats: int) -> list[dict]:
-    """Every solver of ours and every peer tuning on one size, and the per-factorisation times."""
+def compare_size(divisions: int, python: str, tmp: str, repeats: int, names: list[str] | None = None
+                 ) -> list[dict]:
+    """Every solver of ours (``names``, default :func:`solvers`) and every peer tuning on one size,
+    and the per-factorisation times."""
     problem = os.path.join(tmp, f"problem{divisions}.npz")
     records = []
     reference = None
-    for solver, condense in [(name, c) for name in solvers() for c in ((True, False) if ALSO_FULL[0] else (True,))]:
+    names = names or solvers()
+    for solver, condense in [(name, c) for name in names
+                             for c in ((True, False) if ALSO_FULL[0] else (True,))]:
         solution = os.path.join(tmp, f"ours{divisions}-{solver}-{condense}.npz")
         rec = fresh("ours", divisions, solver, problem if reference is None else None, solution, condense)
         rec.update(side="ddcm-casadi FB" + ("" if condense else " (full)"), divisions=divisions, solver=solver)
         if "error" not in rec:
-            rec["default"] = solver == (linalg.delassus_solver(rec["dofs"]) if rec["path"].startswith("condensed")
-                                        else linalg.chosen_solver(rec["unknowns"], symmetric=False))  # FB piece matrix
+            chosen = (linalg.delassus_solver(rec["dofs"]) if rec["path"].startswith("condensed")
+                      else linalg.chosen_solver(rec["unknowns"], symmetric=False))  # FB piece matrix
+            rec["default"] = solver in ("auto", chosen)
         if "error" not in rec:
             reference = reference or solution
             rec["difference"] = difference(reference, solution)
@@ -213,13 +229,54 @@ def compare_size(divisions: int, python: str, tmp: str, repeats: int) -> list[di
             rec["difference"] = difference(reference, solution)
         records.append(rec)
     large = divisions >= ONE_STEP_FROM
-    factors = fresh("factor_times", divisions, 1 if large else repeats)
+    factors = fresh("factor_times", divisions, 1 if large else repeats, names)
     for ordering, factor in tunings:
         rec = peer(python, "factor", problem, str(1 if large else repeats), ordering, factor)
         if "seconds" in rec:
             factors.setdefault("seconds", {})[f"PETSc mumps {factor} ICNTL(7)={ordering}"] = rec["seconds"]
+            factors.setdefault("peer_peak_memory_bytes", {})[f"mumps {factor} ICNTL(7)={ordering}"] = \
+                rec["peak_memory_bytes"]
     records.append(dict(side="factorisation of K", divisions=divisions, **factors))
     return records
+
+
+def peer_record(divisions: int, python: str, repeats: int = 3) -> dict:
+    """One size of :func:`compare_size` as a record of ``benchmarks/run.py``: ``seconds`` ours
+    (the package's default solver, condensed on the contact pairs where that applies, the
+    condensation counted), ``floor_seconds`` SNESVI's best converged tuning that agrees with ours,
+    ``ratio`` ours over SNESVI's (issue 28's target: at most 1/3); ``factor_seconds`` our
+    factorisation of ``K`` with the Delassus matrix and a solve, ``peer_factor_seconds``
+    MUMPS's fastest factorisation and solve of ``K`` (target: ``factor_ratio`` at most 1)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        records = compare_size(divisions, python, tmp, repeats, names=["auto"])
+    name = f"classical FB against PETSc SNESVI, Hertz P2 {divisions} divisions"
+    o = records[0]
+    if "error" in o:
+        return dict(name=name, unknowns=0, data_points=0, seconds=float("nan"), floor_seconds=float("nan"),
+                    ratio=float("nan"), error=o["error"])
+    theirs = [r for r in records[1:-1] if "error" not in r and r["converged"] and r["difference"]["agree"]]
+    best = min(theirs, key=lambda r: r["seconds"], default=None)
+    factors = records[-1] if records[-1]["side"] == "factorisation of K" else {}
+    mumps = {k: v for k, v in factors.get("seconds", {}).items() if k.startswith("PETSc mumps")}
+    peer_factor = min(mumps.values(), default=float("nan"))
+    ours_factor = factors.get("delassus_seconds", float("nan"))
+    rec = dict(name=name, unknowns=o["unknowns"], data_points=0, seconds=o["seconds"],
+               floor_seconds=best["seconds"] if best else float("nan"),
+               ratio=o["seconds"] / best["seconds"] if best else float("nan"),
+               peak_memory_bytes=o["peak_memory_bytes"],
+               peer_peak_memory_bytes=best["peak_memory_bytes"] if best else float("nan"),
+               path=o["path"], converged=o["converged"], newton_iterations=o["newton_iterations"],
+               condensation_seconds=o["condensation_seconds"], build_seconds=o["build_seconds"],
+               peer_tuning=best["solver"] if best else None,
+               peer_newton_iterations=best["newton_iterations"] if best else None,
+               difference=best["difference"] if best else None, agree=bool(best and best["difference"]["agree"]),
+               factor_seconds=ours_factor, peer_factor_seconds=peer_factor, factor_ratio=ours_factor / peer_factor,
+               factor_solver=factors.get("delassus_default"),
+               peer_factor_tuning=min(mumps, key=mumps.get) if mumps else None,
+               peer_errors=[f"{r['solver']}: {r['error']}" for r in records[1:-1] if "error" in r],
+               note="seconds: ours condensed (factor + Delassus + solve); floor: SNESVI's best tuning; "
+                    "target ratio <= 1/3, factor_ratio <= 1")
+    return rec
 
 
 #: The functions :func:`fresh` runs in a fresh process.
@@ -242,6 +299,9 @@ def markdown(records: list[dict]) -> str:
         if r["side"] == "factorisation of K" and "seconds" in r:
             lines += [f"| {r['divisions']} | {r['dofs']} | {k}{' (auto)' if k == r['default'] else ''} | {v:.3g} |"
                       for k, v in r["seconds"].items()]
+            if "delassus_seconds" in r:
+                lines.append(f"| {r['divisions']} | {r['dofs']} | {r['delassus_default']} (auto), with the "
+                             f"Delassus matrix of {r['contacts']} pairs | {r['delassus_seconds']:.3g} |")
     errors = [f"- {r['side']} {r.get('solver', '')} at {r['divisions']}: {r['error']}" for r in records if "error" in r]
     errors += [f"- {r['side']} {r['solver']} at {r['divisions']}: the solutions differ by more than {AGREEMENT:g}"
                for r in records if not r.get("difference", {}).get("agree", True)]

@@ -312,14 +312,41 @@ def _superlu(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
 PERTURBED_REFINEMENT = 2
 
 
-def _upper_with_diagonal(A: sp.spmatrix) -> sp.csr_matrix:
-    """The upper triangle of the symmetric ``A`` with every diagonal entry stored, zeros too
-    (PARDISO's symmetric storage requires them), indices sorted."""
-    U = sp.triu(A, k=1, format="coo")
-    index = np.arange(A.shape[0])
-    M = sp.csr_matrix((np.concatenate([U.data, A.diagonal()]),
-                       (np.concatenate([U.row, index]), np.concatenate([U.col, index]))), shape=A.shape)
-    M.sort_indices()
+def _upper_with_diagonal(A: sp.spmatrix, C: sp.spmatrix | None = None) -> sp.csr_matrix:
+    """The upper triangle of the symmetric ``A``, or of ``[[A, C^T], [C, 0]]`` with the rows ``C``,
+    with every diagonal entry stored, zeros too (PARDISO's symmetric storage requires them), in
+    CSR with sorted indices. Each row is the diagonal, ``A``'s entries right of it and ``C^T``'s:
+    placed by index arithmetic (no sort; building the augmented matrix by blocks, converting and
+    sorting it took 0.29 s of the 1.3 s factorisation of a 95 266-dof stiffness). A CSC ``A``'s
+    arrays are read as the CSR arrays of ``A^T = A``: no conversion (0.4-1.5 s at 1e6 dofs)."""
+    if A.format == "csc":
+        A = sp.csr_matrix((A.data, A.indices, A.indptr), shape=A.shape[::-1])
+    else:
+        A = sp.csr_matrix(A)
+    if not A.has_canonical_format:  # duplicates summed and indices sorted, on a copy
+        A = A.copy()
+        A.sum_duplicates()
+    n = A.shape[0]
+    CT = sp.csr_matrix((0, n)).T.tocsr() if C is None else sp.csr_matrix(sp.csr_matrix(C).T)
+    CT.sum_duplicates()
+    nc = CT.shape[1]
+    rows = np.repeat(np.arange(n, dtype=A.indices.dtype), np.diff(A.indptr))
+    strict = A.indices > rows
+    upper_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[strict], minlength=n))])
+    upper_counts, c_counts = np.diff(upper_indptr), np.diff(CT.indptr)
+    indptr = np.concatenate([[0], np.cumsum(np.concatenate([1 + upper_counts + c_counts, np.ones(nc, np.int64)]))])
+    index_type = np.int32 if indptr[-1] < 2**31 else np.int64
+    indices = np.empty(indptr[-1], dtype=index_type)
+    data = np.zeros(indptr[-1])
+    first = indptr[:-1]
+    indices[first] = np.arange(n + nc)  # the diagonal, first in each row
+    data[first[:n]] = A.diagonal()
+    where = np.repeat(first[:n] + 1 - upper_indptr[:-1], upper_counts) + np.arange(upper_indptr[-1])
+    indices[where], data[where] = A.indices[strict], A.data[strict]
+    where = np.repeat(first[:n] + 1 + upper_counts - CT.indptr[:-1], c_counts) + np.arange(CT.indptr[-1])
+    indices[where], data[where] = n + CT.indices, CT.data
+    M = sp.csr_matrix((data, indices, indptr.astype(index_type)), shape=(n + nc, n + nc))
+    M.has_sorted_indices = True
     return M
 
 
@@ -837,7 +864,7 @@ class _PardisoSchur:
         import pypardiso
 
         n, nc = A.shape[0], C.shape[0]
-        M = _upper_with_diagonal(sp.bmat([[A, sp.csr_matrix(C).T], [sp.csr_matrix(C), None]], format="csr"))
+        M = _upper_with_diagonal(A, C)
         self.n, self.nc = n, nc
         self._data = M.data
         self._ia, self._ja = M.indptr.astype(np.int32) + 1, M.indices.astype(np.int32) + 1  # one-based

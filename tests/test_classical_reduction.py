@@ -115,11 +115,13 @@ def test_a_body_held_only_by_its_contacts_keeps_the_full_path():
     assert "the stiffness is singular" in why or "a Delassus matrix's condition" in why
 
 
-def test_pardiso_schur_complement_is_the_back_solved_delassus_matrix():
+@pytest.mark.parametrize("storage", ["csc", "csr"])
+def test_pardiso_schur_complement_is_the_back_solved_delassus_matrix(storage):
     """PARDISO's Schur complement of ``[[K, G^T], [G, 0]]`` and its solves with ``K`` alone (the
     Schur part zeroed between the substitutions) against SuperLU's factor and back-solves: equal
     to round-off, ``cond(K) eps`` relative at most (``cond(K)`` of a few-hundred-dof continuum:
-    below 1e6)."""
+    below 1e6), with ``K`` stored either way (CSC is read as its transpose's CSR); each solve's
+    backward error at most ``linalg.BACKWARD_ERROR``, the bound the factor is checked to."""
     pytest.importorskip("pypardiso")
     if "pardiso" not in linalg.available_solvers():
         pytest.skip("PARDISO does not load here")
@@ -131,7 +133,7 @@ def test_pardiso_schur_complement_is_the_back_solved_delassus_matrix():
         lu, D = linalg.factorize_with_delassus(K, G)
         linalg.use_solver("pardiso")
         assert linalg.delassus_solver(K.shape[0]) == "pardiso"
-        schur, S = linalg.factorize_with_delassus(K, G)
+        schur, S = linalg.factorize_with_delassus(K.asformat(storage), G)
     finally:
         linalg.use_solver(previous)
     assert np.max(np.abs(S - D)) <= 1e6 * EPS * np.max(np.abs(D))
@@ -141,6 +143,7 @@ def test_pardiso_schur_complement_is_the_back_solved_delassus_matrix():
         x, y = schur.solve(rhs), lu.solve(rhs)
         assert x.shape == rhs.shape
         assert np.max(np.abs(x - y)) <= 1e6 * EPS * np.max(np.abs(y))
+        assert linalg.backward_error(K, x, rhs) <= linalg.BACKWARD_ERROR
 
 
 def test_the_case_file_key_condense():

@@ -345,3 +345,22 @@ def test_definite_solver_selection():
     A = sp.csc_matrix(sp.diags([4.0] * 300) + sp.diags([1.0] * 299, 1) + sp.diags([1.0] * 299, -1))
     b = np.ones(300)
     assert np.max(np.abs(A @ linalg.factorize_definite(A).solve(b) - b)) <= 1e-12
+
+
+@pytest.mark.parametrize("with_rows", [False, True])
+@pytest.mark.parametrize("fmt", ["coo", "csr", "csc"])
+def test_upper_triangle_storage_of_the_augmented_matrix(with_rows, fmt):
+    """PARDISO's symmetric storage of ``A`` (or of ``[[A, C^T], [C, 0]]``): the upper triangle in
+    CSR with every diagonal entry stored (a missing one as an explicit zero), duplicates summed and
+    indices sorted, equal entry by entry to the triangle of the assembled matrix (no arithmetic
+    but the duplicates' sums: exact), from any storage of the symmetric ``A``."""
+    A = sp.coo_matrix(([1.0, 1.0, 2.0, 0.5, 0.5, 0.5, 0.5, 4.0], ([0, 1, 1, 1, 2, 1, 2, 3], [1, 0, 1, 2, 1, 2, 1, 3])),
+                      shape=(4, 4))  # A[0, 0] and A[2, 2] not stored, A[1, 2] in two pieces
+    C = sp.csr_matrix(np.array([[1.0, 0.0, -2.0, 0.0], [0.0, 0.0, 0.0, 3.0]])) if with_rows else None
+    M = linalg._upper_with_diagonal(A.asformat(fmt), C)
+    full = A.toarray() if C is None else sp.bmat([[A, C.T], [C, None]]).toarray()
+    assert M.has_sorted_indices
+    assert np.array_equal(M.toarray(), np.triu(full))
+    rows = np.repeat(np.arange(M.shape[0]), np.diff(M.indptr))
+    assert np.array_equal(rows[M.indices == rows], np.arange(M.shape[0]))  # each diagonal entry stored once
+    assert np.all(np.diff(M.indices)[np.diff(rows) == 0] > 0)
