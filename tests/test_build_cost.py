@@ -15,14 +15,17 @@ from tests.test_reduction import hertz_block
 
 
 def _counting(monkeypatch) -> list:
+    """The scales' factorisations: their own (direct, or AMG where selected), or the one shared
+    with the classical condensation (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`)."""
     calls = []
-    original = scales.factorize_definite  # the scales' solves (direct, or AMG where selected)
+    for name in ("factorize_definite", "StiffnessFactor"):
+        original = getattr(scales, name)
 
-    def counted(A, **kw):
-        calls.append(A.shape[0])
-        return original(A, **kw)
+        def counted(A, *args, original=original, **kw):
+            calls.append(A.shape[0])
+            return original(A, *args, **kw)
 
-    monkeypatch.setattr(scales, "factorize_definite", counted)
+        monkeypatch.setattr(scales, name, counted)
     return calls
 
 
@@ -39,7 +42,7 @@ def test_proportional_kinds_share_one_factorisation(monkeypatch):
     # Both are backward-stable solves of one system (up to the factor beta), so the solutions,
     # and the maxima the scales are, agree to cond(A) eps, A the stiffness with the pair springs.
     B, G, a, w = model.strain_operator, model.gap_operator, model.contact_area, model.volumes
-    K = (B.T @ sp.diags(np.repeat(w * D_c, model.strain_components)) @ B).toarray()
+    K = (B.T @ model.representative_law(D_c) @ B).toarray()
     A = K + 1e3 * np.max(np.diag(K)) / np.max(a) * (G.T @ sp.diags(a) @ G).toarray()
     tol = 4 * np.linalg.cond(A) * np.finfo(float).eps
     for name, value in alone.items():

@@ -31,7 +31,8 @@ from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import to_casadi
 from ddcm_casadi.models.prescribed import PARAMETER as PRESCRIBED, Prescribed
-from ddcm_casadi.models.scales import LARGE_STRAIN, load_path_warnings, reference_scales
+from ddcm_casadi.models.scales import LARGE_STRAIN, STIFFNESS_FACTOR, load_path_warnings, reference_scales
+from ddcm_casadi.models.stiffness import StiffnessFactor, condensation_size_refusal
 
 
 #: Kinematics a model may declare: ``small`` (linear strains and gaps: the problems are affine) or
@@ -345,6 +346,38 @@ class ContactModel:
         a continuum gives its rigid-body modes."""
         return None
 
+    def representative_law(self, D: np.ndarray) -> sp.csr_matrix:
+        """``W D``: the volumes times a law of modulus ``D`` per point (``(m k, m k)``, block
+        diagonal), from which the reference scales assemble their stiffness ``B^T W D B``
+        (:mod:`~ddcm_casadi.models.scales`). The model's classical law at the modulus ``D``
+        (``D / E`` times :meth:`material_matrix`) where it has a Young's modulus, so that the
+        classical kind's is its :meth:`stiffness` (the same arithmetic), whose one factorisation
+        serves the scales and the classical condensation (:meth:`delassus_rows`); else ``D`` on
+        every strain component."""
+        w, k = np.asarray(self.volumes, float), self.strain_components
+        if self.youngs_modulus is None:
+            return sp.diags(np.repeat(w * D, k)).tocsr()
+        return (sp.diags(np.repeat(w * (D / self.youngs_modulus), k)) @ self.material_matrix()).tocsr()
+
+    def delassus_rows(self) -> sp.csr_matrix | None:
+        """The contact rows ``G`` whose Delassus matrix ``G K^-1 G^T`` the first factorisation of
+        the reference scales' stiffness ``K`` also gives, for the classical problem's
+        condensation on its pairs (:class:`~ddcm_casadi.problems.reduction.ClassicalReduction`,
+        which takes it: :meth:`take_stiffness_factor`), or ``None`` where that condensation cannot
+        apply: no classical law, finite kinematics, friction, or sizes it refuses
+        (:func:`~ddcm_casadi.models.stiffness.condensation_size_refusal`)."""
+        if self.youngs_modulus is None or self.kinematics != "small" or self.frictional or \
+                condensation_size_refusal(self.n_dofs, self.n_contacts):
+            return None
+        return self.gap_operator
+
+    def take_stiffness_factor(self) -> StiffnessFactor | None:
+        """The factor of the scales' stiffness with its Delassus matrix
+        (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`, made where :meth:`delassus_rows`
+        says), handed over once: the model keeps it no longer (a reduction that cannot use it lets
+        it go before its own factorisation)."""
+        return self._cache.pop(STIFFNESS_FACTOR, None)
+
     def point_stiffness(self, kind: str) -> np.ndarray:
         """A representative modulus per material point: ``E`` (``"classical"``), or for the data
         (``"ddcm"``) the secant modulus of each point's data set, ``std(stress) / std(strain)``
@@ -361,7 +394,8 @@ class ContactModel:
         """Reference magnitudes of the ``"classical"`` or the ``"ddcm"`` problem (cached).
 
         Derived from the problem itself, by a linear solve with a representative stiffness
-        ``K = B^T W D B`` (``D`` from :meth:`point_stiffness`):
+        ``K = B^T W D B`` (``D`` from :meth:`point_stiffness`, ``W D`` the law of that modulus,
+        :meth:`representative_law`):
 
         - the response to the largest load, ``K u_f = f``;
         - the displacement the obstacles impose where they penetrate the undeformed body

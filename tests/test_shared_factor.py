@@ -1,0 +1,123 @@
+"""One factorisation of the stiffness for the reference scales and the classical condensation
+(docs/maths.md, section 17, "One factorisation for the scales and the condensation"): the scales
+from the condensation's factor (Woodbury for the springs) are the scales from factorisations of
+their own, to round-off; the condensation takes that factor, and the model lets it go once taken."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from ddcm_casadi import formulations
+from ddcm_casadi.drivers.ddcm_reduced import build_classical, build_projection
+from ddcm_casadi.models.base import ContactModel
+from ddcm_casadi.models.scales import STIFFNESS_FACTOR
+from ddcm_casadi.models.stiffness import StiffnessFactor
+from ddcm_casadi.problems.build import build_problems
+from ddcm_casadi.problems.reduction import ClassicalReduction
+
+from tests.test_reduction import MODELS
+
+EPS = np.finfo(float).eps
+CLASSICAL = ["bar", "stopped bar", "truss", "continuum"]
+
+
+def _roundoff(model) -> float:
+    """The relative round-off of the scales' solves either way: ``cond(A) eps`` of a solve with
+    ``A = K + kappa G^T A G`` (the pair springs), and ``cond(K) eps`` amplified by Woodbury's
+    cancellation, ``|K^-1 r| / |A^-1 r|`` for the deepest penetration's right-hand side ``r``
+    (the spring's ``kappa`` cancels between ``K^-1 r`` and its correction)."""
+    B, G, a = model.strain_operator, model.gap_operator, model.contact_area
+    K = (B.T @ model.representative_law(model.point_stiffness("classical")) @ B).toarray()
+    kappa = 1e3 * np.max(np.diag(K)) / np.max(a)
+    A = K + kappa * (G.T @ sp.diags(a) @ G).toarray()
+    r = kappa * (G.T @ (a * np.max(np.maximum(-model.gap_offsets, 0.0), axis=0)))
+    x = np.linalg.solve(A, r)
+    amplification = np.max(np.abs(np.linalg.solve(K, r))) / np.max(np.abs(x)) if np.any(x) else 1.0
+    return (np.linalg.cond(A) + np.linalg.cond(K) * amplification) * EPS
+
+
+@pytest.mark.parametrize("name", CLASSICAL)
+def test_classical_scales_stiffness_is_the_stiffness(name):
+    """The classical kind's representative stiffness is the classical problem's (same arithmetic):
+    its factor can serve the condensation."""
+    model = MODELS[name]()
+    B = model.strain_operator
+    K = B.T @ model.representative_law(model.point_stiffness("classical")) @ B
+    assert (K != model.stiffness()).nnz == 0
+
+
+@pytest.mark.parametrize("name", CLASSICAL)
+def test_scales_from_the_shared_factor_are_the_scales_of_their_own(name, monkeypatch):
+    """Both ways solve the same systems (``K``, and ``K + G^T S G`` directly or by Woodbury from
+    ``K``'s factor and ``D``), so the solutions, and the maxima the scales are, agree to their
+    round-off (:func:`_roundoff`); a factor 8 for the few operations between."""
+    shared = MODELS[name]()
+    new = {k: shared.scales_for(k) for k in ("classical", "ddcm")}
+    assert isinstance(shared._cache.get(STIFFNESS_FACTOR), StiffnessFactor)
+    monkeypatch.setattr(ContactModel, "delassus_rows", lambda self: None)  # the factorisations of their own
+    alone = MODELS[name]()
+    old = {k: alone.scales_for(k) for k in ("classical", "ddcm")}
+    assert STIFFNESS_FACTOR not in alone._cache
+    tol = 8 * _roundoff(shared)
+    for kind in old:
+        for key, value in old[kind].items():
+            assert abs(new[kind][key] - value) <= tol * abs(value), (kind, key)
+
+
+def test_woodbury_solves_the_stiffness_with_springs():
+    model = MODELS["continuum"]()
+    B, G = model.strain_operator, model.gap_operator
+    K = (B.T @ model.representative_law(model.point_stiffness("classical")) @ B).tocsc()
+    S = 1e3 * np.max(K.diagonal()) * np.linspace(1.0, 2.0, G.shape[0])
+    A = (K + G.T @ sp.diags(S) @ G).toarray()
+    r = np.cos(np.arange(K.shape[0]))
+    x = StiffnessFactor(K, G).with_springs(S).solve(r)
+    exact = np.linalg.solve(A, r)
+    assert np.max(np.abs(x - exact)) <= 8 * np.linalg.cond(A) * EPS * np.max(np.abs(exact))
+
+
+@pytest.mark.parametrize("name", CLASSICAL)
+def test_condensation_takes_the_scales_factor(name):
+    """The condensation's factor and ``D_u`` from the scales' factor (over ``c``) equal its own:
+    ``D_u`` to ``cond(D_u)``-free round-off of a backward-stable solve, ``cond(K) eps``."""
+    model = MODELS[name]()
+    problems = build_problems(model)
+    known = model._cache[STIFFNESS_FACTOR]
+    built = build_classical(formulations.get("fischer_burmeister"), problems)
+    assert built.reduction.shared and built.path.endswith("K's factor the reference scales')")
+    assert STIFFNESS_FACTOR not in model._cache  # taken: the model keeps it no longer
+    own = ClassicalReduction(problems.classical)
+    assert not own.shared
+    n = problems.classical.n_x
+    K = problems.classical.residual_map.z[:, :n].toarray()
+    tol = 8 * np.linalg.cond(K) * EPS
+    D, D_own = built.reduction.D_u, own.D_u
+    assert np.max(np.abs(D - D_own)) <= tol * np.max(np.abs(D_own))
+    b = np.cos(np.arange(n))
+    x, x_own = built.reduction.factor.solve(b), own.factor.solve(b)
+    assert np.max(np.abs(x - x_own)) <= tol * np.max(np.abs(x_own))
+    del known
+
+
+def test_a_stiffness_not_a_multiple_is_refused():
+    model = MODELS["truss"]()
+    B, G = model.strain_operator, model.gap_operator
+    K = (B.T @ model.representative_law(model.point_stiffness("classical")) @ B).tocsc()
+    factor = StiffnessFactor(K, G)
+    assert factor.scaled(3.0 * K, G) is not None
+    other = K + sp.csc_matrix(([1.0, 1.0], ([0, 1], [1, 0])), shape=K.shape)  # the same diagonal, another matrix
+    assert factor.scaled(other, G) is None
+    assert factor.scaled(K + sp.identity(K.shape[0]), G) is None  # another diagonal
+    assert factor.scaled(K, 2.0 * G) is None
+
+
+def test_a_ddcm_run_lets_the_factor_go():
+    """A DDCM run (the projection's reduction factorises ``K_C``) does not keep the classical
+    factor of the scales."""
+    model = MODELS["truss"]()
+    problems = build_problems(model)
+    assert STIFFNESS_FACTOR in model._cache
+    build_projection(formulations.get("fischer_burmeister"), problems)
+    assert STIFFNESS_FACTOR not in model._cache
