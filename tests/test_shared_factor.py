@@ -121,3 +121,24 @@ def test_a_ddcm_run_lets_the_factor_go():
     assert STIFFNESS_FACTOR in model._cache
     build_projection(formulations.get("fischer_burmeister"), problems)
     assert STIFFNESS_FACTOR not in model._cache
+
+
+def _floating_bar():
+    """A bar of two nodes and no support, pressed between two stops (node 0 pushed 1 mm in from
+    the left, node 1 against a stop on the right): ``K`` is singular (a rigid translation), the
+    stops alone hold it."""
+    return ContactModel(strain_operator=sp.csr_matrix([[-1.0, 1.0]]), volumes=np.ones(1),
+                        gap_operator=sp.csr_matrix([[1.0, 0.0], [0.0, -1.0]]), contact_area=np.ones(2),
+                        gap_offsets=np.array([[-1e-3, 0.0]]), loads=np.zeros((1, 2)), load_parameter=np.ones(1),
+                        youngs_modulus=np.full(1, 200e9), name="floating bar")
+
+
+def test_a_body_held_only_by_its_contacts_keeps_the_springs_own_factor(monkeypatch):
+    """``K`` singular: the springs' system is factorised itself (no Woodbury from a singular
+    factor), so the scales are those of the path without the shared factor, to round-off of a
+    well-conditioned 2 x 2 system."""
+    new = _floating_bar().scales_for("classical")
+    monkeypatch.setattr(ContactModel, "delassus_rows", lambda self: None)
+    old = _floating_bar().scales_for("classical")
+    for key, value in old.items():
+        assert abs(new[key] - value) <= 1e-12 * abs(value), key

@@ -200,7 +200,7 @@ class _Stiffness:
                     self.singular = True
             if self._shared is not None and not self.singular:
                 self._spring_lu = self._shared.with_springs(self.kappa * model.contact_area)
-            else:
+            if self._spring_lu is None:
                 GA = model.gap_operator.T @ sp.diags(model.contact_area) if model.n_contacts else None
                 self._spring_lu = factorize_definite(self.K + self.kappa * (GA @ model.gap_operator)
                                                      if model.n_contacts else self.K,

@@ -59,6 +59,13 @@ def condensation_size_refusal(n: int, n_pairs: int, max_pairs: int | None = None
     return ""
 
 
+#: Largest condition number of ``D`` for which :meth:`StiffnessFactor.with_springs` is used:
+#: beyond, ``K`` is numerically singular on the pairs' rows (a body held only by its contacts
+#: shows as ``1 / eps``), and Woodbury's correction, which cancels the springs' stiffness, would
+#: carry ``cond(K) eps`` amplified past any use; the springs' system is then factorised itself.
+WOODBURY_MAX_CONDITION = 1.0 / np.sqrt(np.finfo(float).eps)
+
+
 class Scaled:
     """A factor of ``beta A`` from one of ``A``: ``(beta A)^-1 rhs = A^-1 rhs / beta``."""
 
@@ -102,8 +109,13 @@ class StiffnessFactor:
         """``K^-1 rhs``."""
         return self.factor.solve(rhs)
 
-    def with_springs(self, S: np.ndarray) -> "_WithSprings":
-        """A solver of ``K + G^T diag(S) G`` (``S > 0``, one per row of ``G``), by Woodbury."""
+    def with_springs(self, S: np.ndarray) -> "_WithSprings | None":
+        """A solver of ``K + G^T diag(S) G`` (``S > 0``, one per row of ``G``), by Woodbury; ``None``
+        where ``cond(D)`` exceeds :data:`WOODBURY_MAX_CONDITION` (``K`` numerically singular on
+        the pairs' rows)."""
+        eig = np.linalg.eigvalsh(self.D) if self.D.size else np.ones(1)
+        if not eig[0] > eig[-1] / WOODBURY_MAX_CONDITION:
+            return None
         return _WithSprings(self, np.asarray(S, float))
 
     def scaled(self, K_s: sp.spmatrix, G_s: sp.spmatrix) -> tuple[Factor, np.ndarray] | None:
