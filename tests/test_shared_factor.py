@@ -87,7 +87,7 @@ def test_condensation_takes_the_scales_factor(name):
     known = model._cache[STIFFNESS_FACTOR]
     built = build_classical(formulations.get("fischer_burmeister"), problems)
     assert built.reduction.shared and built.path.endswith("K's factor the reference scales')")
-    assert STIFFNESS_FACTOR not in model._cache  # taken: the model keeps it no longer
+    assert model.stiffness_factor() is known  # kept for the model's next condensation (the same factor)
     own = ClassicalReduction(problems.classical)
     assert not own.shared
     n = problems.classical.n_x
@@ -113,14 +113,28 @@ def test_a_stiffness_not_a_multiple_is_refused():
     assert factor.scaled(K, 2.0 * G) is None
 
 
-def test_a_ddcm_run_lets_the_factor_go():
-    """A DDCM run (the projection's reduction factorises ``K_C``) does not keep the classical
-    factor of the scales."""
+@pytest.mark.parametrize("name", CLASSICAL)
+def test_a_ddcm_run_shares_the_factor_or_lets_it_go(name):
+    """The projection's reduction solves with the scales' factor where ``K_C`` is a multiple of
+    their stiffness (a metric proportional to the law); otherwise it lets it go before its own
+    factorisation, and the model keeps it no longer."""
+    model = MODELS[name]()
+    problems = build_problems(model)
+    known = model.stiffness_factor()
+    assert known is not None
+    built = build_projection(formulations.get("fischer_burmeister"), problems)
+    if built.reduction.shared:
+        assert model.stiffness_factor() is known
+    else:
+        assert known.released and model.stiffness_factor() is None and STIFFNESS_FACTOR not in model._cache
+
+
+def test_the_full_path_lets_the_factor_go():
     model = MODELS["truss"]()
     problems = build_problems(model)
-    assert STIFFNESS_FACTOR in model._cache
-    build_projection(formulations.get("fischer_burmeister"), problems)
-    assert STIFFNESS_FACTOR not in model._cache
+    known = model.stiffness_factor()
+    build_classical(formulations.get("fischer_burmeister"), problems, reduce=False)
+    assert known.released and model.stiffness_factor() is None
 
 
 def _floating_bar():

@@ -128,15 +128,15 @@ def _built(formulation, problems: ProblemPair, problem: ComplementarityProblem, 
     """``formulation`` built on the condensed problem of ``problem``'s reduction (a ``kind``,
     made once per problem and solvers of ``K``), in a :class:`ReducedProjection`; on ``problem``
     itself if ``why`` says why not, or the reduction refuses (its ``projection_path``: ``full``
-    with the reason). Either way the model's kept factor of its scales' stiffness is taken
-    (:meth:`~ddcm_casadi.models.base.ContactModel.take_stiffness_factor`): by the reduction, or
-    let go."""
+    with the reason). The model's kept factor of its scales' stiffness
+    (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness_factor`) goes to the reduction, which
+    shares it or lets it go; on the full path it is let go."""
     if not why:
         reduction = problem.shared((kind.__name__, definite_solver_name(), solver_name()),
                                    lambda: _reduction(problem, problems.model, kind))
         why = reduction if isinstance(reduction, str) else _too_ill_conditioned(formulation, problem, reduction)
     if why:
-        problems.model.take_stiffness_factor()  # the scales' factor: let go, the full path makes its own
+        _let_go(problems.model.stiffness_factor())  # the full path makes its own
         built = formulation.build(problem)
         built.projection_path = full.format(why=why)
         return built
@@ -160,12 +160,18 @@ def _too_ill_conditioned(formulation, problem: ComplementarityProblem, reduction
 def _reduction(problem: ComplementarityProblem, model, kind: type):
     """The reduction of ``problem`` (a ``kind``), or why it does not apply (a singular or
     ill-conditioned Delassus matrix). It takes the model's kept factor of its scales' stiffness
-    (:meth:`~ddcm_casadi.models.base.ContactModel.take_stiffness_factor`): its own where it is a
+    (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness_factor`): its own where it is a
     multiple of it, else let go before a factorisation of its own."""
     try:
-        return kind(problem, model.near_null_space(), known=model.take_stiffness_factor())
+        return kind(problem, model.near_null_space(), known=model.stiffness_factor())
     except NotReducible as exc:
         return str(exc)
+
+
+def _let_go(factor) -> None:
+    """Release the model's kept factor (a :class:`~ddcm_casadi.models.stiffness.StiffnessFactor`), if any."""
+    if factor is not None:
+        factor.release()
 
 
 def path_description(built) -> str:

@@ -363,7 +363,7 @@ class ContactModel:
         """The contact rows ``G`` whose Delassus matrix ``G K^-1 G^T`` the first factorisation of
         the reference scales' stiffness ``K`` also gives, for the classical problem's
         condensation on its pairs (:class:`~ddcm_casadi.problems.reduction.ClassicalReduction`,
-        which takes it: :meth:`take_stiffness_factor`), or ``None`` where that condensation cannot
+        which takes it: :meth:`stiffness_factor`), or ``None`` where that condensation cannot
         apply: no classical law, finite kinematics, friction, or sizes it refuses
         (:func:`~ddcm_casadi.models.stiffness.condensation_size_refusal`)."""
         if self.youngs_modulus is None or self.kinematics != "small" or self.frictional or \
@@ -371,12 +371,16 @@ class ContactModel:
             return None
         return self.gap_operator
 
-    def take_stiffness_factor(self) -> StiffnessFactor | None:
+    def stiffness_factor(self) -> StiffnessFactor | None:
         """The factor of the scales' stiffness with its Delassus matrix
         (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`, made where :meth:`delassus_rows`
-        says), handed over once: the model keeps it no longer (a reduction that cannot use it lets
-        it go before its own factorisation)."""
-        return self._cache.pop(STIFFNESS_FACTOR, None)
+        says), kept for the model's reductions, or ``None`` (not made, or let go: a reduction that
+        cannot use it releases it before its own factorisation)."""
+        factor = self._cache.get(STIFFNESS_FACTOR)
+        if factor is not None and factor.released:
+            del self._cache[STIFFNESS_FACTOR]
+            return None
+        return factor
 
     def point_stiffness(self, kind: str) -> np.ndarray:
         """A representative modulus per material point: ``E`` (``"classical"``), or for the data

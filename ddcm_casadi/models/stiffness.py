@@ -15,8 +15,10 @@ the factor of ``K`` and ``D = G K^-1 G^T``):
 - by Woodbury, ``(K + G^T S G)^-1 = K^-1 - K^-1 G^T (S^-1 + D)^-1 G K^-1``
   (:meth:`StiffnessFactor.with_springs`: two solves with ``K`` and an ``nc x nc`` Cholesky factor).
 
-The model keeps it (``model._cache``) until a reduction takes it
-(:meth:`ContactModel.take_stiffness_factor <ddcm_casadi.models.base.ContactModel.take_stiffness_factor>`).
+The model keeps it (:meth:`ContactModel.stiffness_factor
+<ddcm_casadi.models.base.ContactModel.stiffness_factor>`), so that every condensation of its
+classical problem solves with the same factor (repeated runs are bit-identical), until a
+reduction that cannot use it lets it go (:meth:`StiffnessFactor.release`).
 """
 
 from __future__ import annotations
@@ -109,6 +111,16 @@ class StiffnessFactor:
         """``K^-1 rhs``."""
         return self.factor.solve(rhs)
 
+    @property
+    def released(self) -> bool:
+        """Whether :meth:`release` was called."""
+        return self.factor is None
+
+    def release(self) -> None:
+        """Let the factor go (a reduction that cannot use it, before a factorisation of its own):
+        its memory is freed unless a user of :meth:`scaled` still holds it."""
+        self.factor = self.D = None
+
     def with_springs(self, S: np.ndarray) -> "_WithSprings | None":
         """A solver of ``K + G^T diag(S) G`` (``S > 0``, one per row of ``G``), by Woodbury; ``None``
         where ``cond(D)`` exceeds :data:`WOODBURY_MAX_CONDITION` (``K`` numerically singular on
@@ -127,7 +139,7 @@ class StiffnessFactor:
         have a backward error within :data:`~ddcm_casadi.linalg.BACKWARD_ERROR` (one solve: the
         check :func:`~ddcm_casadi.linalg.factorize_with_delassus` makes of its own factor)."""
         K_s, G_s = sp.csc_matrix(K_s), sp.csr_matrix(G_s)
-        if self.solvers != (definite_solver_name(), solver_name()) or K_s.shape[0] != self.diagonal.size \
+        if self.released or self.solvers != (definite_solver_name(), solver_name()) or K_s.shape[0] != self.diagonal.size \
                 or G_s.shape != self.G.shape or (G_s != self.G).nnz:
             return None
         d = np.asarray(K_s.diagonal(), float)

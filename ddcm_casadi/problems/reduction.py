@@ -246,7 +246,7 @@ class Reduction:
         solver ignores it.
     known : StiffnessFactor, optional
         The model's kept factor of its reference scales' stiffness
-        (:meth:`~ddcm_casadi.models.base.ContactModel.take_stiffness_factor`): ``K_u``'s where
+        (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness_factor`): ``K_u``'s where
         ``K_u`` is a multiple of that stiffness
         (:meth:`~ddcm_casadi.models.stiffness.StiffnessFactor.scaled`), else let go before ``K_u``
         is factorised.
@@ -296,7 +296,8 @@ class Reduction:
             del K_s  # a copy of K_u's size, not needed with one factor
         start = time.perf_counter()
         scaled = None if known is None else known.scaled(K_u, self.G)
-        known = None  # the model's factor: kept where it is K_u's, else let go before K_u's own
+        if scaled is None and known is not None:
+            known.release()  # the model's factor: not K_u's, let go before K_u's own
         #: Whether the factor of ``K_u`` is the reference scales' (``K_u`` a multiple of their stiffness).
         self.shared = scaled is not None
         release_heap()  # the temporaries of the operators and of the check, before the factor's pages
@@ -499,10 +500,11 @@ class ClassicalReduction:
         The near-null space of ``K``, for an algebraic multigrid solver.
     known : StiffnessFactor, optional
         The model's factor of its reference scales' stiffness with its Delassus matrix
-        (:meth:`~ddcm_casadi.models.base.ContactModel.take_stiffness_factor`): where ``K`` is a
+        (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness_factor`): where ``K`` is a
         multiple ``c`` of that stiffness (the nondimensional problem's, ``c = s_d / s_f``) and the
         gap rows are its rows, ``K^-1`` and ``D_u`` are its own over ``c``
-        (:meth:`~ddcm_casadi.models.stiffness.StiffnessFactor.scaled`): no factorisation here.
+        (:meth:`~ddcm_casadi.models.stiffness.StiffnessFactor.scaled`): no factorisation here;
+        else it is let go (:meth:`~ddcm_casadi.models.stiffness.StiffnessFactor.release`) first.
 
     Attributes
     ----------
@@ -542,7 +544,8 @@ class ClassicalReduction:
         if self.shared:  # its factorisation's time counted as this one's
             (self.factor, self.D_u), start = scaled, start - known.seconds
         else:
-            known = scaled = None  # let go before a factorisation of its own
+            if known is not None:
+                known.release()  # let go before a factorisation of its own
             release_heap()
             try:
                 self.factor, self.D_u = factorize_with_delassus(K, self.G, near_null=near_null)
