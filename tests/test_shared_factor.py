@@ -156,3 +156,15 @@ def test_a_body_held_only_by_its_contacts_keeps_the_springs_own_factor(monkeypat
     old = _floating_bar().scales_for("classical")
     for key, value in old.items():
         assert abs(new[key] - value) <= 1e-12 * abs(value), key
+
+
+def test_the_classical_stiffness_is_handed_over_once_and_only_the_classical_one():
+    model = MODELS["truss"]()
+    model.scales_for("classical")
+    K = model.stiffness_factor()._K
+    assert K is not None and (model.stiffness() != K).nnz == 0
+    assert model.stiffness_factor()._K is None  # handed over: the next one is assembled
+    other = MODELS["continuum"]()
+    assert not np.array_equal(other.point_stiffness("ddcm"), other.youngs_modulus)
+    other.scales_for("ddcm")  # first: the factor's K is the data's secant stiffness, not the classical one
+    assert other.stiffness_factor() is not None and other.stiffness_factor().hand_over() is None

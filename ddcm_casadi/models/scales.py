@@ -182,7 +182,8 @@ class _Stiffness:
             if rows is None:
                 self._lu = factorize_definite(self.K, near_null=model.near_null_space())
             else:
-                self._lu = self._shared = StiffnessFactor(self.K, rows, model.near_null_space())
+                classical = model.youngs_modulus is not None and np.array_equal(self.D, model.youngs_modulus)
+                self._lu = self._shared = StiffnessFactor(self.K, rows, model.near_null_space(), classical=classical)
                 model._cache[STIFFNESS_FACTOR] = self._shared
         return self._lu
 

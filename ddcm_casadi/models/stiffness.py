@@ -29,6 +29,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from ddcm_casadi.heap import release_heap
 from ddcm_casadi.linalg import (
     BACKWARD_ERROR, SCHUR_MIN_SIZE, Factor, backward_error, definite_solver_name, delassus_solver,
     factorize_with_delassus, solver_name,
@@ -97,15 +98,29 @@ class StiffnessFactor:
         Wall time of the factorisation (with ``D``).
     solvers : tuple of str
         The definite and the sparse solver it was made with (:func:`scaled` serves those only).
+
+    ``classical``: ``K`` is the model's classical stiffness, kept until handed over
+    (:meth:`hand_over`).
     """
 
-    def __init__(self, K: sp.spmatrix, G: sp.spmatrix, near_null: np.ndarray | None = None) -> None:
+    def __init__(self, K: sp.spmatrix, G: sp.spmatrix, near_null: np.ndarray | None = None, *,
+                 classical: bool = False) -> None:
         start = time.perf_counter()
         self.solvers = (definite_solver_name(), solver_name())
+        release_heap()  # the model's and K's assembly temporaries, before the factor's pages
         self.factor, self.D = factorize_with_delassus(K, G, near_null=near_null)
         self.seconds = time.perf_counter() - start
         self.G = sp.csr_matrix(G)
         self.diagonal = np.asarray(K.diagonal(), float)  # to recognise a multiple of K (scaled)
+        # the model's classical stiffness, for its classical problem (hand_over): alive through the
+        # factorisation anyway
+        self._K = K if classical else None
+
+    def hand_over(self) -> sp.spmatrix | None:
+        """``K`` itself, once, where made ``classical`` (the model's classical stiffness: not
+        assembled twice), then ``None``."""
+        K, self._K = self._K, None
+        return K
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """``K^-1 rhs``."""
@@ -119,7 +134,7 @@ class StiffnessFactor:
     def release(self) -> None:
         """Let the factor go (a reduction that cannot use it, before a factorisation of its own):
         its memory is freed unless a user of :meth:`scaled` still holds it."""
-        self.factor = self.D = None
+        self.factor = self.D = self._K = None
 
     def with_springs(self, S: np.ndarray) -> "_WithSprings | None":
         """A solver of ``K + G^T diag(S) G`` (``S > 0``, one per row of ``G``), by Woodbury; ``None``
