@@ -346,18 +346,18 @@ class ContactModel:
         a continuum gives its rigid-body modes."""
         return None
 
-    def representative_law(self, D: np.ndarray) -> sp.csr_matrix:
-        """``W D``: the volumes times a law of modulus ``D`` per point (``(m k, m k)``, block
-        diagonal), from which the reference scales assemble their stiffness ``B^T W D B``
-        (:mod:`~ddcm_casadi.models.scales`). The model's classical law at the modulus ``D``
-        (``D / E`` times :meth:`material_matrix`) where it has a Young's modulus, so that the
-        classical kind's is its :meth:`stiffness` (the same arithmetic), whose one factorisation
-        serves the scales and the classical condensation (:meth:`delassus_rows`); else ``D`` on
-        every strain component."""
+    def representative_law(self, kind: str) -> sp.csr_matrix:
+        """``W D``: the volumes times a representative law per point (``(m k, m k)``, block
+        diagonal), from which the reference scales of the ``"classical"`` or ``"ddcm"`` problem
+        assemble their stiffness ``B^T W D B`` (:mod:`~ddcm_casadi.models.scales`). Classical: the
+        classical law itself (:meth:`material_matrix`), so that ``B^T W D B`` is :meth:`stiffness`
+        (the same arithmetic), whose one factorisation serves the scales and the classical
+        condensation (:meth:`delassus_rows`). DDCM: the data's secant modulus
+        (:meth:`point_stiffness`) on every strain component."""
         w, k = np.asarray(self.volumes, float), self.strain_components
-        if self.youngs_modulus is None:
-            return sp.diags(np.repeat(w * D, k)).tocsr()
-        return (sp.diags(np.repeat(w * (D / self.youngs_modulus), k)) @ self.material_matrix()).tocsr()
+        if kind == "classical":
+            return (sp.diags(np.repeat(w, k)) @ self.material_matrix()).tocsr()
+        return sp.diags(np.repeat(w * self.point_stiffness(kind), k)).tocsr()
 
     def delassus_rows(self) -> sp.csr_matrix | None:
         """The contact rows ``G`` whose Delassus matrix ``G K^-1 G^T`` the first factorisation of
@@ -398,8 +398,8 @@ class ContactModel:
         """Reference magnitudes of the ``"classical"`` or the ``"ddcm"`` problem (cached).
 
         Derived from the problem itself, by a linear solve with a representative stiffness
-        ``K = B^T W D B`` (``D`` from :meth:`point_stiffness`, ``W D`` the law of that modulus,
-        :meth:`representative_law`):
+        ``K = B^T W D B`` (``W D`` from :meth:`representative_law`: the classical law, or the
+        data's secant modulus from :meth:`point_stiffness` on every component):
 
         - the response to the largest load, ``K u_f = f``;
         - the displacement the obstacles impose where they penetrate the undeformed body
@@ -481,11 +481,9 @@ class ContactModel:
         transient of ``B``'s size at 3e5 unknowns), else assembled."""
         factor = self.stiffness_factor()
         K = None if factor is None else factor.hand_over()
-        if K is not None:
-            return K.tocsr()
-        B = self.strain_operator
-        W = sp.diags(np.repeat(self.volumes, self.strain_components))
-        return (B.T @ (W @ self.material_matrix()) @ B).tocsr()
+        if K is None:
+            K = self.strain_operator.T @ self.representative_law("classical") @ self.strain_operator
+        return K.tocsr()
 
     # -------------------------------------------------------------- load steps and their history
     def history_sizes(self) -> dict[str, int]:

@@ -153,7 +153,7 @@ class StiffnessFactor:
         entry, the nondimensional problem's ``K s_d / s_f``); a solve with ``K_s`` must then
         have a backward error within :data:`~ddcm_casadi.linalg.BACKWARD_ERROR` (one solve: the
         check :func:`~ddcm_casadi.linalg.factorize_with_delassus` makes of its own factor)."""
-        K_s, G_s = sp.csc_matrix(K_s), sp.csr_matrix(G_s)
+        G_s = sp.csr_matrix(G_s)
         if self.released or self.solvers != (definite_solver_name(), solver_name()) or K_s.shape[0] != self.diagonal.size \
                 or G_s.shape != self.G.shape or (G_s != self.G).nnz:
             return None

@@ -539,7 +539,7 @@ class ClassicalReduction:
         self.n = n = problem.n_x
         self.nc = problem.n_pairs
         F, gap = problem.residual_map, problem.gap_map
-        K = F.z[:, :n].tocsc()  # not kept: a copy of the problem's (0.27 GB at 1e6 dofs)
+        K = F.z[:, :n]  # not kept: a copy of the problem's (0.27 GB at 1e6 dofs), in its format
         self._R_p = F.z[:, n:].tocsr()
         self._f = F.params.tocsr()  # F = K u + R_p p + f_P P
         self.G = gap.z[:, :n].tocsr()
