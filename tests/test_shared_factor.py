@@ -38,6 +38,12 @@ def _roundoff(model) -> float:
     return (np.linalg.cond(A) + np.linalg.cond(K) * amplification) * EPS
 
 
+def _own_factors(monkeypatch) -> None:
+    """The scales factorise their own (the same stiffness): as if the model kept a factor already
+    (a stand-in), which the scales then neither make nor use."""
+    monkeypatch.setattr(ContactModel, "stiffness_factor", lambda self: object())
+
+
 @pytest.mark.parametrize("name", CLASSICAL)
 def test_classical_scales_stiffness_is_the_stiffness(name):
     """The classical kind's representative stiffness is the classical problem's (same arithmetic):
@@ -56,7 +62,7 @@ def test_scales_from_the_shared_factor_are_the_scales_of_their_own(name, monkeyp
     shared = MODELS[name]()
     new = {k: shared.scales_for(k) for k in ("classical", "ddcm")}
     assert isinstance(shared._cache.get(STIFFNESS_FACTOR), StiffnessFactor)
-    monkeypatch.setattr(ContactModel, "delassus_rows", lambda self: None)  # the factorisations of their own
+    _own_factors(monkeypatch)
     alone = MODELS[name]()
     old = {k: alone.scales_for(k) for k in ("classical", "ddcm")}
     assert STIFFNESS_FACTOR not in alone._cache
@@ -152,7 +158,7 @@ def test_a_body_held_only_by_its_contacts_keeps_the_springs_own_factor(monkeypat
     factor), so the scales are those of the path without the shared factor, to round-off of a
     well-conditioned 2 x 2 system."""
     new = _floating_bar().scales_for("classical")
-    monkeypatch.setattr(ContactModel, "delassus_rows", lambda self: None)
+    _own_factors(monkeypatch)
     old = _floating_bar().scales_for("classical")
     for key, value in old.items():
         assert abs(new[key] - value) <= 1e-12 * abs(value), key
@@ -168,3 +174,15 @@ def test_the_classical_stiffness_is_handed_over_once_and_only_the_classical_one(
     assert not np.array_equal(other.point_stiffness("ddcm"), other.youngs_modulus)
     other.scales_for("ddcm")  # first: the factor's K is the data's secant stiffness, not the classical one
     assert other.stiffness_factor() is not None and other.stiffness_factor().hand_over() is None
+
+
+def test_without_the_condensation_the_scales_law_is_the_modulus_on_every_component():
+    """No contact pair (nothing to condense): the classical scales keep ``E`` on every strain
+    component (the continuum's classical law is not factorised for them)."""
+    from ddcm_casadi.validation.hard_device_rungs import stretched_block
+
+    model = stretched_block(points=11)
+    assert model.delassus_rows() is None
+    w, k = model.volumes, model.strain_components
+    expected = sp.diags(np.repeat(w * model.point_stiffness("classical"), k))
+    assert (model.representative_law("classical") != expected).nnz == 0

@@ -349,13 +349,14 @@ class ContactModel:
     def representative_law(self, kind: str) -> sp.csr_matrix:
         """``W D``: the volumes times a representative law per point (``(m k, m k)``, block
         diagonal), from which the reference scales of the ``"classical"`` or ``"ddcm"`` problem
-        assemble their stiffness ``B^T W D B`` (:mod:`~ddcm_casadi.models.scales`). Classical: the
-        classical law itself (:meth:`material_matrix`), so that ``B^T W D B`` is :meth:`stiffness`
-        (the same arithmetic), whose one factorisation serves the scales and the classical
-        condensation (:meth:`delassus_rows`). DDCM: the data's secant modulus
-        (:meth:`point_stiffness`) on every strain component."""
+        assemble their stiffness ``B^T W D B`` (:mod:`~ddcm_casadi.models.scales`): a modulus
+        per point on every strain component (:meth:`point_stiffness`: ``E``, or the data's secant
+        modulus). Where the classical condensation may use the scales' factor
+        (:meth:`delassus_rows`), the classical kind's is the classical law itself
+        (:meth:`material_matrix`: ``B^T W D B`` is then :meth:`stiffness`, the same arithmetic),
+        so that one factorisation serves both; for one-component points the two are the same."""
         w, k = np.asarray(self.volumes, float), self.strain_components
-        if kind == "classical":
+        if kind == "classical" and self.delassus_rows() is not None:
             return (sp.diags(np.repeat(w, k)) @ self.material_matrix()).tocsr()
         return sp.diags(np.repeat(w * self.point_stiffness(kind), k)).tocsr()
 
@@ -481,9 +482,11 @@ class ContactModel:
         transient of ``B``'s size at 3e5 unknowns), else assembled."""
         factor = self.stiffness_factor()
         K = None if factor is None else factor.hand_over()
-        if K is None:
-            K = self.strain_operator.T @ self.representative_law("classical") @ self.strain_operator
-        return K.tocsr()
+        if K is not None:
+            return K.tocsr()
+        B = self.strain_operator
+        W = sp.diags(np.repeat(self.volumes, self.strain_components))
+        return (B.T @ (W @ self.material_matrix()) @ B).tocsr()
 
     # -------------------------------------------------------------- load steps and their history
     def history_sizes(self) -> dict[str, int]:

@@ -140,10 +140,13 @@ class StiffnessFactor:
         """A solver of ``K + G^T diag(S) G`` (``S > 0``, one per row of ``G``), by Woodbury; ``None``
         where ``cond(D)`` exceeds :data:`WOODBURY_MAX_CONDITION` (``K`` numerically singular on
         the pairs' rows)."""
+        S = np.asarray(S, float)
+        if not (np.all(np.isfinite(self.D)) and np.all(np.isfinite(S)) and np.all(S > 0)):
+            return None  # an overflow (out-of-range input): the springs' own factor reports it
         eig = np.linalg.eigvalsh(self.D) if self.D.size else np.ones(1)
         if not eig[0] > eig[-1] / WOODBURY_MAX_CONDITION:
             return None
-        return _WithSprings(self, np.asarray(S, float))
+        return _WithSprings(self, S)
 
     def scaled(self, K_s: sp.spmatrix, G_s: sp.spmatrix) -> tuple[Factor, np.ndarray] | None:
         """``(factor of K_s, G_s K_s^-1 G_s^T)`` where ``K_s = c K`` and ``G_s = G`` (``K_s^-1 =
@@ -184,5 +187,5 @@ class _WithSprings:
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         r = np.asarray(rhs, float)
         G = self.base.G
-        z = sla.cho_solve(self._small, G @ self.base.solve(r))
+        z = sla.cho_solve(self._small, G @ self.base.solve(r), check_finite=False)  # an overflow propagates
         return self.base.solve(r - G.T @ z)
