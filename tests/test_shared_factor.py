@@ -196,6 +196,11 @@ def test_the_symmetry_check_is_linalgs():
     skew = K.copy()
     skew.data[np.flatnonzero(skew.indices != np.repeat(np.arange(K.shape[0]), np.diff(K.indptr)))[0]] *= 1 + 1e-10
     other = K + sp.csr_matrix(([1.0], ([0], [K.shape[0] - 1])), shape=K.shape)  # another pattern
-    for A in (K, skew, other, 2.0 * K):
+    rng = np.random.default_rng(0)
+    R = sp.random(300, 300, density=0.02, random_state=0, format="csr")
+    near = R + R.T
+    near.data *= 1 + 1e-15 * rng.standard_normal(near.nnz)  # within 1e-14 of symmetric
+    for A in (K, skew, other, 2.0 * K, R, R + R.T, near):
         assert _symmetric(A) == numerically_symmetric(A)
-    assert _symmetric(K) and not _symmetric(skew) and not _symmetric(other)
+    assert _symmetric(K) and not _symmetric(skew) and not _symmetric(other) and not _symmetric(R)
+    assert _symmetric(R + R.T)
