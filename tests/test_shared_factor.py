@@ -186,21 +186,3 @@ def test_without_the_condensation_the_scales_law_is_the_modulus_on_every_compone
     w, k = model.volumes, model.strain_components
     expected = sp.diags(np.repeat(w * model.point_stiffness("classical"), k))
     assert (model.representative_law("classical") != expected).nnz == 0
-
-
-def test_the_symmetry_check_is_linalgs():
-    from ddcm_casadi.linalg import numerically_symmetric
-    from ddcm_casadi.problems.reduction import _symmetric
-
-    K = MODELS["continuum"]().stiffness()
-    skew = K.copy()
-    skew.data[np.flatnonzero(skew.indices != np.repeat(np.arange(K.shape[0]), np.diff(K.indptr)))[0]] *= 1 + 1e-10
-    other = K + sp.csr_matrix(([1.0], ([0], [K.shape[0] - 1])), shape=K.shape)  # another pattern
-    rng = np.random.default_rng(0)
-    R = sp.random(300, 300, density=0.02, random_state=0, format="csr")
-    near = R + R.T
-    near.data *= 1 + 1e-15 * rng.standard_normal(near.nnz)  # within 1e-14 of symmetric
-    for A in (K, skew, other, 2.0 * K, R, R + R.T, near):
-        assert _symmetric(A) == numerically_symmetric(A)
-    assert _symmetric(K) and not _symmetric(skew) and not _symmetric(other) and not _symmetric(R)
-    assert _symmetric(R + R.T)

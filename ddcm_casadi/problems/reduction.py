@@ -471,39 +471,13 @@ def classical_refusal(problem: ComplementarityProblem, *, max_pairs: int | None 
     return problem.shared("classical_structure", lambda: _classical_structure(problem, n))
 
 
-#: Row blocks of :func:`_symmetric` (each compared with its transposed column block).
-SYMMETRY_BLOCKS = 16
-
-
-def _symmetric(K: sp.spmatrix) -> bool:
-    """:func:`~ddcm_casadi.linalg.numerically_symmetric` of ``K`` (``|K - K^T| <= 1e-14 max |K|``
-    entrywise), a block of rows at a time against the same block of columns transposed: about
-    ``1 / SYMMETRY_BLOCKS`` of ``K``'s size at a time, where ``K - K^T`` in one piece took three
-    copies of ``K`` (0.11 GB of the build's peak at 3.2e5 unknowns)."""
-    A = sp.csr_matrix(K)
-    n = A.shape[0]
-    if not A.nnz or A.shape[1] != n:
-        return numerically_symmetric(A)
-    tol = 1e-14 * float(np.max(np.abs(A.data)))
-    step = -(-n // SYMMETRY_BLOCKS)
-    for r0 in range(0, n, step):
-        r1 = min(n, r0 + step)
-        sel = np.flatnonzero((A.indices >= r0) & (A.indices < r1))  # the entries of columns r0:r1
-        rows = np.searchsorted(A.indptr, sel, side="right") - 1
-        transposed = sp.csr_matrix((A.data[sel], (A.indices[sel] - r0, rows)), shape=(r1 - r0, n))
-        difference = A[r0:r1] - transposed
-        if difference.nnz and float(np.max(np.abs(difference.data))) > tol:
-            return False
-    return True
-
-
 def _classical_structure(problem: ComplementarityProblem, n: int) -> str:
     """The structural part of :func:`classical_refusal`: gaps in ``u`` alone, a symmetric ``K``,
     contact forces the gap rows' transposes scaled pair by pair."""
     F, g = problem.residual_map.z, problem.gap_map.z
     if _rows(g, slice(n, None)).any():
         return "the gaps involve more than the displacements"
-    if not _symmetric(F[:, :n]):
+    if not numerically_symmetric(F[:, :n]):
         return "the stiffness is not symmetric"
     if column_ratio(g[:, :n], -F[:, n:]) is None:
         return "the contact forces are not the gap rows' transposes scaled pair by pair"
