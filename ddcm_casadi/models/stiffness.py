@@ -99,8 +99,14 @@ class StiffnessFactor:
     solvers : tuple of str
         The definite and the sparse solver it was made with (:func:`scaled` serves those only).
 
-    ``classical``: ``K`` is the model's classical stiffness, kept until handed over
-    (:meth:`hand_over`).
+    Parameters
+    ----------
+    K, G : sparse matrix
+        The stiffness and the contact rows.
+    near_null : ndarray, optional
+        ``K``'s near-null space, for an algebraic multigrid solver.
+    classical : bool
+        ``K`` is the model's classical stiffness: kept until handed over (:meth:`hand_over`).
     """
 
     def __init__(self, K: sp.spmatrix, G: sp.spmatrix, near_null: np.ndarray | None = None, *,
@@ -157,8 +163,8 @@ class StiffnessFactor:
         have a backward error within :data:`~ddcm_casadi.linalg.BACKWARD_ERROR` (one solve: the
         check :func:`~ddcm_casadi.linalg.factorize_with_delassus` makes of its own factor)."""
         G_s = sp.csr_matrix(G_s)
-        if self.released or self.solvers != (definite_solver_name(), solver_name()) or K_s.shape[0] != self.diagonal.size \
-                or G_s.shape != self.G.shape or (G_s != self.G).nnz:
+        if self.released or self.solvers != (definite_solver_name(), solver_name()) \
+                or K_s.shape[0] != self.diagonal.size or G_s.shape != self.G.shape or (G_s != self.G).nnz:
             return None
         d = np.asarray(K_s.diagonal(), float)
         if not (np.all(self.diagonal > 0) and np.all(d > 0)):
