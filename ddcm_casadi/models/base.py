@@ -399,8 +399,9 @@ class ContactModel:
         """Reference magnitudes of the ``"classical"`` or the ``"ddcm"`` problem (cached).
 
         Derived from the problem itself, by a linear solve with a representative stiffness
-        ``K = B^T W D B`` (``W D`` from :meth:`representative_law`: the classical law, or the
-        data's secant modulus from :meth:`point_stiffness` on every component):
+        ``K = B^T W D B`` (``W D`` from :meth:`representative_law`: ``E`` or the data's secant
+        modulus from :meth:`point_stiffness` on every component; the classical law itself where
+        the classical condensation shares the scales' factor):
 
         - the response to the largest load, ``K u_f = f``;
         - the displacement the obstacles impose where they penetrate the undeformed body
