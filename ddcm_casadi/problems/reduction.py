@@ -266,7 +266,10 @@ class Reduction:
     back_solves : int
         Solves with the kept factor made for the Delassus matrices (``nc`` or ``2 nc``).
     factor_seconds, back_solve_seconds : float
-        Wall time of the factorisation (or AMG set-up) and of the back-solves.
+        Wall time of the factorisation (or AMG set-up; the reference scales' where shared, with
+        the check that recognises ``K_u``) and of the back-solves.
+    shared : bool
+        Whether the factor of ``K_u`` is the reference scales' (``K_u`` a multiple of their stiffness).
     K_u : scipy.sparse.csc_matrix
         ``A_u^T W_e A_u`` (a multiple of ``K_C``; assembled on use, not held).
     Z_u : ndarray
@@ -300,7 +303,7 @@ class Reduction:
             known.release()  # the model's factor: not K_u's, let go before K_u's own
         elif scaled is not None:
             known.hand_over()  # the classical stiffness it kept: not this problem's to hold
-        #: Whether the factor of ``K_u`` is the reference scales' (``K_u`` a multiple of their stiffness).
+            start -= known.seconds  # its factorisation's time counted as this one's
         self.shared = scaled is not None
         release_heap()  # the temporaries of the operators and of the check, before the factor's pages
         self._factor_s = None
@@ -528,6 +531,9 @@ class ClassicalReduction:
     factorizations, solver, factor_seconds, description
         One factorisation (of ``K``), the definite solver's name, its wall time (with ``D_u``; the
         reference scales' where shared), and the one-line description of the path.
+    shared : bool
+        Whether the factor of ``K`` is the reference scales'
+        (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`).
     """
 
     def __init__(self, problem: ComplementarityProblem, near_null: np.ndarray | None = None,
@@ -548,7 +554,6 @@ class ClassicalReduction:
         self.factorizations, self.solver = 1, definite_solver_name()
         start = time.perf_counter()
         scaled = None if known is None else known.scaled(K, self.G)
-        #: Whether the factor is the reference scales' (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`).
         self.shared = scaled is not None
         if self.shared:  # its factorisation's time counted as this one's
             (self.factor, self.D_u), start = scaled, start - known.seconds
