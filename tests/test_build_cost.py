@@ -11,35 +11,40 @@ import scipy.sparse as sp
 import ddcm_casadi.models.scales as scales
 from ddcm_casadi.problems.build import build_problems
 from ddcm_casadi.problems.reduction import Reduction
-from tests.test_reduction import hertz_block
+from tests.test_reduction import MODELS, hertz_block
 
 
 def _counting(monkeypatch) -> list:
+    """The scales' factorisations: their own (direct, or AMG where selected), or the one shared
+    with the classical condensation (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`)."""
     calls = []
-    original = scales.factorize_definite  # the scales' solves (direct, or AMG where selected)
+    for name in ("factorize_definite", "StiffnessFactor"):
+        original = getattr(scales, name)
 
-    def counted(A, **kw):
-        calls.append(A.shape[0])
-        return original(A, **kw)
+        def counted(A, *args, original=original, **kw):
+            calls.append(A.shape[0])
+            return original(A, *args, **kw)
 
-    monkeypatch.setattr(scales, "factorize_definite", counted)
+        monkeypatch.setattr(scales, name, counted)
     return calls
 
 
 def test_proportional_kinds_share_one_factorisation(monkeypatch):
-    model = hertz_block(4)
+    """One-component points: the classical law ``E`` and the data's secant modulus on every
+    component are proportional laws (a continuum's classical law ``C(E, nu)`` is not)."""
+    model = MODELS["truss"]()
     D_c, D_d = (np.broadcast_to(model.point_stiffness(k), (model.n_points,)) for k in ("classical", "ddcm"))
     assert np.allclose(D_d, D_d[0] / D_c[0] * D_c, rtol=4 * np.finfo(float).eps, atol=0)  # the case under test
     calls = _counting(monkeypatch)
     shared = {k: model.scales_for(k) for k in ("classical", "ddcm")}
     assert len(calls) == 1
     # the long way: the data-driven kind alone, on a fresh model (its own factorisation)
-    alone = hertz_block(4).scales_for("ddcm")
+    alone = MODELS["truss"]().scales_for("ddcm")
     assert len(calls) == 2
     # Both are backward-stable solves of one system (up to the factor beta), so the solutions,
     # and the maxima the scales are, agree to cond(A) eps, A the stiffness with the pair springs.
     B, G, a, w = model.strain_operator, model.gap_operator, model.contact_area, model.volumes
-    K = (B.T @ sp.diags(np.repeat(w * D_c, model.strain_components)) @ B).toarray()
+    K = (B.T @ model.representative_law("classical") @ B).toarray()
     A = K + 1e3 * np.max(np.diag(K)) / np.max(a) * (G.T @ sp.diags(a) @ G).toarray()
     tol = 4 * np.linalg.cond(A) * np.finfo(float).eps
     for name, value in alone.items():

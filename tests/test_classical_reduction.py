@@ -80,10 +80,10 @@ def test_the_path_is_reported_and_can_be_switched_off():
 def test_large_problems_need_the_schur_complement(monkeypatch):
     """Above ``SCHUR_MIN_SIZE`` unknowns, ``nc`` back-solves with SuperLU cost more than the full
     path: without PARDISO's Schur complement the full path is kept, and says why."""
-    import ddcm_casadi.problems.reduction as reduction
+    import ddcm_casadi.models.stiffness as stiffness
 
     problems = build_problems(MODELS["continuum"]())
-    monkeypatch.setattr(reduction, "SCHUR_MIN_SIZE", 10)
+    monkeypatch.setattr(stiffness, "SCHUR_MIN_SIZE", 10)
     previous = linalg.solver_name()
     try:
         linalg.use_solver("superlu")

@@ -109,8 +109,11 @@ def test_local_cluster_of_two_workers_runs_a_small_sweep(tmp_path):
     assert meta["cases"] == 4 and meta["finished"] == 4 and meta["workers"] == 2
     assert {"dask", "distributed", "ddcm_casadi", "casadi"} <= set(meta["versions"])
     assert meta["spec"]["grid"] == {"generate.points": [30, 60]}
-    # a log-log slope is fitted where the error is positive: DDCM (the classical error is roundoff)
-    assert [f["series"] for f in meta["fits"]] == ["ddcm/fischer_burmeister"]
+    # a log-log slope is fitted where the error is positive: DDCM; the classical error is roundoff
+    # (0, or an ulp where the condensation solves with the reference scales' factor over c = s_d / s_f:
+    # a flat line of nothing if fitted)
+    assert "ddcm/fischer_burmeister" in [f["series"] for f in meta["fits"]]
+    assert all(float(r["max_error_p"]) <= 64 * np.finfo(float).eps for r in rows if r["variant"] == "classical")
     assert (out / "band.png").stat().st_size > 0 and (out / "rate_max_error_p_vs_generate_points.png").is_file()
 
     # each case's folder: its record and the results of ddcm-compare; the same metrics in process

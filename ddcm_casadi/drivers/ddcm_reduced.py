@@ -128,12 +128,15 @@ def _built(formulation, problems: ProblemPair, problem: ComplementarityProblem, 
     """``formulation`` built on the condensed problem of ``problem``'s reduction (a ``kind``,
     made once per problem and solvers of ``K``), in a :class:`ReducedProjection`; on ``problem``
     itself if ``why`` says why not, or the reduction refuses (its ``projection_path``: ``full``
-    with the reason)."""
+    with the reason). The model's kept factor of its scales' stiffness
+    (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness_factor`) goes to the reduction, which
+    shares it or lets it go; on the full path it is let go."""
     if not why:
         reduction = problem.shared((kind.__name__, definite_solver_name(), solver_name()),
-                                   lambda: _reduction(problem, problems.model.near_null_space(), kind))
+                                   lambda: _reduction(problem, problems.model, kind))
         why = reduction if isinstance(reduction, str) else _too_ill_conditioned(formulation, problem, reduction)
     if why:
+        _let_go(problems.model.stiffness_factor())  # the full path makes its own
         built = formulation.build(problem)
         built.projection_path = full.format(why=why)
         return built
@@ -154,13 +157,21 @@ def _too_ill_conditioned(formulation, problem: ComplementarityProblem, reduction
             f"tolerance {tol:g}: the condensed solve's roundoff would exceed it")
 
 
-def _reduction(problem: ComplementarityProblem, near_null: np.ndarray | None, kind: type):
+def _reduction(problem: ComplementarityProblem, model, kind: type):
     """The reduction of ``problem`` (a ``kind``), or why it does not apply (a singular or
-    ill-conditioned Delassus matrix)."""
+    ill-conditioned Delassus matrix). It takes the model's kept factor of its scales' stiffness
+    (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness_factor`): its own where it is a
+    multiple of it, else let go before a factorisation of its own."""
     try:
-        return kind(problem, near_null)
+        return kind(problem, model.near_null_space(), known=model.stiffness_factor())
     except NotReducible as exc:
         return str(exc)
+
+
+def _let_go(factor) -> None:
+    """Release the model's kept factor (a :class:`~ddcm_casadi.models.stiffness.StiffnessFactor`), if any."""
+    if factor is not None:
+        factor.release()
 
 
 def path_description(built) -> str:

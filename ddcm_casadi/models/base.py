@@ -31,7 +31,8 @@ from ddcm_casadi.data.dataset import MaterialDataset, PointData, check_positive
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import to_casadi
 from ddcm_casadi.models.prescribed import PARAMETER as PRESCRIBED, Prescribed
-from ddcm_casadi.models.scales import LARGE_STRAIN, load_path_warnings, reference_scales
+from ddcm_casadi.models.scales import LARGE_STRAIN, STIFFNESS_FACTOR, load_path_warnings, reference_scales
+from ddcm_casadi.models.stiffness import StiffnessFactor, condensation_size_refusal
 
 
 #: Kinematics a model may declare: ``small`` (linear strains and gaps: the problems are affine) or
@@ -345,6 +346,43 @@ class ContactModel:
         a continuum gives its rigid-body modes."""
         return None
 
+    def representative_law(self, kind: str) -> sp.csr_matrix:
+        """``W D``: the volumes times a representative law per point (``(m k, m k)``, block
+        diagonal), from which the reference scales of the ``"classical"`` or ``"ddcm"`` problem
+        assemble their stiffness ``B^T W D B`` (:mod:`~ddcm_casadi.models.scales`): a modulus
+        per point on every strain component (:meth:`point_stiffness`: ``E``, or the data's secant
+        modulus). Where the classical condensation may use the scales' factor
+        (:meth:`delassus_rows`), the classical kind's is the classical law itself
+        (:meth:`material_matrix`: ``B^T W D B`` is then :meth:`stiffness`, the same arithmetic),
+        so that one factorisation serves both; for one-component points the two are the same."""
+        w, k = np.asarray(self.volumes, float), self.strain_components
+        if kind == "classical" and self.delassus_rows() is not None:
+            return (sp.diags(np.repeat(w, k)) @ self.material_matrix()).tocsr()
+        return sp.diags(np.repeat(w * self.point_stiffness(kind), k)).tocsr()
+
+    def delassus_rows(self) -> sp.csr_matrix | None:
+        """The contact rows ``G`` whose Delassus matrix ``G K^-1 G^T`` the first factorisation of
+        the reference scales' stiffness ``K`` also gives, for the classical problem's
+        condensation on its pairs (:class:`~ddcm_casadi.problems.reduction.ClassicalReduction`,
+        which takes it: :meth:`stiffness_factor`), or ``None`` where that condensation cannot
+        apply: no classical law, finite kinematics, friction, or sizes it refuses
+        (:func:`~ddcm_casadi.models.stiffness.condensation_size_refusal`)."""
+        if self.youngs_modulus is None or self.kinematics != "small" or self.frictional or \
+                condensation_size_refusal(self.n_dofs, self.n_contacts):
+            return None
+        return self.gap_operator
+
+    def stiffness_factor(self) -> StiffnessFactor | None:
+        """The factor of the scales' stiffness with its Delassus matrix
+        (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`, made where :meth:`delassus_rows`
+        says), kept for the model's reductions, or ``None`` (not made, or let go: a reduction that
+        cannot use it releases it before its own factorisation)."""
+        factor = self._cache.get(STIFFNESS_FACTOR)
+        if factor is not None and factor.released:
+            del self._cache[STIFFNESS_FACTOR]
+            return None
+        return factor
+
     def point_stiffness(self, kind: str) -> np.ndarray:
         """A representative modulus per material point: ``E`` (``"classical"``), or for the data
         (``"ddcm"``) the secant modulus of each point's data set, ``std(stress) / std(strain)``
@@ -361,7 +399,9 @@ class ContactModel:
         """Reference magnitudes of the ``"classical"`` or the ``"ddcm"`` problem (cached).
 
         Derived from the problem itself, by a linear solve with a representative stiffness
-        ``K = B^T W D B`` (``D`` from :meth:`point_stiffness`):
+        ``K = B^T W D B`` (``W D`` from :meth:`representative_law`: ``E`` or the data's secant
+        modulus from :meth:`point_stiffness` on every component; the classical law itself where
+        the classical condensation shares the scales' factor):
 
         - the response to the largest load, ``K u_f = f``;
         - the displacement the obstacles impose where they penetrate the undeformed body
@@ -437,7 +477,14 @@ class ContactModel:
         return ca.mtimes(to_casadi(self.material_matrix()), strain)
 
     def stiffness(self) -> sp.csr_matrix:
-        """Classical stiffness ``K = B^T W D B`` (sparse; ``W`` the volumes on every component)."""
+        """Classical stiffness ``K = B^T W D B`` (sparse; ``W`` the volumes on every component):
+        the reference scales' (the same arithmetic, :meth:`representative_law`) where their
+        :meth:`stiffness_factor` holds it, handed over once (no second assembly: 1.4 s and a
+        transient of ``B``'s size at 3e5 unknowns), else assembled."""
+        factor = self.stiffness_factor()
+        K = None if factor is None else factor.hand_over()
+        if K is not None:
+            return K.tocsr()
         B = self.strain_operator
         W = sp.diags(np.repeat(self.volumes, self.strain_components))
         return (B.T @ (W @ self.material_matrix()) @ B).tocsr()

@@ -17,6 +17,10 @@ import scipy.sparse as sp
 
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.linalg import SingularMatrix, factorize, factorize_definite
+from ddcm_casadi.models.stiffness import Scaled, StiffnessFactor
+
+#: The model's cache key of its kept :class:`~ddcm_casadi.models.stiffness.StiffnessFactor`.
+STIFFNESS_FACTOR = "stiffness_factor"
 
 
 
@@ -55,6 +59,10 @@ class ContactModel(Protocol):
 
     def near_null_space(self) -> np.ndarray | None: ...
 
+    def representative_law(self, kind: str) -> sp.csr_matrix: ...
+
+    def delassus_rows(self) -> sp.csr_matrix | None: ...
+
 #: Imposed strain beyond which :func:`load_path_warnings` warns: small-strain kinematics then
 #: differ from finite-strain ones by more than ~5 % (Green-Lagrange ``e + e^2/2`` vs ``e``).
 LARGE_STRAIN = 0.1
@@ -77,7 +85,7 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
     """
     D = model.point_stiffness(kind)
     B, G, a = model.strain_operator, model.gap_operator, model.contact_area
-    stiffness = _stiffness(model, D)
+    stiffness = _stiffness(model, kind)
     load_step = int(np.argmax(np.max(np.abs(model.loads), axis=1))) if model.loads.size else 0
     f = model.loads[load_step] if model.loads.size else np.zeros(model.n_dofs)
     penetration = np.maximum(-model.gap_offsets, 0.0)
@@ -98,6 +106,7 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
             # singular, which the factorisation may miss by roundoff: a displacement beyond
             # SINGULAR_DISPLACEMENT body sizes is that, not a small-strain solution
             if not float(np.max(np.abs(u_f), initial=0.0)) <= SINGULAR_DISPLACEMENT * model.length_scale:
+                stiffness.singular = True  # the spring's solves from its own factor, not K's
                 u_f = spring().solve(f)
             strain = float(np.max(np.abs(B @ u_f), initial=0.0))
         if pen > 0:
@@ -111,7 +120,7 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
                 model._cache[("imposed_strain", kind)] = imposed
                 strain = max(strain, imposed)
         if model.prescribed is not None:  # the hard device's largest step, alone
-            U_D, strain_D = _prescribed_response(model, stiffness, D, spring)
+            U_D, strain_D = _prescribed_response(model, stiffness, spring)
             model._cache[("prescribed_strain", kind)] = strain_D
             strain = max(strain, strain_D)
             pen = max(pen, U_D)
@@ -123,81 +132,118 @@ def reference_scales(model: ContactModel, kind: str) -> dict:
 
 
 class _Stiffness:
-    """The representative stiffness ``K = B^T W D B`` of :func:`reference_scales` for one point
-    stiffness ``D``, with ``kappa`` (a stiff spring per pair, ``1e3 max diag(K) / max a``) and
-    solves with ``K`` and ``K + kappa G^T A G``, each factorised on first use.
+    """The representative stiffness ``K = B^T W D B`` of :func:`reference_scales` for one kind's
+    law ``W D`` (:meth:`~ddcm_casadi.models.base.ContactModel.representative_law`: the classical
+    law, so that the classical kind's ``K`` is the classical stiffness; the data's secant modulus
+    on every component), with ``kappa`` (a stiff spring per pair, ``1e3 max diag(K) / max a``)
+    and solves with ``K`` and ``K + kappa G^T A G``, each factorised on first use.
 
-    A kind whose ``D`` is ``beta`` times another's (the data's secant modulus against ``E``, one
-    material) reuses its factors: ``K = beta K_1`` and ``kappa = beta kappa_1``, so both inverses
+    Where the model's classical condensation may apply
+    (:meth:`~ddcm_casadi.models.base.ContactModel.delassus_rows`), the factor of ``K`` is the
+    condensation's (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`, kept by the model
+    for it), and the spring's solves follow from it by Woodbury: ``(K + G^T S G)^-1 = K^-1 -
+    K^-1 G^T (S^-1 + D)^-1 G K^-1``, ``S = kappa diag(a)``, ``D = G K^-1 G^T`` (one factorisation
+    of ``K`` for the scales and the condensation: 15-25 s at 1e6 unknowns). Not where ``K`` is
+    singular (:attr:`singular`: the spring then holds a body that ``K`` alone does not).
+
+    A kind whose law is ``beta`` times another's (one-component points: the data's secant modulus
+    against ``E``, one material) reuses its factors: ``K = beta K_1`` and ``kappa = beta kappa_1``, so both inverses
     are ``1 / beta`` of the first kind's (one factorisation instead of two: 23 s at 1e6 unknowns).
     """
 
-    def __init__(self, model: ContactModel, D: np.ndarray, base: "_Stiffness | None" = None,
-                 beta: float = 1.0) -> None:
-        self.model, self.D, self.beta = model, D, beta
-        self.base = base
+    def __init__(self, model: ContactModel, law: sp.csr_matrix, base: "_Stiffness | None" = None,
+                 beta: float = 1.0, *, classical: bool = False) -> None:
+        self.model, self.beta, self.base = model, beta, base
+        #: ``W D`` (:meth:`~ddcm_casadi.models.base.ContactModel.representative_law`), kept by the
+        #: first kind only (a later kind's is ``beta`` times it).
+        self.law = law if base is None else None
+        #: Whether ``K`` is the model's classical stiffness (handed over to its classical problem).
+        self.classical = classical
+        #: Set where the load's solve shows ``K`` singular (a body held only by its contacts).
+        self.singular = False
         if base is None:
-            k = model.strain_components
-            B, w = model.strain_operator, model.volumes
-            self.K = (B.T @ sp.diags(np.repeat(w * D, k)) @ B).tocsc()
+            self.K = (model.strain_operator.T @ law @ model.strain_operator).tocsc()
             k_max = float(np.max(self.K.diagonal())) if self.K.shape[0] else 1.0
             self.kappa = 1e3 * k_max / float(np.max(model.contact_area)) if model.n_contacts else 0.0
         else:
             self.K, self.kappa = None, beta * base.kappa
-        self._lu = self._spring_lu = None
+        self._lu = self._spring_lu = self._shared = None
+
+    def law_times(self, strain: np.ndarray) -> np.ndarray:
+        """``W D strain``."""
+        return self.beta * self.base.law_times(strain) if self.base is not None else self.law @ strain
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """``K^-1 rhs`` (:class:`~ddcm_casadi.linalg.SingularMatrix` if ``K`` is singular)."""
         if self.base is not None:
             return self.base.solve(rhs) / self.beta
-        if self._lu is None:  # the selected solver of definite systems (direct, or AMG)
-            self._lu = factorize_definite(self.K, near_null=self.model.near_null_space())
-        return self._lu.solve(rhs)
+        return self._factor().solve(rhs)
+
+    def _factor(self):
+        """The factor of ``K``, made on first use: the selected solver of definite systems
+        (direct, or AMG), with the Delassus matrix where the model's classical condensation may
+        apply (kept by the model for it)."""
+        if self._lu is None:
+            model = self.model
+            # the condensation's factor where it may apply, and no kind made it already
+            rows = model.delassus_rows() if model.stiffness_factor() is None else None
+            if rows is None:
+                self._lu = factorize_definite(self.K, near_null=model.near_null_space())
+            else:
+                self._lu = self._shared = StiffnessFactor(self.K, rows, model.near_null_space(),
+                                                          classical=self.classical)
+                model._cache[STIFFNESS_FACTOR] = self._shared
+        return self._lu
 
     def spring(self):
         """The factor of ``K`` with a stiff spring on every pair (bodies resting on obstacles only)."""
         if self.base is not None:
-            return _Scaled(self.base.spring(), self.beta)
+            self.base.singular |= self.singular
+            return Scaled(self.base.spring(), self.beta)
         if self._spring_lu is None:
             model = self.model
-            GA = model.gap_operator.T @ sp.diags(model.contact_area) if model.n_contacts else None
-            self._spring_lu = factorize_definite(self.K + self.kappa * (GA @ model.gap_operator) if model.n_contacts
-                                                 else self.K, near_null=model.near_null_space())
+            if not self.singular and self._lu is None and model.delassus_rows() is not None \
+                    and model.stiffness_factor() is None:
+                try:  # K's factor first (the condensation's), the spring's from it
+                    self._factor()
+                except SingularMatrix:  # a body held only by its contacts
+                    self.singular = True
+            if self._shared is not None and not self.singular:
+                self._spring_lu = self._shared.with_springs(self.kappa * model.contact_area)
+            if self._spring_lu is None:
+                GA = model.gap_operator.T @ sp.diags(model.contact_area) if model.n_contacts else None
+                self._spring_lu = factorize_definite(self.K + self.kappa * (GA @ model.gap_operator)
+                                                     if model.n_contacts else self.K,
+                                                     near_null=model.near_null_space())
         return self._spring_lu
 
 
-class _Scaled:
-    """A factor of ``beta A`` from one of ``A``."""
-
-    def __init__(self, lu, beta: float) -> None:
-        self.lu, self.beta = lu, beta
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        return self.lu.solve(rhs) / self.beta
-
-
-def _stiffness(model: ContactModel, D: np.ndarray) -> _Stiffness:
-    """The :class:`_Stiffness` of ``D``, sharing the model's first one where ``D`` is a multiple
-    of its point stiffness (cached in the model)."""
-    D = np.asarray(D, float)
+def _stiffness(model: ContactModel, kind: str) -> _Stiffness:
+    """The :class:`_Stiffness` of ``kind``, sharing the model's first one where its law
+    (:meth:`~ddcm_casadi.models.base.ContactModel.representative_law`) is a multiple of that
+    one's: the same pattern, the entries' ratio equal to ``4 eps`` (cached in the model)."""
+    law = model.representative_law(kind)
     first = model._cache.get("scale_stiffness")
-    if first is not None:
-        D1 = np.broadcast_to(first.D, D.shape) if np.ndim(first.D) == 0 else first.D
-        if D1.shape == D.shape and D.size and np.all(D1 > 0):
-            beta = float(D.flat[0] / D1.flat[0])
-            if np.array_equal(D, D1) or (beta > 0 and np.allclose(D, beta * D1, rtol=4 * np.finfo(float).eps, atol=0)):
-                return first if np.array_equal(D, D1) else _Stiffness(model, D, first, beta)
-    out = _Stiffness(model, D)
+    if first is not None and law.shape == first.law.shape and law.nnz and law.nnz == first.law.nnz \
+            and np.array_equal(law.indptr, first.law.indptr) and np.array_equal(law.indices, first.law.indices) \
+            and np.all(first.law.data > 0):
+        ratio = law.data / first.law.data
+        beta = float(ratio[0])
+        if np.array_equal(law.data, first.law.data):
+            return first
+        if beta > 0 and np.allclose(ratio, beta, rtol=4 * np.finfo(float).eps, atol=0):
+            return _Stiffness(model, law, first, beta)
+    out = _Stiffness(model, law, classical=kind == "classical")
     if first is None:
         model._cache["scale_stiffness"] = out
     return out
 
 
-def _prescribed_response(model: ContactModel, stiffness: "_Stiffness", D: np.ndarray, spring
-                         ) -> tuple[float, float]:
+def _prescribed_response(model: ContactModel, stiffness: "_Stiffness", spring) -> tuple[float, float]:
     """``(displacement, strain)`` magnitudes of the step with the largest prescribed displacement:
-    ``K u = -B^T W D B_D u_D`` (no load, no obstacle), the displacement ``max(|u|, |u_D|)`` and
-    the strain ``max |B u + B_D u_D|``."""
+    ``K u = -B^T W D B_D u_D`` (``W D`` the model's
+    :meth:`~ddcm_casadi.models.base.ContactModel.representative_law`; no load, no obstacle), the
+    displacement ``max(|u|, |u_D|)`` and the strain ``max |B u + B_D u_D|``."""
     pr = model.prescribed
     if not pr.size or not np.any(pr.values):
         return 0.0, 0.0
@@ -206,7 +252,7 @@ def _prescribed_response(model: ContactModel, stiffness: "_Stiffness", D: np.nda
     offset = pr.strain_operator @ u_D
     u = np.zeros(model.n_dofs)
     if model.n_dofs:
-        rhs = -(model.strain_operator.T @ (np.repeat(model.volumes * D, model.strain_components) * offset))
+        rhs = -(model.strain_operator.T @ (stiffness.law_times(offset)))
         try:
             u = stiffness.solve(rhs)
         except SingularMatrix:

@@ -397,8 +397,10 @@ def build_problems(model: ContactModel) -> ProblemPair:
         build = partial(_build_small, model)
     has = {"classical": model.youngs_modulus is not None, "projection": model.dataset is not None}
     # The reference scales now, in this order, whichever problem is built first: the projection's
-    # share the classical factor (a multiple of its stiffness, ``reference_scales``), which is
-    # freed once both are known, before any problem's matrices take memory.
+    # share the classical factor where their laws are proportional (``reference_scales``), which is
+    # freed once both are known, before any problem's matrices take memory; where the classical
+    # condensation may apply, the classical factor is the condensation's, kept by the model
+    # (``ContactModel.stiffness_factor``).
     for variant, kind in (("classical", "classical"), ("projection", "ddcm")):
         if has[variant]:
             model.scales_for(kind)

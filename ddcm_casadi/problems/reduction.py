@@ -42,10 +42,11 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ddcm_casadi.linalg import (
-    SCHUR_MIN_SIZE, SingularMatrix, definite_solver_name, delassus_solver, factorize_definite,
-    factorize_with_delassus, numerically_symmetric, solved_columns,
+    SingularMatrix, definite_solver_name, factorize_definite, factorize_with_delassus, numerically_symmetric,
+    solved_columns,
 )
 from ddcm_casadi.heap import release_heap
+from ddcm_casadi.models.stiffness import MAX_CLASSICAL_PAIRS, StiffnessFactor, condensation_size_refusal
 from ddcm_casadi.problems.contract import ComplementarityProblem
 from ddcm_casadi.problems.maps import Affine, Distance
 from ddcm_casadi.problems.parameters import Parameters
@@ -53,11 +54,6 @@ from ddcm_casadi.problems.parameters import Parameters
 #: Contact pairs up to which the condensed problem is assembled (``nc`` back-solves, an ``n x nc``
 #: dense block kept); above, the projection keeps the full saddle-point path.
 MAX_PAIRS = 500
-#: Contact pairs up to which the classical problem is condensed (:class:`ClassicalReduction`: it
-#: keeps nothing ``n x nc``; its cost is the condensed problem's dense ``nc x nc`` block). Measured
-#: (FB on a dense condensed problem, most pairs closed): 705 pairs built in 0.28 s and solved in
-#: 0.19 s, 1000 in 0.61 s and 0.55 s; the dense block grows like ``nc^2``, its solves like ``nc^3``.
-MAX_CLASSICAL_PAIRS = 1000
 #: Relative size (Frobenius) of ``K_s - alpha K_u`` up to which the two share one factor.
 PROPORTIONAL = 1e-12
 #: The formulations' Newton tolerance (relative increment and scaled residual, their default).
@@ -248,6 +244,12 @@ class Reduction:
         The near-null space of ``K_u`` (a body's rigid-body modes in the free dofs), for an
         algebraic multigrid solver (:func:`~ddcm_casadi.linalg.use_definite_solver`); a direct
         solver ignores it.
+    known : StiffnessFactor, optional
+        The model's kept factor of its reference scales' stiffness
+        (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness_factor`): ``K_u``'s where
+        ``K_u`` is a multiple of that stiffness
+        (:meth:`~ddcm_casadi.models.stiffness.StiffnessFactor.scaled`), else let go before ``K_u``
+        is factorised.
 
     Attributes
     ----------
@@ -264,7 +266,10 @@ class Reduction:
     back_solves : int
         Solves with the kept factor made for the Delassus matrices (``nc`` or ``2 nc``).
     factor_seconds, back_solve_seconds : float
-        Wall time of the factorisation (or AMG set-up) and of the back-solves.
+        Wall time of the factorisation (or AMG set-up; the reference scales' where shared, with
+        the check that recognises ``K_u``) and of the back-solves.
+    shared : bool
+        Whether the factor of ``K_u`` is the reference scales' (``K_u`` a multiple of their stiffness).
     K_u : scipy.sparse.csc_matrix
         ``A_u^T W_e A_u`` (a multiple of ``K_C``; assembled on use, not held).
     Z_u : ndarray
@@ -275,7 +280,8 @@ class Reduction:
         The larger of their condition numbers (at most :data:`MAX_CONDITION`; 1 without pairs).
     """
 
-    def __init__(self, problem: ComplementarityProblem, near_null: np.ndarray | None = None) -> None:
+    def __init__(self, problem: ComplementarityProblem, near_null: np.ndarray | None = None,
+                 known: StiffnessFactor | None = None) -> None:
         why = refusal(problem, max_pairs=np.iinfo(np.int64).max)
         if why:
             raise NotReducible(why)
@@ -291,11 +297,18 @@ class Reduction:
         self.alpha = scale if _frobenius(K_s - scale * K_u) <= PROPORTIONAL * _frobenius(K_s) else None
         if self.alpha is not None:
             del K_s  # a copy of K_u's size, not needed with one factor
+        start = time.perf_counter()
+        scaled = None if known is None else known.scaled(K_u, self.G)
+        if scaled is None and known is not None:
+            known.release()  # the model's factor: not K_u's, let go before K_u's own
+        elif scaled is not None:
+            known.hand_over()  # the classical stiffness it kept: not this problem's to hold
+            start -= known.seconds  # its factorisation's time counted as this one's
+        self.shared = scaled is not None
         release_heap()  # the temporaries of the operators and of the check, before the factor's pages
         self._factor_s = None
-        start = time.perf_counter()
         try:
-            self.factor = factorize_definite(K_u, near_null=near_null)
+            self.factor = scaled[0] if scaled is not None else factorize_definite(K_u, near_null=near_null)
         except SingularMatrix:
             raise NotReducible("K_C is singular (a body held only by its contacts)") from None
         del K_u  # the factor holds what it needs (K_u on demand: :attr:`K_u`)
@@ -441,13 +454,10 @@ def classical_refusal(problem: ComplementarityProblem, *, max_pairs: int | None 
     """Why the Delassus condensation (:class:`ClassicalReduction`) does not apply to the classical
     ``problem`` (one line), or ``""``: it needs an affine problem ``K u + R_p p + f = 0`` in the
     displacements ``u`` alone with a symmetric ``K``, gaps in ``u`` alone, contact forces
-    ``-R_p p = G^T diag(r) p`` (Signorini pairs, no friction), 1 to ``max_pairs`` pairs
-    (default :data:`MAX_CLASSICAL_PAIRS`), and, above
-    :data:`~ddcm_casadi.linalg.SCHUR_MIN_SIZE` unknowns, PARDISO's Schur complement for ``D_u``
-    (:func:`~ddcm_casadi.linalg.delassus_solver`): its ``nc`` back-solves with SuperLU cost more
-    than the full path (measured on the Hertz body of 95 266 dofs, 219 pairs: 15.4 s for the
-    factor and back-solves, where the full path took 6.6 s; PARDISO's Schur complement 0.9 s)."""
-    max_pairs = MAX_CLASSICAL_PAIRS if max_pairs is None else max_pairs
+    ``-R_p p = G^T diag(r) p`` (Signorini pairs, no friction), and sizes it is made for
+    (:func:`~ddcm_casadi.models.stiffness.condensation_size_refusal`: 1 to ``max_pairs`` pairs,
+    default :data:`MAX_CLASSICAL_PAIRS`, and PARDISO's Schur complement above
+    :data:`~ddcm_casadi.linalg.SCHUR_MIN_SIZE` unknowns)."""
     if problem.kind != "mcp":
         return "not a classical problem"
     if not problem.affine:
@@ -456,14 +466,17 @@ def classical_refusal(problem: ComplementarityProblem, *, max_pairs: int | None 
         return "Coulomb friction (the condensed problem carries Signorini pairs only, for now)"
     if [name for name, _ in problem.unknowns] != ["u"]:
         return "the classical problem's unknowns are not the displacements alone"
-    if not problem.n_pairs:
-        return "no contact pairs (nothing to condense)"
-    if problem.n_pairs > max_pairs:
-        return f"{problem.n_pairs} contact pairs (the condensed problem is assembled up to {max_pairs})"
     n = problem.n_x
-    if n > SCHUR_MIN_SIZE and delassus_solver(n) != "pardiso":
-        return (f"{n} unknowns without PARDISO's Schur complement ({problem.n_pairs} back-solves would cost "
-                "more than the full path's factorisation)")
+    why = condensation_size_refusal(n, problem.n_pairs, max_pairs)
+    if why:
+        return why
+    # once per problem (asked by build_classical, then by ClassicalReduction: 0.45 s at 3e5 unknowns)
+    return problem.shared("classical_structure", lambda: _classical_structure(problem, n))
+
+
+def _classical_structure(problem: ComplementarityProblem, n: int) -> str:
+    """The structural part of :func:`classical_refusal`: gaps in ``u`` alone, a symmetric ``K``,
+    contact forces the gap rows' transposes scaled pair by pair."""
     F, g = problem.residual_map.z, problem.gap_map.z
     if _rows(g, slice(n, None)).any():
         return "the gaps involve more than the displacements"
@@ -497,6 +510,13 @@ class ClassicalReduction:
         with a singular ``K`` or an ill-conditioned ``D_u``, :class:`NotReducible`).
     near_null : ndarray, optional
         The near-null space of ``K``, for an algebraic multigrid solver.
+    known : StiffnessFactor, optional
+        The model's factor of its reference scales' stiffness with its Delassus matrix
+        (:meth:`~ddcm_casadi.models.base.ContactModel.stiffness_factor`): where ``K`` is a
+        multiple ``c`` of that stiffness (the nondimensional problem's, ``c = s_d / s_f``) and the
+        gap rows are its rows, ``K^-1`` and ``D_u`` are its own over ``c``
+        (:meth:`~ddcm_casadi.models.stiffness.StiffnessFactor.scaled`): no factorisation here;
+        else it is let go (:meth:`~ddcm_casadi.models.stiffness.StiffnessFactor.release`) first.
 
     Attributes
     ----------
@@ -509,11 +529,15 @@ class ClassicalReduction:
     ratio : ndarray
         ``r``: the contact forces ``-R_p p = G^T diag(r) p``.
     factorizations, solver, factor_seconds, description
-        One factorisation (of ``K``), the definite solver's name, its wall time (with ``D_u``),
-        and the one-line description of the path.
+        One factorisation (of ``K``), the definite solver's name, its wall time (with ``D_u``; the
+        reference scales' where shared), and the one-line description of the path.
+    shared : bool
+        Whether the factor of ``K`` is the reference scales'
+        (:class:`~ddcm_casadi.models.stiffness.StiffnessFactor`).
     """
 
-    def __init__(self, problem: ComplementarityProblem, near_null: np.ndarray | None = None) -> None:
+    def __init__(self, problem: ComplementarityProblem, near_null: np.ndarray | None = None,
+                 known: StiffnessFactor | None = None) -> None:
         why = classical_refusal(problem, max_pairs=np.iinfo(np.int64).max)
         if why:
             raise NotReducible(why)
@@ -521,7 +545,7 @@ class ClassicalReduction:
         self.n = n = problem.n_x
         self.nc = problem.n_pairs
         F, gap = problem.residual_map, problem.gap_map
-        K = F.z[:, :n].tocsc()  # not kept: a copy of the problem's (0.27 GB at 1e6 dofs)
+        K = F.z[:, :n]  # not kept: a copy of the problem's (0.27 GB at 1e6 dofs), in its format
         self._R_p = F.z[:, n:].tocsr()
         self._f = F.params.tocsr()  # F = K u + R_p p + f_P P
         self.G = gap.z[:, :n].tocsr()
@@ -529,14 +553,23 @@ class ClassicalReduction:
         self.ratio = column_ratio(self.G, -self._R_p)
         self.factorizations, self.solver = 1, definite_solver_name()
         start = time.perf_counter()
-        try:
-            self.factor, self.D_u = factorize_with_delassus(K, self.G, near_null=near_null)
-        except SingularMatrix:
-            raise NotReducible("the stiffness is singular (a body held only by its contacts)") from None
+        scaled = None if known is None else known.scaled(K, self.G)
+        self.shared = scaled is not None
+        if self.shared:  # its factorisation's time counted as this one's
+            (self.factor, self.D_u), start = scaled, start - known.seconds
+        else:
+            if known is not None:
+                known.release()  # let go before a factorisation of its own
+            release_heap()
+            try:
+                self.factor, self.D_u = factorize_with_delassus(K, self.G, near_null=near_null)
+            except SingularMatrix:
+                raise NotReducible("the stiffness is singular (a body held only by its contacts)") from None
         self.factor_seconds = time.perf_counter() - start
         self.condition = delassus_condition(self.D_u)
+        whose = ", K's factor the reference scales'" if self.shared else ""
         self.description = (f"condensed (Delassus: 1 factorisation of K, {self.nc} contact pairs, "
-                            f"D_u condition {self.condition:.1e})")
+                            f"D_u condition {self.condition:.1e}{whose})")
 
     @cached_property
     def condensed(self) -> ComplementarityProblem:
