@@ -250,7 +250,10 @@ def test_a_float32_data_file_reaches_the_strip_search_through_a_case_file(tmp_pa
     data set keeps the file's float32 values (no float64 copy), the strip search is built from
     blocks of its coordinates without the array of them or the KD-tree, and the DDCM path (data
     assignment, displacements, pressures, distances, iterations) is the exact KD-tree's over the
-    same file (the strip search's answers are exact: every one certified or widened)."""
+    same file (the strip search's answers are exact: every one certified or widened). The strip
+    search's keys are the file's own float32 values (``c = 300e9``: the search is in their
+    scaled frame, the data set's centre and rotation applied to the queries only), so its
+    re-ranking and certificates never gather the data set's coordinates."""
     noisy = noisy_dataset(0.05, 1, n_data=3000)
     np.save(tmp_path / "noisy.npy", np.column_stack([noisy.strain, noisy.stress]).astype(np.float32))
     case = (CASES / "bar_stops.toml").read_text()
@@ -261,11 +264,16 @@ def test_a_float32_data_file_reaches_the_strip_search_through_a_case_file(tmp_pa
         loaded = load_case(tmp_path / f"{search}.toml")
         data = loaded.model.dataset
         assert data.strain.dtype == np.float32 and not data.strain.flags.owndata and not data._searches
+        if search == "strips":
+            def gathered(index):
+                raise AssertionError("the strip search gathered the data set's coordinates")
+            data._rows._of = gathered
         problems = build_problems(loaded.model)
         solver = DDCMSolver(problems, formulations.get("fischer_burmeister").build(problems.projection),
                             options=loaded.ddcm_options)
         paths[search] = solver.solve()
         assert set(data._searches) == {search} and (search == "kdtree") == (data._rows._array is not None)
+        assert search == "kdtree" or data.search(search).exact_keys
     for field in ("data_index", "outer_iterations", "u", "p", "distance"):
         np.testing.assert_array_equal(paths["strips"].array(field), paths["kdtree"].array(field), err_msg=field)
 
@@ -279,3 +287,28 @@ def test_data_set_coordinates_read_in_blocks_equal_those_gathered():
     pick = RNG.integers(0, len(data), (70, 3))
     assert np.array_equal(rows[pick], rows.read(0, len(data))[pick])
     assert np.array_equal(rows.read(17, 4000), rows.array()[17:4000])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_data_set_s_strip_keys_are_its_float32_values(dtype):
+    """Over a float32 data set the strip search's keys are the stored strain and stress values
+    (the coordinates their scaled values, the data set's centre and rotation applied to the
+    queries only); over float64 data they are the coordinates rounded to float32 and re-ranked.
+    Either way the answers are the KD-tree's nearest distances (ties apart)."""
+    noisy = noisy_dataset(0.05, 3, n_data=4000)
+    data = MaterialDataset(noisy.strain.astype(dtype), noisy.stress.astype(dtype), noisy.c)
+    search = data.search("strips")
+    assert search.exact_keys == (dtype == np.float32)
+    if dtype == np.float32:
+        stored = np.column_stack([data.strain, data.stress])[search.perm]
+        a, b = search.axes
+        assert np.array_equal(search.keys[0], stored[:, a]) and np.array_equal(search.keys[1], stored[:, b])
+    e = RNG.uniform(-0.06, 0.02, 600)
+    s = 200e9 * e + RNG.normal(0, 0.3 * np.std(noisy.stress), 600)
+    found, exact = data.nearest(e, s, search="strips"), data.nearest(e, s)
+    # the metric distance of two data of the same squared distance: each computed in float64
+    # over 2 coordinates (the frames differ, so the roundoff of both, relative to the squares)
+    np.testing.assert_allclose(data.distance2(e, s, found), data.distance2(e, s, exact), rtol=4 * _tolerance(2),
+                               atol=0)
+    Q = data.coordinates(e, s)
+    np.testing.assert_array_equal(search.brute_force(Q).distance, search.certified(Q).distance)

@@ -19,7 +19,8 @@ from ddcm_casadi.data.files import is_npy, read_csv, read_npy
 from ddcm_casadi.data import limits
 from ddcm_casadi.data.limits import check_balance, searchable_coordinates
 from ddcm_casadi.data.metric import Metric
-from ddcm_casadi.data.search import KDTreeSearch, NeighbourSearch, Rows, kd_tree, search_class, search_name
+from ddcm_casadi.data.search import (KDTreeSearch, NeighbourSearch, Rows, Stored, kd_tree, search_class,
+                                     search_name)
 from ddcm_casadi.data import ann  # noqa: F401  (registers the certified searches)
 
 
@@ -189,7 +190,13 @@ class MaterialDataset:
         mean, axes, lo, hi = _principal_frame(metric, strain, stress)
         object.__setattr__(self, "_frame", (mean, axes))
         object.__setattr__(self, "box", (lo, hi))
-        object.__setattr__(self, "_rows", Rows(strain.shape[0], 2 * k, self._rows_of))
+        # With a diagonal metric the coordinates are the stored values scaled, shifted and
+        # rotated (Stored): a search may keep the stored values as its keys (the strip search
+        # over a float32 file: exact keys, no gathers from the file)
+        scales = metric.scales
+        stored = None if scales is None else Stored(self._stored_rows, np.result_type(strain.dtype, stress.dtype),
+                                                    scales, mean, axes)
+        object.__setattr__(self, "_rows", Rows(strain.shape[0], 2 * k, self._rows_of, stored=stored))
 
     def _rows_of(self, index) -> np.ndarray:
         """The search coordinates of the data ``index`` (a slice or an index array, :class:`Rows`).
@@ -201,6 +208,13 @@ class MaterialDataset:
             _release(self.strain, self.stress, least=0 if isinstance(index, slice) else RELEASE_BYTES)
             return X
         return np.concatenate([self._rows_of(index[a:a + RELEASE_ROWS]) for a in range(0, index.size, RELEASE_ROWS)])
+
+    def _stored_rows(self, a: int, b: int) -> np.ndarray:
+        """The values ``[strain, stress]`` of the data ``a:b`` as stored (:class:`Stored`), the
+        pages read left to the page cache."""
+        v = np.column_stack([self.strain[a:b], self.stress[a:b]])
+        _release(self.strain, self.stress)
+        return v
 
     @property
     def k(self) -> int:
