@@ -164,17 +164,19 @@ def test_ddcm_fixed_points_equal_the_kd_tree_s(search):
     assert search in model.dataset._searches  # the backend was used
 
 
-@pytest.mark.parametrize("pack", [32, 0], ids=["packed", "argsort"])
-def test_strip_build_in_blocks_and_groups_sorts_every_strip(monkeypatch, tmp_path, pack):
+@pytest.mark.parametrize("group", [64, 1 << 16])
+def test_strip_build_in_blocks_and_groups_sorts_every_strip(monkeypatch, tmp_path, group):
     """The build's passes over blocks of rows, its deal to groups of strips and each group's
-    sort (packed keys, or the argsort fallback) give strips sorted by key ``b``, each datum in
+    radix sort (groups of one strip or of many) give strips sorted by key ``b``, each datum in
     the strip of its key ``a``, ``perm`` a permutation with ``keys = X[perm]``; the search over
     a float32 ``.npy`` file read in blocks answers as over the array, exactly."""
     monkeypatch.setattr(StripSearch, "READ", 333)
-    monkeypatch.setattr(StripSearch, "GROUP", 64)
-    monkeypatch.setattr(StripSearch, "PACK", pack)
+    monkeypatch.setattr(StripSearch, "GROUP", group)
     X, Q = _clouds()["band"]
     X = X.astype(np.float32)
+    X[::7, 1] *= -1.0  # negative keys b and signed zeros (the sort's order-preserving bits)
+    X[::11, 1] = 0.0
+    X[::13, 1] = -0.0
     path = tmp_path / "band.npy"
     np.save(path, X)
     for search in (StripSearch.build(X), StripSearch.from_npy(path)):
@@ -185,6 +187,8 @@ def test_strip_build_in_blocks_and_groups_sorts_every_strip(monkeypatch, tmp_pat
         strip = np.repeat(np.arange(search.lo_t.size), np.diff(search.offsets))
         assert np.array_equal(np.clip(t, 0, search.lo_t.size - 1), strip)
         assert np.all((np.diff(search.keys[1]) >= 0) | (np.diff(strip) > 0))
+        ties = (np.diff(search.keys[1].view(np.int32)) == 0) & (np.diff(strip) == 0)
+        assert np.all(np.diff(search.perm)[ties] > 0)  # equal keys in the order of the data
         truth = _brute(X, Q)
         exact = search.nearest(Q)
         np.testing.assert_allclose(np.sqrt(np.einsum("ij,ij->i", X[exact] - Q, X[exact] - Q)), truth,
