@@ -353,11 +353,16 @@ class StripSearch(CertifiedSearch):
             block = read(c, min(n, c + cls.READ))
             ka, kb = block[:, a].astype(np.float32), block[:, b].astype(np.float32)
             g = group[strip(ka)]
-            rank = np.empty(g.size, dtype=np.int64)  # each datum's place in the block sorted by group
-            rank[np.argsort(g, kind="stable")] = np.arange(g.size)  # a radix sort up to 2^16 groups
+            order = np.argsort(g, kind="stable")  # the block by group (a radix sort up to 2^16 groups)
+            g = g[order]
             per = np.bincount(g, minlength=first.size)
-            rank += (fill - (np.cumsum(per) - per))[g]  # its place in the group's range
-            keys[0, rank], keys[1, rank], perm[rank] = ka, kb, np.arange(c, c + g.size)
+            # the sorted block's place in its groups' ranges, written group by group in ascending
+            # order (the deal at 1e8: 46-53 against 53-57 ns a datum written in the block's order)
+            place = (fill - (np.cumsum(per) - per))[g]
+            place += np.arange(g.size)
+            keys[0, place], keys[1, place] = ka[order], kb[order]
+            order += c
+            perm[place] = order
             fill += per
         for s0, s1 in zip(starts[:-1], starts[1:]):  # each group sorted by (strip, key b)
             if s1 - s0 > 1:

@@ -133,8 +133,9 @@ class MaterialDataset:
     used hold, each built on first use (:meth:`search`): the KD-tree (``kdtree``, and the exact
     search of the others but ``strips``) one float64 array of the search's coordinates (``16 k``
     bytes) and the tree (about 15 bytes); the warm search's graph 36 bytes more. The strip search
-    (``strips``, one component) is built from blocks of the coordinates (12 bytes a point, neither
-    the array nor the tree): a float32 file of 1e9 points is searched in 12 GB. The KD-tree's
+    (``strips``, one component) is built from blocks of the stored values (12 bytes a point, neither
+    the array nor the tree; over float32 values its keys are those values, so it never reads the
+    data again): a float32 file of 1e9 points is searched in 12 GB. The KD-tree's
     coordinates stay float64:
     near the ends of a principal axis a float32 step is ``2^-24`` of the data's extent along it,
     as wide as the spacing of ``2^24 = 1.7e7`` points equally spaced along it (at 1e8 points some
