@@ -4,6 +4,7 @@ their selection and errors, and DDCM fixed points equal to the exact KD-tree's."
 from __future__ import annotations
 
 import builtins
+import dataclasses
 
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from ddcm_casadi import formulations
 from ddcm_casadi.casefiles.config import load_case
 from ddcm_casadi.data.ann import U64, IVFSearch, StripSearch
 from ddcm_casadi.data.dataset import MaterialDataset
-from ddcm_casadi.data.search import SEARCHES, KDTreeSearch, search_class
+from ddcm_casadi.data.search import SEARCHES, KDTreeSearch, Rows, search_class
 from ddcm_casadi.drivers.ddcm import DDCMSolver
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.errors import InputError
@@ -307,6 +308,12 @@ def test_a_data_set_s_strip_keys_are_its_float32_values(dtype):
         stored = np.column_stack([data.strain, data.stress])[search.perm]
         a, b = search.axes
         assert np.array_equal(search.keys[0], stored[:, a]) and np.array_equal(search.keys[1], stored[:, b])
+        # the data set's pass gave the extremes: the same structure as with the build's own pass
+        rows = data._rows
+        unknown = Rows(*rows.shape, rows._of, stored=dataclasses.replace(rows.stored, extremes=None))
+        again = StripSearch.from_rows(unknown, None)
+        assert (again.low, again.width, again.b_range) == (search.low, search.width, search.b_range)
+        assert np.array_equal(again.perm, search.perm)
     e = RNG.uniform(-0.06, 0.02, 600)
     s = 200e9 * e + RNG.normal(0, 0.3 * np.std(noisy.stress), 600)
     found, exact = data.nearest(e, s, search="strips"), data.nearest(e, s)

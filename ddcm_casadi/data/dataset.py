@@ -80,8 +80,9 @@ FRAME_BLOCK = 1 << 18
 
 def _principal_frame(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> tuple[np.ndarray, ...]:
     r"""The centre ``m`` and principal axes ``V`` of the data's scaled coordinates ``x_j``
-    (:func:`~ddcm_casadi.data.limits.searchable_coordinates`, checked block by block) and their
-    least and largest values ``lo``, ``hi`` (the data's box), from one pass over blocks of rows:
+    (:func:`~ddcm_casadi.data.limits.searchable_coordinates`, checked block by block), their
+    least and largest values ``lo``, ``hi`` (the data's box) and those of the stored values
+    ``[strain, stress]``, column by column (:class:`Stored`), from one pass over blocks of rows:
     with a shift ``x_0`` (the first block's mean, against cancellation), ``S = sum (x_j - x_0)``,
     ``G = sum (x_j - x_0)(x_j - x_0)^T``, ``m = x_0 + S / N`` and ``V`` the eigenvectors of
     ``G - S S^T / N = sum (x_j - m)(x_j - m)^T`` (the largest last).
@@ -94,9 +95,14 @@ def _principal_frame(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> 
     n = strain.shape[0]
     d = 2 * metric.k
     lo, hi = np.full(d, np.inf), np.full(d, -np.inf)
+    v_lo, v_hi = lo.copy(), hi.copy()
     shift, total, gram = None, np.zeros(d), np.zeros((d, d))
     for a in range(0, n, FRAME_BLOCK):
-        X, low, high = searchable_coordinates(metric, strain[a:a + FRAME_BLOCK], stress[a:a + FRAME_BLOCK], first=a)
+        e, s = strain[a:a + FRAME_BLOCK], stress[a:a + FRAME_BLOCK]
+        X, low, high = searchable_coordinates(metric, e, s, first=a)
+        columns = [c for v in (e, s) for c in v.reshape(v.shape[0], -1).T]  # while the pages are in
+        v_lo = np.minimum(v_lo, [c.min() for c in columns])
+        v_hi = np.maximum(v_hi, [c.max() for c in columns])
         _release(strain, stress)
         lo, hi = np.minimum(lo, low), np.maximum(hi, high)
         if shift is None:
@@ -106,7 +112,7 @@ def _principal_frame(metric: Metric, strain: np.ndarray, stress: np.ndarray) -> 
         gram += X.T @ X
     check_balance(metric, lo, hi)
     _, axes = np.linalg.eigh(gram - np.outer(total, total) / n)
-    return shift + total / n, axes, lo, hi
+    return shift + total / n, axes, lo, hi, (v_lo, v_hi)
 
 
 @dataclass(frozen=True, eq=False)
@@ -188,7 +194,7 @@ class MaterialDataset:
         # The frame comes from one pass over blocks (checked, summed); the coordinates are then
         # made on demand (Rows): in one array only for a backend that needs it (the KD-tree),
         # never for one built from blocks (the strip search over a 1e9-point float32 file).
-        mean, axes, lo, hi = _principal_frame(metric, strain, stress)
+        mean, axes, lo, hi, extremes = _principal_frame(metric, strain, stress)
         object.__setattr__(self, "_frame", (mean, axes))
         object.__setattr__(self, "box", (lo, hi))
         # With a diagonal metric the coordinates are the stored values scaled, shifted and
@@ -196,7 +202,7 @@ class MaterialDataset:
         # over a float32 file: exact keys, no gathers from the file)
         scales = metric.scales
         stored = None if scales is None else Stored(self._stored_rows, np.result_type(strain.dtype, stress.dtype),
-                                                    scales, mean, axes)
+                                                    scales, mean, axes, extremes)
         object.__setattr__(self, "_rows", Rows(strain.shape[0], 2 * k, self._rows_of, stored=stored))
 
     def _rows_of(self, index) -> np.ndarray:

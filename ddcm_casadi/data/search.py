@@ -60,6 +60,9 @@ class Stored:
         The stored values' type (float32 values are exact in float64).
     scale, mean : (d,) float64
     axes : (d, d) float64
+    extremes : ((d,), (d,)) float64, optional
+        The least and largest stored values of each column, where known (a pass over the
+        values saved).
     """
 
     read: Callable[[int, int], np.ndarray]
@@ -67,6 +70,7 @@ class Stored:
     scale: np.ndarray
     mean: np.ndarray
     axes: np.ndarray
+    extremes: tuple[np.ndarray, np.ndarray] | None = None
 
     def unrotated(self, x: np.ndarray) -> np.ndarray:
         """``x @ axes^T + mean``: coordinates ``x`` back in the scaled stored frame ``y``."""
