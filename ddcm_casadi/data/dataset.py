@@ -19,8 +19,8 @@ from ddcm_casadi.data.files import is_npy, read_csv, read_npy
 from ddcm_casadi.data import limits
 from ddcm_casadi.data.limits import check_balance, searchable_coordinates
 from ddcm_casadi.data.metric import Metric
-from ddcm_casadi.data.search import (KDTreeSearch, NeighbourSearch, Rows, Stored, kd_tree, search_class,
-                                     search_name)
+from ddcm_casadi.data.search import (KDTreeSearch, NeighbourSearch, Rows, Stored, kd_tree, rotated,
+                                     search_class, search_name)
 from ddcm_casadi.data import ann  # noqa: F401  (registers the certified searches)
 
 
@@ -240,14 +240,7 @@ class MaterialDataset:
         mean, axes = self._frame
         X = self.metric.coordinates(strain, stress)
         X -= mean
-        if X.shape[1] > 2:
-            return np.einsum("ij,jk->ik", X, axes)
-        # one component: by columns, 5x faster than einsum here (2.3 against 11 ns a row)
-        out = np.empty_like(X)
-        for j in range(2):
-            np.multiply(X[:, 0], axes[0, j], out=out[:, j])
-            out[:, j] += X[:, 1] * axes[1, j]
-        return out
+        return rotated(X, axes)
 
     def distance2(self, strain, stress, index) -> np.ndarray:
         """Squared DDCM distance ``d^2`` between states and the data points ``index``."""

@@ -74,15 +74,23 @@ class Stored:
 
     def unrotated(self, x: np.ndarray) -> np.ndarray:
         """``x @ axes^T + mean``: coordinates ``x`` back in the scaled stored frame ``y``."""
-        if x.shape[1] > 2:
-            return np.einsum("ij,kj->ik", x, self.axes) + self.mean
-        # two columns: by columns, as MaterialDataset.coordinates (einsum is 5x slower here)
-        out = np.empty_like(x)
-        for j in range(2):
-            np.multiply(x[:, 0], self.axes[j, 0], out=out[:, j])
-            out[:, j] += x[:, 1] * self.axes[j, 1]
-            out[:, j] += self.mean[j]
+        out = rotated(x, self.axes.T)
+        out += self.mean
         return out
+
+
+def rotated(X: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``X @ R`` (``R`` small and square) row by row with the same arithmetic whatever the number
+    of rows (elementwise, or einsum's own loop: no BLAS kernel chosen by size), so that a row's
+    product in a block equals the row's alone; two columns by columns, 5x faster than einsum
+    here (2.3 against 11 ns a row)."""
+    if X.shape[1] > 2:
+        return np.einsum("ij,jk->ik", X, R)
+    out = np.empty_like(X)
+    for j in range(2):
+        np.multiply(X[:, 0], R[0, j], out=out[:, j])
+        out[:, j] += X[:, 1] * R[1, j]
+    return out
 
 
 class Rows:
