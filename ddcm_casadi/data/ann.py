@@ -239,7 +239,8 @@ class StripSearch(CertifiedSearch):
         self.b_lo_t, self.b_hi_t = np.full(full.size, np.inf), np.full(full.size, -np.inf)
         self.b_lo_t[full] = keys[1][offsets[:-1][full]] * self.scale[1]
         self.b_hi_t[full] = keys[1][offsets[1:][full] - 1] * self.scale[1]
-        #: The keys are the coordinates themselves (two float32 columns): key distances are exact.
+        #: The keys are the coordinates themselves, or their stored values scaled (two float32
+        #: columns): key distances are exact.
         self.exact_keys = points.shape[1] == 2 and delta == (0.0, 0.0)
 
     @classmethod
@@ -304,9 +305,9 @@ class StripSearch(CertifiedSearch):
         """The build: one pass for the extremes (none where the ``frame`` knows them), one for
         the strip counts, one that deals the data to groups of consecutive strips (a counting
         sort, O(N)), and a sort within each group of at most :attr:`GROUP` data (strip, then key
-        ``b``). Beside the result (12 bytes
-        a datum) it holds one block of :attr:`READ` rows and one group. With a ``frame``, the
-        blocks read are stored values ``v`` and the coordinates are ``frame.scale * v``."""
+        ``b``). Beside the result (12 bytes a datum) it holds one block of :attr:`READ` rows and
+        one group. With a ``frame``, the blocks read are stored values ``v`` and the coordinates
+        are ``frame.scale * v``."""
         n, dim = X.shape
         scale = np.ones(dim) if frame is None else np.asarray(frame.scale, dtype=np.float64)
         if frame is not None and frame.extremes is not None:  # known: one pass fewer
