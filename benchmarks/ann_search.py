@@ -15,9 +15,10 @@ Its answers on a sample of 200 states are checked against an exact search that s
 with it (:func:`slab_check`). ``dataset`` is the same file reached as a DDCM user reaches it:
 :meth:`MaterialDataset.from_npy <ddcm_casadi.MaterialDataset.from_npy>` (the file's columns as
 strain and stress, ``c = 1``, so its scaled coordinates are the file's values) and its
-``strips`` search (``[ddcm] search = "strips"``), built from blocks of the data set's
-coordinates (one more pass for its frame; float32 keys of float64 coordinates, re-ranked from
-the file), without the KD-tree or a float64 copy; its build seconds include the data set's.
+``strips`` search (``[ddcm] search = "strips"``), built from blocks of the file (one more pass
+for the data set's frame; the keys are the file's float32 values, the frame applied to the
+queries only, so nothing is read from the file to re-rank or certify), without the KD-tree or a
+float64 copy; its build seconds include the data set's.
 Measured (wall and CPU seconds: on a shared machine the process may get a fraction of a core,
 and CPU seconds are what it needed): build seconds; seconds to answer every state exactly (the
 certified search widened until every answer is certified); the share certified by the first

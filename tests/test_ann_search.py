@@ -4,6 +4,7 @@ their selection and errors, and DDCM fixed points equal to the exact KD-tree's."
 from __future__ import annotations
 
 import builtins
+import dataclasses
 
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from ddcm_casadi import formulations
 from ddcm_casadi.casefiles.config import load_case
 from ddcm_casadi.data.ann import U64, IVFSearch, StripSearch
 from ddcm_casadi.data.dataset import MaterialDataset
-from ddcm_casadi.data.search import SEARCHES, KDTreeSearch, search_class
+from ddcm_casadi.data.search import SEARCHES, KDTreeSearch, Rows, search_class
 from ddcm_casadi.drivers.ddcm import DDCMSolver
 from ddcm_casadi.drivers.ddcm_options import DDCMOptions
 from ddcm_casadi.errors import InputError
@@ -164,17 +165,19 @@ def test_ddcm_fixed_points_equal_the_kd_tree_s(search):
     assert search in model.dataset._searches  # the backend was used
 
 
-@pytest.mark.parametrize("pack", [32, 0], ids=["packed", "argsort"])
-def test_strip_build_in_blocks_and_groups_sorts_every_strip(monkeypatch, tmp_path, pack):
+@pytest.mark.parametrize("group", [64, 1 << 16])
+def test_strip_build_in_blocks_and_groups_sorts_every_strip(monkeypatch, tmp_path, group):
     """The build's passes over blocks of rows, its deal to groups of strips and each group's
-    sort (packed keys, or the argsort fallback) give strips sorted by key ``b``, each datum in
+    radix sort (groups of one strip or of many) give strips sorted by key ``b``, each datum in
     the strip of its key ``a``, ``perm`` a permutation with ``keys = X[perm]``; the search over
     a float32 ``.npy`` file read in blocks answers as over the array, exactly."""
     monkeypatch.setattr(StripSearch, "READ", 333)
-    monkeypatch.setattr(StripSearch, "GROUP", 64)
-    monkeypatch.setattr(StripSearch, "PACK", pack)
+    monkeypatch.setattr(StripSearch, "GROUP", group)
     X, Q = _clouds()["band"]
     X = X.astype(np.float32)
+    X[::7, 1] *= -1.0  # negative keys b and signed zeros (the sort's order-preserving bits)
+    X[::11, 1] = 0.0
+    X[::13, 1] = -0.0
     path = tmp_path / "band.npy"
     np.save(path, X)
     for search in (StripSearch.build(X), StripSearch.from_npy(path)):
@@ -185,6 +188,8 @@ def test_strip_build_in_blocks_and_groups_sorts_every_strip(monkeypatch, tmp_pat
         strip = np.repeat(np.arange(search.lo_t.size), np.diff(search.offsets))
         assert np.array_equal(np.clip(t, 0, search.lo_t.size - 1), strip)
         assert np.all((np.diff(search.keys[1]) >= 0) | (np.diff(strip) > 0))
+        ties = (np.diff(search.keys[1].view(np.int32)) == 0) & (np.diff(strip) == 0)
+        assert np.all(np.diff(search.perm)[ties] > 0)  # equal keys in the order of the data
         truth = _brute(X, Q)
         exact = search.nearest(Q)
         np.testing.assert_allclose(np.sqrt(np.einsum("ij,ij->i", X[exact] - Q, X[exact] - Q)), truth,
@@ -250,7 +255,10 @@ def test_a_float32_data_file_reaches_the_strip_search_through_a_case_file(tmp_pa
     data set keeps the file's float32 values (no float64 copy), the strip search is built from
     blocks of its coordinates without the array of them or the KD-tree, and the DDCM path (data
     assignment, displacements, pressures, distances, iterations) is the exact KD-tree's over the
-    same file (the strip search's answers are exact: every one certified or widened)."""
+    same file (the strip search's answers are exact: every one certified or widened). The strip
+    search's keys are the file's own float32 values (``c = 300e9``: the search is in their
+    scaled frame, the data set's centre and rotation applied to the queries only), so its
+    re-ranking and certificates never gather the data set's coordinates."""
     noisy = noisy_dataset(0.05, 1, n_data=3000)
     np.save(tmp_path / "noisy.npy", np.column_stack([noisy.strain, noisy.stress]).astype(np.float32))
     case = (CASES / "bar_stops.toml").read_text()
@@ -261,11 +269,16 @@ def test_a_float32_data_file_reaches_the_strip_search_through_a_case_file(tmp_pa
         loaded = load_case(tmp_path / f"{search}.toml")
         data = loaded.model.dataset
         assert data.strain.dtype == np.float32 and not data.strain.flags.owndata and not data._searches
+        if search == "strips":
+            def gathered(index):
+                raise AssertionError("the strip search gathered the data set's coordinates")
+            data._rows._of = gathered
         problems = build_problems(loaded.model)
         solver = DDCMSolver(problems, formulations.get("fischer_burmeister").build(problems.projection),
                             options=loaded.ddcm_options)
         paths[search] = solver.solve()
         assert set(data._searches) == {search} and (search == "kdtree") == (data._rows._array is not None)
+        assert search == "kdtree" or data.search(search).exact_keys
     for field in ("data_index", "outer_iterations", "u", "p", "distance"):
         np.testing.assert_array_equal(paths["strips"].array(field), paths["kdtree"].array(field), err_msg=field)
 
@@ -279,3 +292,34 @@ def test_data_set_coordinates_read_in_blocks_equal_those_gathered():
     pick = RNG.integers(0, len(data), (70, 3))
     assert np.array_equal(rows[pick], rows.read(0, len(data))[pick])
     assert np.array_equal(rows.read(17, 4000), rows.array()[17:4000])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_data_set_s_strip_keys_are_its_float32_values(dtype):
+    """Over a float32 data set the strip search's keys are the stored strain and stress values
+    (the coordinates their scaled values, the data set's centre and rotation applied to the
+    queries only); over float64 data they are the coordinates rounded to float32 and re-ranked.
+    Either way the answers are the KD-tree's nearest distances (ties apart)."""
+    noisy = noisy_dataset(0.05, 3, n_data=4000)
+    data = MaterialDataset(noisy.strain.astype(dtype), noisy.stress.astype(dtype), noisy.c)
+    search = data.search("strips")
+    assert search.exact_keys == (dtype == np.float32)
+    if dtype == np.float32:
+        stored = np.column_stack([data.strain, data.stress])[search.perm]
+        a, b = search.axes
+        assert np.array_equal(search.keys[0], stored[:, a]) and np.array_equal(search.keys[1], stored[:, b])
+        # the data set's pass gave the extremes: the same structure as with the build's own pass
+        rows = data._rows
+        unknown = Rows(*rows.shape, rows._of, stored=dataclasses.replace(rows.stored, extremes=None))
+        again = StripSearch.from_rows(unknown, None)
+        assert (again.low, again.width, again.b_range) == (search.low, search.width, search.b_range)
+        assert np.array_equal(again.perm, search.perm)
+    e = RNG.uniform(-0.06, 0.02, 600)
+    s = 200e9 * e + RNG.normal(0, 0.3 * np.std(noisy.stress), 600)
+    found, exact = data.nearest(e, s, search="strips"), data.nearest(e, s)
+    # the metric distance of two data of the same squared distance: each computed in float64
+    # over 2 coordinates (the frames differ, so the roundoff of both, relative to the squares)
+    np.testing.assert_allclose(data.distance2(e, s, found), data.distance2(e, s, exact), rtol=4 * _tolerance(2),
+                               atol=0)
+    Q = data.coordinates(e, s)
+    np.testing.assert_array_equal(search.brute_force(Q).distance, search.certified(Q).distance)

@@ -30,7 +30,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ddcm_casadi.data.search import CHUNK, NeighbourSearch, _count, register_search
+from ddcm_casadi.data.search import CHUNK, NeighbourSearch, Stored, _count, register_search
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.heap import kept_heap
 
@@ -83,9 +83,7 @@ class CertifiedSearch(NeighbourSearch):
     def certified(self, queries: np.ndarray, *, rounds: int | None = None) -> Certificate:
         """The nearest examined datum of each query with its certificate, after at most
         ``rounds`` widenings of the first search (default: until every query is certified)."""
-        q = np.ascontiguousarray(queries, dtype=np.float64)
-        if q.ndim != 2 or q.shape[1] != self.points.shape[1]:
-            raise InputError(f"queries must be (n, {self.points.shape[1]}) coordinates, got shape {q.shape}")
+        q = self._queries(queries)
         n = q.shape[0]
         index = np.zeros(n, dtype=np.intp)
         dist = np.full(n, np.inf)
@@ -103,6 +101,14 @@ class CertifiedSearch(NeighbourSearch):
                 bound[rows] = found[2]
             todo = todo[~_is_certified(dist[todo], bound[todo])]
         return Certificate(index, dist, bound, _is_certified(dist, bound))
+
+    def _queries(self, queries) -> np.ndarray:
+        """The queries, coordinates of :attr:`points`, in the search's own coordinates (checked;
+        here the same: float64)."""
+        q = np.ascontiguousarray(queries, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != self.points.shape[1]:
+            raise InputError(f"queries must be (n, {self.points.shape[1]}) coordinates, got shape {q.shape}")
+        return q
 
     def _search(self, q: np.ndarray, level: int, reach: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Best examined index, its exact distance and the bound on the rest, at widening
@@ -135,6 +141,7 @@ class CertifiedSearch(NeighbourSearch):
     def brute_force(self, q: np.ndarray) -> Certificate:
         """The exact nearest of each query by a pass over all data in float64 (for the rare
         queries the widest search leaves uncertified: ties within float32 roundoff)."""
+        q = self._queries(q)
         n, d = q.shape
         index = np.zeros(n, dtype=np.intp)
         best = np.full(n, np.inf)
@@ -193,9 +200,9 @@ class StripSearch(CertifiedSearch):
     ``M`` in a strip of data along a line.
 
     The build (:meth:`_built`) is O(N) passes over blocks of rows (the extremes, the strip counts,
-    a deal of the data to groups of consecutive strips: a counting sort) and one sort a group of
-    at most :attr:`GROUP` data, of one packed ``uint64`` a datum (strip, the key ``b``'s
-    order-preserving bits, position): ``N log2(GROUP)`` compares and bounded temporaries.
+    a deal of the data to groups of consecutive strips: a counting sort) and one radix sort a
+    group of at most :attr:`GROUP` data (strip, then the key ``b``'s order-preserving bits:
+    three passes of 16-bit digits): O(N) work and bounded temporaries.
 
     Memory: 12 bytes a datum (two float32 keys and an int32 permutation up to ``2^31`` data)
     beside the coordinates it is given (kept, not copied). Float32 coordinates are their own keys
@@ -216,17 +223,24 @@ class StripSearch(CertifiedSearch):
     WINDOW = 6
 
     def __init__(self, points, keys, perm, offsets, axes, width, low, lo_t, hi_t, right_lo, left_hi,
-                 b_range, delta, base=None) -> None:
+                 b_range, delta, base=None, *, scale=(1.0, 1.0), frame: Stored | None = None) -> None:
         self._points, self.keys, self.perm, self.offsets = points, keys, perm, offsets
         self.axes, self.width, self.low = axes, width, low
         self.lo_t, self.hi_t, self.right_lo, self.left_hi = lo_t, hi_t, right_lo, left_hi
         self.b_range, self.delta, self.base = b_range, delta, base
+        #: ``(s_a, s_b)``: a datum's coordinates are ``s * key`` in float64 (1: the keys themselves).
+        self.scale = tuple(np.float64(v) for v in scale)
+        #: Where the keys are stored values of an affine image (:class:`~ddcm_casadi.data.search.Stored`),
+        #: the queries' map to the scaled stored frame; else ``None``.
+        self.frame = frame
         self.largest = int(np.max(np.diff(offsets)))
         # each strip's key-b extent (its first and last key): a strip's box bounds all its data
         full = np.diff(offsets) > 0
         self.b_lo_t, self.b_hi_t = np.full(full.size, np.inf), np.full(full.size, -np.inf)
-        self.b_lo_t[full], self.b_hi_t[full] = keys[1][offsets[:-1][full]], keys[1][offsets[1:][full] - 1]
-        #: The keys are the coordinates themselves (two float32 columns): key distances are exact.
+        self.b_lo_t[full] = keys[1][offsets[:-1][full]] * self.scale[1]
+        self.b_hi_t[full] = keys[1][offsets[1:][full] - 1] * self.scale[1]
+        #: The keys are the coordinates themselves, or their stored values scaled (two float32
+        #: columns): key distances are exact.
         self.exact_keys = points.shape[1] == 2 and delta == (0.0, 0.0)
 
     @classmethod
@@ -239,7 +253,18 @@ class StripSearch(CertifiedSearch):
     @classmethod
     def from_rows(cls, rows, exact) -> "StripSearch":
         """Built from blocks of a data set's rows (:meth:`_built`): neither the array of its
-        coordinates nor the exact KD-tree is made (``exact`` is not called)."""
+        coordinates nor the exact KD-tree is made (``exact`` is not called). Where the rows are
+        an affine image of float32 values as stored (:attr:`Rows.stored
+        <ddcm_casadi.data.search.Rows>`: a one-component data set's float32 file), the keys are
+        those values and the search is in their scaled frame ``y = scale * v``, computed from the
+        keys in float64 (monotone in each key, so the keys' order is the coordinates' and every
+        bound is exact, ``delta = 0``); only the queries are moved there
+        (:meth:`~ddcm_casadi.data.search.Stored.unrotated`), and the rows are never read again.
+        Otherwise the keys are the rows rounded to float32 and the candidates are re-ranked
+        from rows gathered."""
+        stored = rows.stored
+        if stored is not None and np.dtype(stored.dtype) == np.float32 and rows.shape[1] == 2:
+            return cls._built(rows, stored.read, None, stored)
         return cls._built(rows, rows.read, None)
 
     @classmethod
@@ -261,35 +286,41 @@ class StripSearch(CertifiedSearch):
         return cls._built(X, read, None)
 
     #: Rows read per block by the build's passes over the data, and data per group of strips
-    #: sorted at once (one packed 64-bit key a datum). Temporaries of 2 MB and 0.5 MB stay in
+    #: sorted at once (:meth:`_sort_group`). Temporaries of 2 MB and 0.5 MB stay in
     #: malloc's heap (32 MB ones were mapped and faulted in anew each time): the build of 1e8
     #: data took 10-11 s CPU, against 14-15 s with 2^22 and 2^20.
     READ = 1 << 18
     GROUP = 1 << 16
-    #: Bits of the packed key left to a group's strip and position (32 go to the key ``b``).
-    PACK = 32
 
     @classmethod
-    def _built(cls, X, read, base) -> "StripSearch":
+    def _built(cls, X, read, base, frame: Stored | None = None) -> "StripSearch":
         """The search over ``X`` (its ``shape`` and ``dtype``) read by blocks ``read(a, b)``
-        (:meth:`_passes`), with glibc's heap kept (:func:`~ddcm_casadi.heap.kept_heap`)."""
+        (:meth:`_passes`), with glibc's heap kept (:func:`~ddcm_casadi.heap.kept_heap`);
+        ``frame``: ``read`` gives the stored values of ``X`` (:class:`~ddcm_casadi.data.search.Stored`)."""
         with kept_heap():
-            return cls._passes(X, read, base)
+            return cls._passes(X, read, base, frame)
 
     @classmethod
-    def _passes(cls, X, read, base) -> "StripSearch":
-        """The build: one pass for the extremes, one for the strip counts, one that deals the
-        data to groups of consecutive strips (a counting sort, O(N)), and a sort within each
-        group of at most :attr:`GROUP` data (strip, then key ``b``). Beside the result (12 bytes
-        a datum) it holds one block of :attr:`READ` rows and one group."""
+    def _passes(cls, X, read, base, frame) -> "StripSearch":
+        """The build: one pass for the extremes (none where the ``frame`` knows them), one for
+        the strip counts, one that deals the data to groups of consecutive strips (a counting
+        sort, O(N)), and a sort within each group of at most :attr:`GROUP` data (strip, then key
+        ``b``). Beside the result (12 bytes a datum) it holds one block of :attr:`READ` rows and
+        one group. With a ``frame``, the blocks read are stored values ``v`` and the coordinates
+        are ``frame.scale * v``."""
         n, dim = X.shape
-        lo, hi = np.full(dim, np.inf), np.full(dim, -np.inf)
-        for c in range(0, n, cls.READ):
-            block = read(c, min(n, c + cls.READ))  # by columns: 30x faster than along axis 0
-            lo = np.minimum(lo, [block[:, i].min() for i in range(dim)])
-            hi = np.maximum(hi, [block[:, i].max() for i in range(dim)])
+        scale = np.ones(dim) if frame is None else np.asarray(frame.scale, dtype=np.float64)
+        if frame is not None and frame.extremes is not None:  # known: one pass fewer
+            lo, hi = (np.array(v, dtype=np.float64) for v in frame.extremes)
+        else:
+            lo, hi = np.full(dim, np.inf), np.full(dim, -np.inf)
+            for c in range(0, n, cls.READ):
+                block = read(c, min(n, c + cls.READ))  # by columns: 30x faster than along axis 0
+                lo = np.minimum(lo, [block[:, i].min() for i in range(dim)])
+                hi = np.maximum(hi, [block[:, i].max() for i in range(dim)])
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):  # NaN propagates to the extremes
             raise InputError("the strip search's coordinates must be finite")
+        lo, hi = lo * scale, hi * scale  # scale > 0 keeps the order: the extremes of the coordinates
         extent = hi - lo
         a, b = (int(i) for i in np.argsort(extent)[::-1][:2])
         L, H = float(extent[a]), float(extent[b])
@@ -300,6 +331,7 @@ class StripSearch(CertifiedSearch):
             # from the float32 key, so that every pass (and the sort) puts a datum in one strip; the
             # bounds use the strips' extents as stored, whatever this rounding
             t = key_a.astype(np.float64)
+            t *= scale[a]
             t -= lo[a]
             t *= 1.0 / width
             t = t.astype(np.int64)  # truncation: t >= 0
@@ -311,7 +343,7 @@ class StripSearch(CertifiedSearch):
         offsets = np.zeros(strips + 1, dtype=np.int64)
         np.cumsum(counts, out=offsets[1:])
         # groups of consecutive strips: GROUP data (and at most one strip more) and at most 2^12
-        # strips, so that strip, key b (32 bits) and position pack into one uint64 of its sort
+        # strips, so that a group's strip is one 16-bit digit of its radix sort
         span = 1 << 12
         first = np.flatnonzero(np.diff(np.minimum(offsets[:-1] // cls.GROUP, n) * (strips // span + 1)
                                        + np.arange(strips) // span, prepend=-1))
@@ -326,50 +358,49 @@ class StripSearch(CertifiedSearch):
             block = read(c, min(n, c + cls.READ))
             ka, kb = block[:, a].astype(np.float32), block[:, b].astype(np.float32)
             g = group[strip(ka)]
-            rank = np.empty(g.size, dtype=np.int64)  # each datum's place in the block sorted by group
-            rank[np.argsort(g, kind="stable")] = np.arange(g.size)  # a radix sort up to 2^16 groups
+            order = np.argsort(g, kind="stable")  # the block by group (a radix sort up to 2^16 groups)
+            g = g[order]
             per = np.bincount(g, minlength=first.size)
-            rank += (fill - (np.cumsum(per) - per))[g]  # its place in the group's range
-            keys[0, rank], keys[1, rank], perm[rank] = ka, kb, np.arange(c, c + g.size)
+            # the sorted block's place in its groups' ranges, written group by group in ascending
+            # order (the deal at 1e8: 46-53 against 53-57 ns a datum written in the block's order)
+            place = (fill - (np.cumsum(per) - per))[g]
+            place += np.arange(g.size)
+            keys[0, place], keys[1, place] = ka[order], kb[order]
+            order += c
+            perm[place] = order
             fill += per
         for s0, s1 in zip(starts[:-1], starts[1:]):  # each group sorted by (strip, key b)
             if s1 - s0 > 1:
                 cls._sort_group(keys[:, s0:s1], perm[s0:s1], strip(keys[0, s0:s1]))
         lo_t, hi_t = np.full(strips, np.inf), np.full(strips, -np.inf)
         full = counts > 0
-        lo_t[full] = np.minimum.reduceat(keys[0], offsets[:-1][full])
-        hi_t[full] = np.maximum.reduceat(keys[0], offsets[:-1][full])
+        lo_t[full] = np.minimum.reduceat(keys[0], offsets[:-1][full]) * scale[a]
+        hi_t[full] = np.maximum.reduceat(keys[0], offsets[:-1][full]) * scale[a]
         right_lo = np.minimum.accumulate(lo_t[::-1])[::-1]  # least key a of strips >= t
         left_hi = np.maximum.accumulate(hi_t)  # largest key a of strips <= t
         reach = np.maximum(np.abs(lo), np.abs(hi))
-        delta = (_rounding(reach[a], X.dtype), _rounding(reach[b], X.dtype))
+        stored = X.dtype if frame is None else frame.dtype
+        delta = (_rounding(reach[a], stored), _rounding(reach[b], stored))
         return cls(X, keys, perm, offsets, (a, b), width, lo[a], lo_t, hi_t, right_lo, left_hi,
-                   (lo[b], hi[b]), delta, base)
+                   (lo[b], hi[b]), delta, base, scale=(scale[a], scale[b]), frame=frame)
 
     @staticmethod
     def _sort_group(keys: np.ndarray, perm: np.ndarray, t: np.ndarray) -> None:
-        """Sort one group's ``keys`` (2, m) and ``perm`` in place by strip ``t``, then key ``b``:
-        one ``uint64`` a datum (strip, the key's order-preserving bits, position) when they fit,
-        else an argsort of (strip, key bits)."""
-        m = perm.size
-        bits = keys[1].view(np.uint32)
-        # order-preserving bits of a float: the sign bit set on positives, every bit flipped on negatives
-        flip = (keys[1].view(np.int32) >> 31).view(np.uint32)
-        flip |= np.uint32(1 << 31)
-        code = (bits ^ flip).astype(np.uint64)
+        """Sort one group's ``keys`` (2, m) and ``perm`` in place by strip ``t``, then key ``b``
+        (ties in the order given): a least-significant-digit radix sort, three stable passes of
+        16-bit digits (numpy's stable argsort of ``uint16`` is a counting sort): the low and the
+        high half of the key's order-preserving bits, then the strip (a group spans at most 2^12
+        strips). 30 against 50 ns a datum for one sort of packed ``uint64`` keys (2^16 data)."""
+        code = keys[1].view(np.int32) >> 31  # order-preserving bits of a float: every bit flipped
+        code = code.view(np.uint32)  # on negatives, the sign bit set on positives
+        code |= np.uint32(1 << 31)
+        code ^= keys[1].view(np.uint32)
+        order = np.argsort(code.astype(np.uint16), kind="stable")  # the low 16 bits
+        code >>= np.uint32(16)
+        order = order[np.argsort(code.astype(np.uint16)[order], kind="stable")]
         t -= t.min()  # the group's strips are consecutive
-        t = t.view(np.uint64)
-        place = max(int(m - 1).bit_length(), 0)
-        t <<= np.uint64(32)
-        code |= t
-        if place + int(t.max() >> np.uint64(32)).bit_length() <= StripSearch.PACK:
-            code <<= np.uint64(place)
-            code |= np.arange(m, dtype=np.uint64)
-            code.sort()
-            code &= np.uint64((1 << place) - 1)
-            order = code.view(np.int64)
-        else:
-            order = np.argsort(code, kind="stable")
+        if t.max() > 0:
+            order = order[np.argsort(t.astype(np.uint16)[order], kind="stable")]
         keys[0], keys[1], perm[:] = keys[0][order], keys[1][order], perm[order]
 
     @property
@@ -377,14 +408,21 @@ class StripSearch(CertifiedSearch):
         return self._points
 
     def _coordinates(self, pos: np.ndarray) -> np.ndarray:
-        """The float64 coordinates of the data at sorted positions ``pos`` (any shape): the keys
-        where they are the coordinates (float32 data; the points are then never read), else the
-        exact points."""
+        """The float64 coordinates of the data at sorted positions ``pos`` (any shape): the keys,
+        scaled, where they are the coordinates (float32 data; the points are then never read),
+        else the exact points."""
         if not self.exact_keys:
             return np.asarray(self.points[self.perm[pos]], dtype=np.float64)
         y = np.empty(pos.shape + (2,))
-        y[..., self.axes[0]], y[..., self.axes[1]] = self.keys[0][pos], self.keys[1][pos]
+        for i in range(2):
+            np.multiply(self.keys[i][pos], self.scale[i], out=y[..., self.axes[i]])
         return y
+
+    def _queries(self, queries) -> np.ndarray:
+        """Queries in the search's coordinates: those of :attr:`points`, or with a :attr:`frame`
+        moved back to the scaled stored frame (a rotation and a shift: distances unchanged)."""
+        q = super()._queries(queries)
+        return q if self.frame is None else self.frame.unrotated(q)
 
     def _rows(self, a, b):
         if not self.exact_keys:
@@ -426,14 +464,14 @@ class StripSearch(CertifiedSearch):
         halves ``length``; ``right``: after equal keys)."""
         base = self.offsets[t].copy()
         length = self.offsets[t + 1] - base
-        keys, last = self.keys[1], self.keys[1].size - 1
+        keys, last, sb = self.keys[1], self.keys[1].size - 1, self.scale[1]
         below = np.less_equal if right else np.less
         for _ in range(int(length.max(initial=0)).bit_length()):
             half = length >> 1
             mid = base + half
-            base = np.where(below(keys[np.minimum(mid, last)], value), mid, base)
+            base = np.where(below(keys[np.minimum(mid, last)] * sb, value), mid, base)
             length -= half
-        return base + ((length > 0) & below(keys[np.minimum(base, last)], value))
+        return base + ((length > 0) & below(keys[np.minimum(base, last)] * sb, value))
 
     def _strip_gap(self, t: np.ndarray, qa: np.ndarray) -> np.ndarray:
         """``dist(q_a, [lo_t, hi_t])`` less the keys' rounding (``inf`` for an empty strip)."""
@@ -518,9 +556,7 @@ class StripSearch(CertifiedSearch):
         key ``b`` in its strip (clipped to the data) is an upper bound ``r`` on the ``k``-th nearest
         distance, and every datum within ``r`` is examined (:meth:`_within`) and ranked by exact
         distances."""
-        q = np.ascontiguousarray(queries, dtype=np.float64)
-        if q.ndim != 2 or q.shape[1] != self.points.shape[1]:
-            raise InputError(f"queries must be (n, {self.points.shape[1]}) coordinates, got shape {q.shape}")
+        q = self._queries(queries)
         n, size = q.shape[0], self.keys.shape[1]
         k = min(int(k), size)
         if k < 1:
@@ -567,6 +603,7 @@ class StripSearch(CertifiedSearch):
         a, b = self.axes
         da, db = self.delta
         (ka, kb), off = self.keys, self.offsets
+        sa, sb = self.scale
         strips = self.lo_t.size
         qa, qb = q[:, a], q[:, b]
         s = np.clip(np.floor((qa - self.low) / self.width), 0, strips - 1).astype(np.int64)
@@ -587,9 +624,9 @@ class StripSearch(CertifiedSearch):
         # squared distances of the keys (the coordinates a, b rounded to float32): their roots are at
         # most |delta| from the exact distances (and below them in more than 2 coordinates); the
         # two nearest are re-ranked exactly
-        da_ = ka[pos] - qa[:, None, None]
+        da_ = ka[pos] * sa - qa[:, None, None]
         kd2 = da_ * da_
-        da_ = kb[pos] - qb[:, None, None]
+        da_ = kb[pos] * sb - qb[:, None, None]
         kd2 += da_ * da_
         kd2, pos = kd2.reshape(n, -1), pos.reshape(n, -1)
         if self.exact_keys:
@@ -605,8 +642,9 @@ class StripSearch(CertifiedSearch):
             best_pos, best = cand[rows, j], exact[rows, j]
         # bounds of the data left in the examined strips ...
         gap = self._strip_gap(Tc, qa[:, None])
-        under = np.where(w_lo > seg_lo, np.maximum(qb[:, None] - kb[np.maximum(w_lo - 1, 0)] - db, 0.0), np.inf)
-        over = np.where(w_hi < seg_hi, np.maximum(kb[np.minimum(w_hi, kb.size - 1)] - qb[:, None] - db, 0.0), np.inf)
+        under = np.where(w_lo > seg_lo, np.maximum(qb[:, None] - kb[np.maximum(w_lo - 1, 0)] * sb - db, 0.0), np.inf)
+        over = np.where(w_hi < seg_hi, np.maximum(kb[np.minimum(w_hi, kb.size - 1)] * sb - qb[:, None] - db, 0.0),
+                        np.inf)
         left = np.where(inside, np.hypot(gap, np.minimum(under, over)), np.inf)
         bound = np.minimum(left.min(axis=1), rest)
         # ... and of the strips not examined

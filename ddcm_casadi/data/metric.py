@@ -87,6 +87,16 @@ class Metric:
         """The largest eigenvalue of ``C`` (Pa): the stiffness scale of the metric."""
         return float(np.linalg.eigvalsh(self.matrix)[-1])
 
+    @property
+    def scales(self) -> np.ndarray | None:
+        """Where ``C`` is diagonal, the factors ``[sqrt(C_ii), 1 / sqrt(C_ii)]`` (``(2k,)``) that
+        make :meth:`coordinates` column by column (up to its rounding); else ``None``."""
+        d = np.diag(self.matrix)
+        if np.count_nonzero(self.matrix - np.diag(d)):
+            return None
+        r = np.sqrt(d)
+        return np.concatenate([r, 1.0 / r])
+
     def coordinates(self, strain, stress) -> np.ndarray:
         """Scaled coordinates ``[L^T e, L^{-1} s]`` of states, ``(N, 2k)``; Euclidean distance
         between them is the metric distance. ``strain``, ``stress``: ``(N,)`` for ``k = 1`` or

@@ -33,6 +33,7 @@ The first two are exact:
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from typing import Callable, ClassVar
 
 import numpy as np
@@ -42,6 +43,54 @@ from ddcm_casadi.errors import InputError
 
 #: Rows per block where a pass over the data would otherwise allocate a full-size temporary.
 CHUNK = 1 << 16
+
+
+@dataclass(frozen=True, eq=False)
+class Stored:
+    r"""Coordinates that are an affine image of the values as stored, column by column scaled:
+    ``x = (scale * v - mean) @ axes`` (``v`` a stored row, ``axes`` orthogonal), so that
+    ``|x - x'| = |scale * (v - v')|``: a search may keep the stored values as its keys, search
+    in the scaled coordinates ``y = scale * v`` and map its queries by ``y = x @ axes^T + mean``.
+
+    Attributes
+    ----------
+    read : callable
+        ``read(a, b)``: the stored rows ``a:b``, ``(m, d)`` of :attr:`dtype`.
+    dtype : numpy.dtype
+        The stored values' type (float32 values are exact in float64).
+    scale, mean : (d,) float64
+    axes : (d, d) float64
+    extremes : ((d,), (d,)) float64, optional
+        The least and largest stored values of each column, where known (a pass over the
+        values saved).
+    """
+
+    read: Callable[[int, int], np.ndarray]
+    dtype: np.dtype
+    scale: np.ndarray
+    mean: np.ndarray
+    axes: np.ndarray
+    extremes: tuple[np.ndarray, np.ndarray] | None = None
+
+    def unrotated(self, x: np.ndarray) -> np.ndarray:
+        """``x @ axes^T + mean``: coordinates ``x`` back in the scaled stored frame ``y``."""
+        out = rotated(x, self.axes.T)
+        out += self.mean
+        return out
+
+
+def rotated(X: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``X @ R`` (``R`` small and square) row by row with the same arithmetic whatever the number
+    of rows (elementwise, or einsum's own loop: no BLAS kernel chosen by size), so that a row's
+    product in a block equals the row's alone; two columns by columns, 5x faster than einsum
+    here (2.3 against 11 ns a row)."""
+    if X.shape[1] > 2:
+        return np.einsum("ij,jk->ik", X, R)
+    out = np.empty_like(X)
+    for j in range(2):
+        np.multiply(X[:, 0], R[0, j], out=out[:, j])
+        out[:, j] += X[:, 1] * R[1, j]
+    return out
 
 
 class Rows:
@@ -56,12 +105,16 @@ class Rows:
     rows_of : callable
         ``rows_of(index)``, ``index`` a slice or a 1-D integer array: those rows, ``(m, dim)``
         float64; the same values for a row whichever way it is asked for.
+    stored : Stored, optional
+        The rows as an affine image of the stored values (:class:`Stored`), where they are one:
+        a search may keep those values as its keys instead of rounding the rows.
     """
 
     dtype = np.dtype(np.float64)
 
-    def __init__(self, n: int, dim: int, rows_of: Callable[[slice | np.ndarray], np.ndarray]) -> None:
-        self.shape, self._of, self._array = (int(n), int(dim)), rows_of, None
+    def __init__(self, n: int, dim: int, rows_of: Callable[[slice | np.ndarray], np.ndarray], *,
+                 stored: Stored | None = None) -> None:
+        self.shape, self._of, self._array, self.stored = (int(n), int(dim)), rows_of, None, stored
 
     def read(self, a: int, b: int) -> np.ndarray:
         """The rows ``a:b``."""
