@@ -8,7 +8,7 @@ The problem is the Hertz example's body (:func:`run.continuum_block`, P2 plane s
 cylinder pressed in over 5 steps; 1 step, its last, at 1e6): about 1e4 and 1e5 unknowns, and 1e6
 with ``--full``. ddcm-casadi builds it, writes the free-dof stiffness ``K``, the gap operator,
 gap offsets and loads to an ``.npz``, and solves it with every available sparse solver of
-:mod:`ddcm_casadi.linalg`; ``benchmarks/snesvi_peer.py``, run by a Python that has ``petsc4py``
+:mod:`ddcm_casadi.linalg`; ``benchmarks/peers/snesvi_peer.py``, run by a Python that has ``petsc4py``
 (the ``dolfinx-solver-real`` wheel, Python >= 3.12; not a dependency of the package), solves the
 same ``.npz`` with MUMPS in each tuning of :data:`PEER_TUNINGS`. Ours is built by
 :func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical`: condensed on the contact pairs (one
@@ -185,7 +185,7 @@ def peer(python: str, mode: str, problem: str, out: str, ordering: int, factor: 
     """``snesvi_peer.py`` in the peer's Python: PETSc SNESVI on ``problem`` (``mode`` ``"solve"``,
     its solution written to ``out``), or the time of a MUMPS factorisation and solve of ``K``
     (``"factor"``, median of ``out`` repeats)."""
-    return _run([python, str(HERE / "snesvi_peer.py"), mode, problem, out, str(ordering), factor])
+    return _run([python, str(HERE / "peers" / "snesvi_peer.py"), mode, problem, out, str(ordering), factor])
 
 
 def difference(a: str, b: str) -> dict:

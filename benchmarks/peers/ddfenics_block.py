@@ -32,13 +32,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 import ddfenicsx as dd
-
-
-def peak_resident_bytes() -> int:
-    """The peak resident set of this process (Linux ``VmHWM``; not ``ru_maxrss``, which a process
-    started by a large parent inherits from it), in bytes."""
-    with open("/proc/self/status") as fh:
-        return next(int(line.split()[1]) * 1024 for line in fh if line.startswith("VmHWM:"))
+from process import peak_resident_bytes  # benchmarks/peers/, this script's folder
 
 
 def main(problem_path: str, result_path: str, assignment_path: str) -> None:

@@ -1,8 +1,8 @@
 """The peer side of ``benchmarks/snesvi.py``: PETSc's reduced-space active-set VI Newton
 (SNES ``vinewtonrsls``) with MUMPS on the discrete Signorini problem that ddcm-casadi wrote.
 
-    PYTHON_WITH_PETSC benchmarks/snesvi_peer.py solve PROBLEM.npz SOLUTION.npz ORDERING FACTOR
-    PYTHON_WITH_PETSC benchmarks/snesvi_peer.py factor PROBLEM.npz REPEATS ORDERING FACTOR
+    PYTHON_WITH_PETSC benchmarks/peers/snesvi_peer.py solve PROBLEM.npz SOLUTION.npz ORDERING FACTOR
+    PYTHON_WITH_PETSC benchmarks/peers/snesvi_peer.py factor PROBLEM.npz REPEATS ORDERING FACTOR
 
 Imports only numpy, scipy and petsc4py (the ``dolfinx-solver-real`` wheel ships PETSc, petsc4py
 and MUMPS; it needs Python >= 3.12, so this runs in its own interpreter). ``PROBLEM.npz`` holds the
@@ -24,7 +24,6 @@ peak resident memory of this process. ``factor``: the seconds of one factorisati
 from __future__ import annotations
 
 import json
-import resource
 import sys
 import time
 
@@ -33,6 +32,7 @@ import scipy.sparse as sp
 
 import dolfinx_solver  # noqa: F401 - loads the wheel's MPI library before petsc4py
 from petsc4py import PETSc
+from process import peak_resident_bytes  # benchmarks/peers/, this script's folder
 
 
 def rotation(G: sp.csr_matrix, n: int) -> sp.csr_matrix:
@@ -134,7 +134,7 @@ def main(problem: str, solution: str, ordering: int, factor: str) -> dict:
                 numeric_factorisations=event_count("MatLUFactorNum") + event_count("MatCholFctrNum"),
                 symbolic_factorisations=event_count("MatLUFactorSym") + event_count("MatCholFctrSym"),
                 converged=all(s["reason"] > 0 for s in steps), ordering=ordering, factor=factor,
-                peak_memory_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+                peak_memory_bytes=peak_resident_bytes(),
                 petsc_version=".".join(map(str, PETSc.Sys.getVersion())))
 
 
@@ -164,7 +164,7 @@ def factor_time(problem: str, repeats: int, ordering: int, factor: str) -> dict:
         times.append(time.perf_counter() - t0)
         ksp.destroy()
     return dict(seconds=float(np.median(times)), ordering=ordering, factor=factor,
-                peak_memory_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+                peak_memory_bytes=peak_resident_bytes())
 
 
 if __name__ == "__main__":
