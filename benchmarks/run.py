@@ -221,10 +221,12 @@ def iteration_floor(problems, built, step: int, x, p, data, states, repeats: int
                 cached_floor_seconds=t_solve + t_kd, linear_solver=solver_name())
 
 
-def continuum_block(divisions: int):
+def continuum_block(divisions: int, data: bool = True):
     """The body of the Hertz example (``examples/cases/hertz2d.toml``: plane strain, P2 triangles,
-    a 20 mm square indented by a cylinder, with its 21^3 Hookean data) on a uniform
-    ``divisions x divisions`` mesh without the contact grading, for sizes set by one number."""
+    a 20 mm square indented by a cylinder, with its 101^3 graded Hookean data) on a uniform
+    ``divisions x divisions`` mesh without the contact grading, for sizes set by one number.
+    ``data=False``: without the data (the classical problem alone; the data set of 1e6 points
+    is not built)."""
     from ddcm_casadi.casefiles.base import read_document
     from ddcm_casadi.casefiles.config import case_from_dict
     from ddcm_casadi.validation.continuum import EXAMPLE
@@ -232,6 +234,8 @@ def continuum_block(divisions: int):
     doc = read_document(EXAMPLE)
     doc["mesh"]["divisions"] = [divisions, divisions]
     doc["mesh"].pop("refine_near", None)
+    if not data:
+        doc.pop("data", None)
     return case_from_dict(doc, base_dir=EXAMPLE.parent, source=f"hertz block {divisions}x{divisions}").model
 
 

@@ -74,7 +74,7 @@ def hertz_model(divisions: int):
     spec = importlib.util.spec_from_file_location("ddcm_benchmarks_run", HERE / "run.py")
     run = importlib.util.module_from_spec(spec)  # run.py is a sibling script, not a package module
     spec.loader.exec_module(run)
-    model = replace(run.continuum_block(divisions), dataset=None)
+    model = run.continuum_block(divisions, data=False)
     if divisions >= ONE_STEP_FROM:
         model = replace(model, gap_offsets=model.gap_offsets[-1:], loads=model.loads[-1:],
                         load_parameter=model.load_parameter[-1:])
@@ -96,9 +96,12 @@ def ours(divisions: int, solver: str, problem: str | None, solution: str, conden
     as :func:`~ddcm_casadi.drivers.ddcm_reduced.build_classical` selects (condensed on the contact
     pairs where it applies), else the full problem. ``seconds`` counts the condensation's
     factorisation and Delassus matrix (made at the build) with the solve: the work the peer does
-    in its solve; ``build_seconds`` the rest of the build."""
+    in its solve; ``build_seconds`` the rest of the build, ``model_seconds`` the model's (meshed
+    and assembled) before it."""
     linalg.use_solver(solver)
+    t0 = time.perf_counter()
     model = hertz_model(divisions)
+    model_seconds = time.perf_counter() - t0
     t0 = time.perf_counter()
     problems = build_problems(model)
     built = build_classical(registry.get("fischer_burmeister"), problems, reduce=condense)
@@ -113,7 +116,8 @@ def ours(divisions: int, solver: str, problem: str | None, solution: str, conden
     np.savez(solution, u=res.array("u"), p=res.array("p"))
     stats = built.stats
     return dict(unknowns=model.n_dofs + model.n_contacts, dofs=model.n_dofs, contacts=model.n_contacts,
-                steps=model.n_steps, seconds=seconds, build_seconds=build, condensation_seconds=condensation,
+                steps=model.n_steps, seconds=seconds, build_seconds=build, model_seconds=model_seconds,
+                condensation_seconds=condensation,
                 path=res.projection_path, converged=bool(res.converged),
                 newton_iterations=int(res.array("iterations").sum()), factorisations=stats["factorizations"],
                 updates=stats["updates"], solver=solver, peak_memory_bytes=peak_resident_bytes())
