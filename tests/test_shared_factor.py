@@ -117,6 +117,9 @@ def test_a_stiffness_not_a_multiple_is_refused():
     assert factor.scaled(other, G) is None
     assert factor.scaled(K + sp.identity(K.shape[0]), G) is None  # another diagonal
     assert factor.scaled(K, 2.0 * G) is None
+    # a reduction adopts it where it serves, else lets it go before factorising its own
+    assert factor.adopted(2.0 * K, G) is not None and not factor.released
+    assert factor.adopted(other, G) is None and factor.released
 
 
 @pytest.mark.parametrize("name", CLASSICAL)

@@ -154,6 +154,14 @@ class StiffnessFactor:
             return None
         return _WithSprings(self, S)
 
+    def adopted(self, K_s: sp.spmatrix, G_s: sp.spmatrix) -> tuple[Factor, np.ndarray] | None:
+        """:meth:`scaled`, for a reduction about to factorise ``K_s`` itself where this factor
+        cannot serve it: then released first (its memory gone before the other factorisation)."""
+        scaled = self.scaled(K_s, G_s)
+        if scaled is None:
+            self.release()
+        return scaled
+
     def scaled(self, K_s: sp.spmatrix, G_s: sp.spmatrix) -> tuple[Factor, np.ndarray] | None:
         """``(factor of K_s, G_s K_s^-1 G_s^T)`` where ``K_s = c K`` and ``G_s = G`` (``K_s^-1 =
         K^-1 / c``, ``D_s = D / c``), with the solvers selected now; else ``None``.

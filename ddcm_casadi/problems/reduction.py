@@ -298,10 +298,8 @@ class Reduction:
         if self.alpha is not None:
             del K_s  # a copy of K_u's size, not needed with one factor
         start = time.perf_counter()
-        scaled = None if known is None else known.scaled(K_u, self.G)
-        if scaled is None and known is not None:
-            known.release()  # the model's factor: not K_u's, let go before K_u's own
-        elif scaled is not None:
+        scaled = None if known is None else known.adopted(K_u, self.G)
+        if scaled is not None:
             known.hand_over()  # the classical stiffness it kept: not this problem's to hold
             start -= known.seconds  # its factorisation's time counted as this one's
         self.shared = scaled is not None
@@ -553,13 +551,11 @@ class ClassicalReduction:
         self.ratio = column_ratio(self.G, -self._R_p)
         self.factorizations, self.solver = 1, definite_solver_name()
         start = time.perf_counter()
-        scaled = None if known is None else known.scaled(K, self.G)
+        scaled = None if known is None else known.adopted(K, self.G)
         self.shared = scaled is not None
         if self.shared:  # its factorisation's time counted as this one's
             (self.factor, self.D_u), start = scaled, start - known.seconds
         else:
-            if known is not None:
-                known.release()  # let go before a factorisation of its own
             release_heap()
             try:
                 self.factor, self.D_u = factorize_with_delassus(K, self.G, near_null=near_null)
