@@ -3,9 +3,18 @@
 Every factorisation in the package (Newton steps, cached active-set systems, exact enumeration,
 the reference scales) goes through :func:`factorize`, so the solver is chosen in one place.
 
-``"auto"`` (the default): ``"pardiso"`` for matrices of :data:`PARDISO_MIN_SIZE` unknowns or
-more (:data:`PARDISO_UNSYMMETRIC_MIN_SIZE` for unsymmetric ones) where ``pypardiso`` is
-installed and loads, else ``"superlu"`` (:func:`chosen_solver`).
+``"auto"`` (the default): ``"mumps"`` for matrices of :data:`MUMPS_MIN_SIZE` unknowns or more
+where CasADi's MUMPS loads; else ``"pardiso"`` for matrices of :data:`PARDISO_MIN_SIZE` unknowns
+or more (:data:`PARDISO_UNSYMMETRIC_MIN_SIZE` for unsymmetric ones) where ``pypardiso`` is
+installed and loads; else ``"superlu"`` (:func:`chosen_solver`).
+
+``"mumps"`` (no extra dependency where CasADi's wheel ships MUMPS, as its Linux, macOS and
+Windows wheels do for IPOPT; :mod:`ddcm_casadi.mumps`): a symmetric matrix is factorised as
+symmetric indefinite (``SYM = 2``), a definite one (:func:`factorize_definite`) without pivoting
+(``SYM = 1``), others by LU; AMD or METIS ordering by the matrix's density
+(:func:`ddcm_casadi.mumps.ordering_for`). It is the fastest of the three here from a few
+thousand unknowns (``docs/performance.md``, 2026-11-26), and its Schur complement gives the
+Delassus matrix with the factor (:func:`factorize_with_delassus`).
 
 ``"superlu"`` (always available, no extra dependency): scipy's SuperLU, with the ordering chosen by the
 matrix's pattern. Every matrix this package factorises is a stiffness or the KKT matrix of a
@@ -26,7 +35,7 @@ of iterative refinement are tried, and only then partial pivoting. Matrices of f
 registered when ``pypardiso`` imports. A symmetric matrix is factorised as symmetric indefinite
 (``mtype = -2``, Bunch-Kaufman pivots within supernodes, one factor of the upper triangle), other
 matrices as general (``mtype = 11``). Others can be registered with :func:`register_solver` (a
-CHOLMOD or MUMPS wrapper, say) and selected with :func:`use_solver`.
+CHOLMOD wrapper, say) and selected with :func:`use_solver`.
 
 Symmetric positive definite systems (the reduction's ``K_C``, the reference scales' stiffness) go
 through :func:`factorize_definite`: the selected direct solver by default, or, after
@@ -39,8 +48,8 @@ Low-rank updates of a factor (the active-set solver's, when a few pairs switch p
 
 A factor of a definite ``K`` together with the Delassus matrix ``C K^-1 C^T`` of a few rows ``C``
 (the classical problem's condensation on its contact pairs) is :func:`factorize_with_delassus`:
-PARDISO's Schur complement of ``[[K, C^T], [C, 0]]`` in one partial factorisation where it runs,
-else a factor and back-solves.
+MUMPS's or PARDISO's Schur complement of ``[[K, C^T], [C, 0]]`` in one partial factorisation
+where one runs, else a factor and back-solves.
 """
 
 from __future__ import annotations
@@ -61,6 +70,7 @@ import scipy.sparse.linalg as spla
 
 from ddcm_casadi.errors import InputError
 from ddcm_casadi.heap import release_heap
+from ddcm_casadi.schur import schur_columns
 
 
 #: Bytes per stored material datum and Mandel component (strain and stress, 8 bytes each, about
@@ -420,6 +430,50 @@ def _pardiso(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
     return lu
 
 
+def _mumps_factor(A: sp.spmatrix, symmetric: int, C: sp.spmatrix | None = None) -> Factor:
+    """:class:`~ddcm_casadi.mumps.MumpsFactor`, a singular matrix (``INFOG(1) = -10`` or null
+    pivots) raised as :class:`SingularMatrix`."""
+    from ddcm_casadi import mumps
+
+    try:
+        lu = mumps.MumpsFactor(A, symmetric, C)
+    except mumps.MumpsError as exc:
+        if exc.infog1 == -10:
+            raise SingularMatrix(str(exc)) from None
+        raise
+    if lu.null_pivots:
+        raise SingularMatrix(f"MUMPS: {lu.null_pivots} null pivots (a singular matrix)")
+    return lu
+
+
+def _mumps_definite(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
+    """MUMPS's ``LDL^T`` without pivoting of a symmetric positive definite ``A`` (``SYM = 1``),
+    checked; an indefinite or singular ``A`` raises :class:`SingularMatrix`."""
+    lu = _mumps_factor(A, 1)
+    if not _checked(lu, A, tolerance):
+        raise SingularMatrix("MUMPS (definite): no solve within the backward error (a singular or indefinite matrix)")
+    return lu
+
+
+def _mumps(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
+    # a symmetric matrix as symmetric indefinite (LDL^T, 1x1 and 2x2 pivots: the saddle-point
+    # systems too), others, and a symmetric one whose factor misses its check, by LU
+    if numerically_symmetric(A):
+        try:
+            lu = _mumps_factor(A, 2)
+        except SingularMatrix:
+            lu = None
+        if lu is not None and _checked(lu, A, tolerance):
+            return lu
+    lu = _mumps_factor(A, 0)
+    if not _checked(lu, A, tolerance):
+        refined = _Refined(lu, A)
+        if not _checked(refined, A, tolerance):
+            raise SingularMatrix("MUMPS: no solve within the backward error (a singular or ill-conditioned matrix)")
+        return refined
+    return lu
+
+
 _SOLVERS: dict[str, Callable[[sp.csc_matrix], Factor]] = {"superlu": _superlu}
 #: The library each registered solver loads on first use, by name (none for SuperLU).
 _LIBRARIES: dict[str, str] = {}
@@ -485,14 +539,24 @@ def unregister_solver(name: str) -> None:
 
 if importlib.util.find_spec("pypardiso") is not None:  # optional; imported on first use (it loads MKL)
     register_solver("pardiso", _pardiso, library="pypardiso")
+# CasADi's own MUMPS (ddcm_casadi.mumps): loaded on first use, unavailable where CasADi's build has none
+register_solver("mumps", _mumps, library="ddcm_casadi.mumps")
 
 
-#: Unknowns from which ``"auto"`` factorises a symmetric matrix with PARDISO where it runs
-#: (docs/performance.md, 2026-11-26, issue 28 item 6). At 99 687 unknowns the DDCM full path's
-#: symmetric KKT matrices (PARDISO's symmetric indefinite mode) took 0.85 s an iteration with
-#: PARDISO against 0.61 s with SuperLU (5 factorisations against 3: its updates missed their
-#: tolerance more often); on the Hertz stiffness at 991 936 dofs PARDISO took 14.0 s against
-#: SuperLU's 72.4 s.
+#: Unknowns from which ``"auto"`` factorises with MUMPS (CasADi's, :mod:`ddcm_casadi.mumps`)
+#: where it loads (docs/performance.md, 2026-11-26): on the DDCM projection's KKT matrix (2-D
+#: continuum, one thread) factor and solve took 0.008 s with either at 2 847 unknowns, 0.027 s
+#: against SuperLU's 0.067 s at 9 999 and 0.44 s against SuperLU's 1.32 s and PARDISO's 0.88 s at
+#: 99 687; the Hertz stiffness of 95 266 dofs 0.59 s against 2.0 s and 1.2 s. Below, SuperLU
+#: (no set-up: MUMPS's costs about 0.6 ms a factorisation, which the DDCM runs of bars and trusses
+#: would pay on hundreds of tiny systems).
+MUMPS_MIN_SIZE = 5_000
+#: Unknowns from which ``"auto"`` factorises a symmetric matrix with PARDISO where it runs and
+#: MUMPS does not (docs/performance.md, 2026-11-26, issue 28 item 6). At 99 687 unknowns the DDCM
+#: full path's symmetric KKT matrices (PARDISO's symmetric indefinite mode) took 0.85 s an
+#: iteration with PARDISO against 0.61 s with SuperLU (5 factorisations against 3: its updates
+#: missed their tolerance more often); on the Hertz stiffness at 991 936 dofs PARDISO took 14.0 s
+#: against SuperLU's 72.4 s.
 PARDISO_MIN_SIZE = 200_000
 #: The same for an unsymmetric matrix (PARDISO's LU): the classical FB piece matrix of 95 485
 #: unknowns factorised in 1.5 s against 4.4 s, its solves 0.05 s against 0.10 s. Below about 5e4
@@ -502,11 +566,13 @@ PARDISO_UNSYMMETRIC_MIN_SIZE = 80_000
 
 def chosen_solver(n: int, symmetric: bool = True) -> str:
     """The solver ``"auto"`` uses for a matrix of ``n`` unknowns, numerically symmetric or not
-    (:func:`numerically_symmetric`): ``"pardiso"`` from :data:`PARDISO_MIN_SIZE` unknowns
-    (:data:`PARDISO_UNSYMMETRIC_MIN_SIZE` if unsymmetric) where it is registered and its library
-    loads, else ``"superlu"``."""
+    (:func:`numerically_symmetric`): ``"mumps"`` from :data:`MUMPS_MIN_SIZE` unknowns where it
+    loads; else ``"pardiso"`` from :data:`PARDISO_MIN_SIZE` unknowns
+    (:data:`PARDISO_UNSYMMETRIC_MIN_SIZE` if unsymmetric) where it runs; else ``"superlu"``."""
+    if n >= MUMPS_MIN_SIZE and _runs("mumps"):
+        return "mumps"
     large = n >= (PARDISO_MIN_SIZE if symmetric else PARDISO_UNSYMMETRIC_MIN_SIZE)
-    if large and "pardiso" in _SOLVERS and _check_loads("pardiso") is None:
+    if large and _runs("pardiso"):
         return "pardiso"
     return "superlu"
 
@@ -515,6 +581,11 @@ def _auto(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
     n = A.shape[0]
     symmetric = n >= PARDISO_MIN_SIZE or n < PARDISO_UNSYMMETRIC_MIN_SIZE or numerically_symmetric(A)
     return _SOLVERS[chosen_solver(n, symmetric)](A, tolerance=tolerance)
+
+
+def _runs(name: str) -> bool:
+    """Whether solver ``name`` is registered and its library loads."""
+    return name in _SOLVERS and _check_loads(name) is None
 
 
 register_solver("auto", _auto)
@@ -720,9 +791,15 @@ def factorize(A: sp.spmatrix, *, iterated: bool = False) -> Factor:
     tolerance = ITERATED_BACKWARD_ERROR if iterated else BACKWARD_ERROR
     A = sp.csc_matrix(A)
     solver = _SOLVERS[_ACTIVE[0]]
-    if A.shape[0] >= INTERRUPTIBLE_MIN_SIZE and threading.current_thread() is threading.main_thread():
-        return _interruptible(lambda: solver(A, tolerance=tolerance))
-    return solver(A, tolerance=tolerance)
+    return _made(lambda: solver(A, tolerance=tolerance), A.shape[0])
+
+
+def _made(make: Callable[[], Factor], n: int) -> Factor:
+    """``make()``, in the factorising thread for :data:`INTERRUPTIBLE_MIN_SIZE` unknowns or more
+    when called from the main thread (:func:`factorize`)."""
+    if n >= INTERRUPTIBLE_MIN_SIZE and threading.current_thread() is threading.main_thread():
+        return _interruptible(make)
+    return make()
 
 
 # ---------------------------------------------------------------------- definite systems
@@ -825,6 +902,9 @@ def factorize_definite(A: sp.spmatrix, *, near_null: np.ndarray | None = None) -
     solver). Raises :class:`SingularMatrix`."""
     if _DEFINITE[0] == "amg":
         return AMGFactor(A, near_null)
+    A = sp.csc_matrix(A)
+    if _ACTIVE[0] == "mumps" or (_ACTIVE[0] == "auto" and chosen_solver(A.shape[0]) == "mumps"):
+        return _made(lambda: _mumps_definite(A), A.shape[0])  # no pivoting: the ordering's fill alone
     return factorize(A)
 
 
@@ -898,13 +978,8 @@ class _PardisoSchur:
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """``A^-1 rhs`` (a vector or ``n x k`` columns)."""
-        b = np.asarray(rhs, dtype=float)
-        if b.shape[0] != self.n:
-            raise InputError(f"right-hand side of {b.shape[0]} rows for a matrix of {self.n}")
-        cols = b.reshape(self.n, -1)
-        k = cols.shape[1]
-        y = np.zeros((self.n + self.nc, k), order="F")
-        y[:self.n] = cols
+        b, y = schur_columns(rhs, self.n, self.nc)
+        k = y.shape[1]
         z = np.zeros_like(y)
         for phase in (331, 332, 333):
             self._call(phase, y, z, k)
@@ -918,25 +993,33 @@ class _PardisoSchur:
             self._call(-1, np.zeros(1), np.zeros(1))
 
 
-#: Unknowns from which :func:`factorize_with_delassus` takes PARDISO's Schur complement where
-#: PARDISO runs: below, a factor and back-solves cost little either way (the Hertz body of 9 870
-#: dofs and 71 pairs: SuperLU and 71 back-solves 0.21 s, PARDISO's Schur complement 0.31 s, MKL's
-#: start-up included). Above it the classical condensation needs the Schur complement
-#: (:func:`~ddcm_casadi.problems.reduction.classical_refusal`).
+#: Unknowns from which ``"auto"`` has :func:`factorize_with_delassus` take a Schur complement
+#: (MUMPS's, else PARDISO's): below, a factor and back-solves cost little either way (the Hertz
+#: body of 9 870 dofs and 71 pairs: SuperLU and 71 back-solves 0.21 s, PARDISO's Schur
+#: complement 0.31 s, MKL's start-up included). Above it the classical condensation needs a Schur
+#: complement (:func:`~ddcm_casadi.problems.reduction.classical_refusal`).
 SCHUR_MIN_SIZE = 20_000
+#: The solvers whose :func:`factorize_with_delassus` is a Schur complement (one elimination).
+SCHUR_SOLVERS = ("mumps", "pardiso")
 
 
 def delassus_solver(n: int) -> str:
-    """How :func:`factorize_with_delassus` treats a matrix of ``n`` unknowns: ``"pardiso"`` (the
-    Schur complement) where PARDISO is selected, or ``"auto"`` from :data:`SCHUR_MIN_SIZE`
-    unknowns where it runs, with the direct definite solver; else the definite solver's
-    factor and back-solves (``"superlu"``, the selected solver, or ``"amg"``)."""
+    """How :func:`factorize_with_delassus` treats a matrix of ``n`` unknowns: a Schur complement
+    (:data:`SCHUR_SOLVERS`) where MUMPS or PARDISO is selected, or with ``"auto"`` MUMPS's from
+    :data:`MUMPS_MIN_SIZE` unknowns where it loads, else PARDISO's from :data:`SCHUR_MIN_SIZE`
+    where it runs, with the direct definite solver; else the definite solver's factor and
+    back-solves (``"superlu"``, the selected solver, or ``"amg"``). MUMPS first: on the Hertz
+    stiffness of 95 266 dofs and 219 pairs its Schur complement (AMD ordering) took 0.50-0.66 s
+    with the factor, PARDISO's 0.92-1.03 s (``docs/performance.md``, 2026-11-26)."""
     if _DEFINITE[0] != "direct":
         return _DEFINITE[0]
-    if (_ACTIVE[0] == "pardiso" or (_ACTIVE[0] == "auto" and n >= SCHUR_MIN_SIZE)) and "pardiso" in _SOLVERS \
-            and _check_loads("pardiso") is None:
-        return "pardiso"
-    return "superlu" if _ACTIVE[0] == "auto" else _ACTIVE[0]
+    if _ACTIVE[0] in SCHUR_SOLVERS and _runs(_ACTIVE[0]):
+        return _ACTIVE[0]
+    if _ACTIVE[0] != "auto":
+        return _ACTIVE[0]
+    if n >= MUMPS_MIN_SIZE and _runs("mumps"):
+        return "mumps"
+    return "pardiso" if n >= SCHUR_MIN_SIZE and _runs("pardiso") else "superlu"
 
 
 def factorize_with_delassus(A: sp.spmatrix, C: sp.spmatrix, *, near_null: np.ndarray | None = None
@@ -944,20 +1027,29 @@ def factorize_with_delassus(A: sp.spmatrix, C: sp.spmatrix, *, near_null: np.nda
     r"""A kept solver of the symmetric positive definite ``A`` and the Delassus matrix
     ``D = C A^-1 C^T`` (dense, ``nc x nc``, symmetrised) of the few rows ``C``.
 
-    With PARDISO (selected, or ``"auto"`` from :data:`SCHUR_MIN_SIZE` unknowns where it runs) and
-    the direct definite solver: one partial factorisation of ``[[A, C^T], [C, 0]]`` gives both
-    (:class:`_PardisoSchur`). Otherwise :func:`factorize_definite` and ``nc`` back-solves, by
+    With MUMPS or PARDISO (selected, or ``"auto"`` from :data:`SCHUR_MIN_SIZE` unknowns where one
+    runs, :func:`delassus_solver`) and the direct definite solver: one partial factorisation of
+    ``[[A, C^T], [C, 0]]`` gives both (:class:`~ddcm_casadi.mumps.MumpsFactor`,
+    :class:`_PardisoSchur`). Otherwise :func:`factorize_definite` and ``nc`` back-solves, by
     :data:`SOLVE_BLOCK`. Raises :class:`SingularMatrix`.
     """
     A, C = sp.csc_matrix(A), sp.csr_matrix(C)
-    if C.shape[0] and delassus_solver(A.shape[0]) == "pardiso":
+    how = delassus_solver(A.shape[0]) if C.shape[0] else ""
+    if how in SCHUR_SOLVERS:
         def make() -> Factor:
+            if how == "mumps":
+                # A definite: LDL^T without pivoting (SYM = 1), the ordering's fill alone
+                factor = _mumps_factor(A, 1, C)
+                if not _checked(factor, A):
+                    raise SingularMatrix("MUMPS (Schur complement): no solve within the backward error "
+                                         "(a singular or indefinite matrix)")
+                return factor
             factor = _PardisoSchur(A, C)
             if not _checked(factor, A) or (factor.perturbed and not _solves_generic(factor, A)):
                 raise SingularMatrix(f"PARDISO (Schur complement): {factor.perturbed} perturbed pivots "
                                      "and no accurate solve (a singular matrix)")
             return factor
-        factor = _interruptible(make) if threading.current_thread() is threading.main_thread() else make()
+        factor = _made(make, INTERRUPTIBLE_MIN_SIZE)
         return factor, factor.schur
     factor = factorize_definite(A, near_null=near_null)
     D = np.empty((C.shape[0], C.shape[0]))

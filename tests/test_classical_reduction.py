@@ -79,7 +79,7 @@ def test_the_path_is_reported_and_can_be_switched_off():
 
 def test_large_problems_need_the_schur_complement(monkeypatch):
     """Above ``SCHUR_MIN_SIZE`` unknowns, ``nc`` back-solves with SuperLU cost more than the full
-    path: without PARDISO's Schur complement the full path is kept, and says why."""
+    path: without a Schur complement (MUMPS's or PARDISO's) the full path is kept, and says why."""
     import ddcm_casadi.models.stiffness as stiffness
 
     problems = build_problems(MODELS["continuum"]())
@@ -90,7 +90,7 @@ def test_large_problems_need_the_schur_complement(monkeypatch):
         why = classical_refusal(problems.classical)
     finally:
         linalg.use_solver(previous)
-    assert why.startswith(f"{problems.classical.n_x} unknowns without PARDISO's Schur complement")
+    assert why.startswith(f"{problems.classical.n_x} unknowns without a Schur complement")
 
 
 def test_finite_kinematics_keep_the_full_path():
@@ -116,23 +116,23 @@ def test_a_body_held_only_by_its_contacts_keeps_the_full_path():
 
 
 @pytest.mark.parametrize("storage", ["csc", "csr"])
-def test_pardiso_schur_complement_is_the_back_solved_delassus_matrix(storage):
-    """PARDISO's Schur complement of ``[[K, G^T], [G, 0]]`` and its solves with ``K`` alone (the
-    Schur part zeroed between the substitutions) against SuperLU's factor and back-solves: equal
-    to round-off, ``cond(K) eps`` relative at most (``cond(K)`` of a few-hundred-dof continuum:
-    below 1e6), with ``K`` stored either way (CSC is read as its transpose's CSR); each solve's
-    backward error at most ``linalg.BACKWARD_ERROR``, the bound the factor is checked to."""
-    pytest.importorskip("pypardiso")
-    if "pardiso" not in linalg.available_solvers():
-        pytest.skip("PARDISO does not load here")
+@pytest.mark.parametrize("solver", linalg.SCHUR_SOLVERS)
+def test_schur_complement_is_the_back_solved_delassus_matrix(solver, storage):
+    """MUMPS's and PARDISO's Schur complement of ``[[K, G^T], [G, 0]]`` and their solves with
+    ``K`` alone (the Schur part zeroed) against SuperLU's factor and back-solves: equal to
+    round-off, ``cond(K) eps`` relative at most (``cond(K)`` of a few-hundred-dof continuum:
+    below 1e6), with ``K`` stored either way; each solve's backward error at most
+    ``linalg.BACKWARD_ERROR``, the bound the factor is checked to."""
+    if solver not in linalg.available_solvers():
+        pytest.skip(f"{solver} does not load here: {linalg.unavailable_solvers().get(solver, 'not installed')}")
     model = MODELS["continuum"]()
     K, G = sp.csc_matrix(model.stiffness()), sp.csr_matrix(model.gap_operator)
     previous = linalg.solver_name()
     try:
         linalg.use_solver("superlu")
         lu, D = linalg.factorize_with_delassus(K, G)
-        linalg.use_solver("pardiso")
-        assert linalg.delassus_solver(K.shape[0]) == "pardiso"
+        linalg.use_solver(solver)
+        assert linalg.delassus_solver(K.shape[0]) == solver
         schur, S = linalg.factorize_with_delassus(K.asformat(storage), G)
     finally:
         linalg.use_solver(previous)

@@ -119,22 +119,27 @@ def test_singular_matrix_raises(solver, rows):
         linalg.factorize(sp.csc_matrix(np.array(rows)))
 
 
-def test_auto_chooses_superlu_below_the_pardiso_size():
-    """The default ``"auto"`` factorises small matrices with SuperLU, always available, and large
-    ones (smaller if unsymmetric) with PARDISO where it runs."""
+def test_auto_chooses_by_size():
+    """The default ``"auto"`` factorises small matrices with SuperLU (no set-up), larger ones with
+    MUMPS where it loads (CasADi ships it), else the largest (smaller if unsymmetric) with PARDISO
+    where it runs; the Delassus matrix likewise, PARDISO's Schur complement from its own size."""
     assert linalg.solver_name() == "auto"
-    assert linalg.chosen_solver(linalg.PARDISO_MIN_SIZE - 1) == "superlu"
-    assert linalg.chosen_solver(linalg.PARDISO_UNSYMMETRIC_MIN_SIZE - 1, symmetric=False) == "superlu"
-    expected = "pardiso" if "pardiso" in linalg.available_solvers() else "superlu"
-    assert linalg.chosen_solver(linalg.PARDISO_MIN_SIZE) == expected
-    assert linalg.chosen_solver(linalg.PARDISO_UNSYMMETRIC_MIN_SIZE, symmetric=False) == expected
+    mumps = "mumps" in linalg.available_solvers()
+    pardiso = "pardiso" in linalg.available_solvers()
+    assert linalg.chosen_solver(linalg.MUMPS_MIN_SIZE - 1) == "superlu"
+    assert linalg.chosen_solver(linalg.MUMPS_MIN_SIZE) == ("mumps" if mumps else "superlu")
+    large = "mumps" if mumps else "pardiso" if pardiso else "superlu"
+    assert linalg.chosen_solver(linalg.PARDISO_MIN_SIZE) == large
+    assert linalg.chosen_solver(linalg.PARDISO_UNSYMMETRIC_MIN_SIZE, symmetric=False) == large
+    assert linalg.delassus_solver(linalg.MUMPS_MIN_SIZE - 1) == "superlu"
+    assert linalg.delassus_solver(linalg.SCHUR_MIN_SIZE) == large
 
 
 def test_unknown_solver_is_an_input_error():
     from ddcm_casadi.errors import InputError
 
-    with pytest.raises(InputError, match="unknown linear solver 'mumps'"):
-        linalg.use_solver("mumps")
+    with pytest.raises(InputError, match="unknown linear solver 'nosuch'"):
+        linalg.use_solver("nosuch")
 
 
 def _switched(A: sp.csc_matrix, rows) -> sp.csc_matrix:

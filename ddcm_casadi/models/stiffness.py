@@ -31,7 +31,7 @@ import scipy.sparse as sp
 
 from ddcm_casadi.heap import release_heap
 from ddcm_casadi.linalg import (
-    BACKWARD_ERROR, SCHUR_MIN_SIZE, Factor, backward_error, definite_solver_name, delassus_solver,
+    BACKWARD_ERROR, SCHUR_MIN_SIZE, SCHUR_SOLVERS, Factor, backward_error, definite_solver_name, delassus_solver,
     factorize_with_delassus, solver_name,
 )
 
@@ -47,18 +47,18 @@ def condensation_size_refusal(n: int, n_pairs: int, max_pairs: int | None = None
     """Why a classical problem of ``n`` unknowns and ``n_pairs`` Signorini pairs is not condensed
     for its sizes (one line), or ``""``: 1 to ``max_pairs`` pairs (default
     :data:`MAX_CLASSICAL_PAIRS`) and, above :data:`~ddcm_casadi.linalg.SCHUR_MIN_SIZE` unknowns,
-    PARDISO's Schur complement for ``D`` (:func:`~ddcm_casadi.linalg.delassus_solver`): its
+    a Schur complement for ``D`` (MUMPS's or PARDISO's, :func:`~ddcm_casadi.linalg.delassus_solver`):
     ``nc`` back-solves with SuperLU cost more than the full path (measured on the Hertz body of
     95 266 dofs, 219 pairs: 15.4 s for the factor and back-solves, where the full path took 6.6 s;
-    PARDISO's Schur complement 0.9 s)."""
+    PARDISO's Schur complement 0.9 s, MUMPS's 0.5-0.7 s)."""
     max_pairs = MAX_CLASSICAL_PAIRS if max_pairs is None else max_pairs
     if not n_pairs:
         return "no contact pairs (nothing to condense)"
     if n_pairs > max_pairs:
         return f"{n_pairs} contact pairs (the condensed problem is assembled up to {max_pairs})"
-    if n > SCHUR_MIN_SIZE and delassus_solver(n) != "pardiso":
-        return (f"{n} unknowns without PARDISO's Schur complement ({n_pairs} back-solves would cost "
-                "more than the full path's factorisation)")
+    if n > SCHUR_MIN_SIZE and delassus_solver(n) not in SCHUR_SOLVERS:
+        return (f"{n} unknowns without a Schur complement (MUMPS or PARDISO; {n_pairs} back-solves would "
+                "cost more than the full path's factorisation)")
     return ""
 
 

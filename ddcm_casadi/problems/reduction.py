@@ -454,7 +454,7 @@ def classical_refusal(problem: ComplementarityProblem, *, max_pairs: int | None 
     displacements ``u`` alone with a symmetric ``K``, gaps in ``u`` alone, contact forces
     ``-R_p p = G^T diag(r) p`` (Signorini pairs, no friction), and sizes it is made for
     (:func:`~ddcm_casadi.models.stiffness.condensation_size_refusal`: 1 to ``max_pairs`` pairs,
-    default :data:`MAX_CLASSICAL_PAIRS`, and PARDISO's Schur complement above
+    default :data:`MAX_CLASSICAL_PAIRS`, and a Schur complement (MUMPS's or PARDISO's) above
     :data:`~ddcm_casadi.linalg.SCHUR_MIN_SIZE` unknowns)."""
     if problem.kind != "mcp":
         return "not a classical problem"
@@ -498,7 +498,7 @@ class ClassicalReduction:
     (:attr:`condensed`, a classical problem in the unknowns ``w``, so every formulation solves it
     unchanged). ``u`` follows by one solve with the kept factor of ``K``
     (:meth:`recover`). ``K`` is factorised once and ``D_u`` assembled with it
-    (:func:`~ddcm_casadi.linalg.factorize_with_delassus`: PARDISO's Schur complement, or ``nc``
+    (:func:`~ddcm_casadi.linalg.factorize_with_delassus`: MUMPS's or PARDISO's Schur complement, or ``nc``
     back-solves); nothing of size ``n x nc`` is kept.
 
     Parameters
