@@ -446,12 +446,14 @@ def _mumps_factor(A: sp.spmatrix, symmetric: int, C: sp.spmatrix | None = None) 
     return lu
 
 
-def _mumps_definite(A: sp.csc_matrix, *, tolerance: float = BACKWARD_ERROR) -> Factor:
+def _mumps_definite(A: sp.csc_matrix, C: sp.spmatrix | None = None) -> Factor:
     """MUMPS's ``LDL^T`` without pivoting of a symmetric positive definite ``A`` (``SYM = 1``),
-    checked; an indefinite or singular ``A`` raises :class:`SingularMatrix`."""
-    lu = _mumps_factor(A, 1)
-    if not _checked(lu, A, tolerance):
-        raise SingularMatrix("MUMPS (definite): no solve within the backward error (a singular or indefinite matrix)")
+    with the Schur complement of the rows ``C`` if given. Positive pivots alone make it as
+    backward stable as Cholesky's, so no solve is checked (0.1 s of 0.55 s at 95 266 dofs); a
+    negative or null pivot (an indefinite or singular ``A``) raises :class:`SingularMatrix`."""
+    lu = _mumps_factor(A, 1, C)
+    if lu.negative_pivots:
+        raise SingularMatrix(f"MUMPS: {lu.negative_pivots} negative pivots (the matrix is not positive definite)")
     return lu
 
 
@@ -1038,12 +1040,7 @@ def factorize_with_delassus(A: sp.spmatrix, C: sp.spmatrix, *, near_null: np.nda
     if how in SCHUR_SOLVERS:
         def make() -> Factor:
             if how == "mumps":
-                # A definite: LDL^T without pivoting (SYM = 1), the ordering's fill alone
-                factor = _mumps_factor(A, 1, C)
-                if not _checked(factor, A):
-                    raise SingularMatrix("MUMPS (Schur complement): no solve within the backward error "
-                                         "(a singular or indefinite matrix)")
-                return factor
+                return _mumps_definite(A, C)  # A definite: no pivoting, the ordering's fill alone
             factor = _PardisoSchur(A, C)
             if not _checked(factor, A) or (factor.perturbed and not _solves_generic(factor, A)):
                 raise SingularMatrix(f"PARDISO (Schur complement): {factor.perturbed} perturbed pivots "

@@ -197,6 +197,9 @@ class MumpsFactor:
         ``L``'s, as SuperLU and PARDISO count).
     null_pivots : int
         Pivots MUMPS found null (``INFOG(28)``, with null pivot detection on): a singular ``A``.
+    negative_pivots : int
+        Negative pivots of a symmetric factor (``INFOG(12)``): with ``symmetric = 1``, none means
+        ``A`` is positive definite and the factor as backward stable as Cholesky's.
     schur : ndarray or None
         ``C A^-1 C^T`` (dense ``nc x nc``) where ``C`` was given.
 
@@ -259,6 +262,7 @@ class MumpsFactor:
         s.listvar_schur, s.schur = ctypes.POINTER(_INT)(), ctypes.POINTER(ctypes.c_double)()
         del irn, jcn, a
         self.null_pivots = int(s.infog[27])
+        self.negative_pivots = int(s.infog[11]) if symmetric else 0
         entries = int(s.infog[28])
         self.nnz = (-entries * 10**6 if entries < 0 else entries) * (2 if symmetric else 1)
         if schur is not None:

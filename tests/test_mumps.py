@@ -111,6 +111,23 @@ def test_a_singular_matrix_shows_its_null_pivots(symmetric):
     assert lu.null_pivots == 1
 
 
+def test_an_indefinite_matrix_shows_its_negative_pivots():
+    """``SYM = 1`` counts negative pivots (``INFOG(12)``): the definite path of
+    :mod:`ddcm_casadi.linalg` refuses the factor rather than check a solve."""
+    indefinite = sp.csc_matrix(np.array([[1.0, 2.0], [2.0, 1.0]]))  # eigenvalues 3 and -1
+    assert mumps.MumpsFactor(indefinite, 1).negative_pivots == 1
+    assert mumps.MumpsFactor(laplacian(5), 1).negative_pivots == 0
+    previous = linalg.solver_name()
+    linalg.use_solver("mumps")
+    try:
+        with pytest.raises(linalg.SingularMatrix, match="1 negative pivots"):
+            linalg.factorize_definite(indefinite)
+        with pytest.raises(linalg.SingularMatrix, match="1 negative pivots"):
+            linalg.factorize_with_delassus(indefinite, sp.csr_matrix(np.array([[1.0, 0.0]])))
+    finally:
+        linalg.use_solver(previous)
+
+
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux's resident memory")
 def test_factors_are_freed_with_their_objects():
     """30 factors of a 40 000-unknown Laplacian (each ``nnz`` about 4.5e6 entries, 36 MB) made
