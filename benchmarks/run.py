@@ -1058,9 +1058,9 @@ def main(argv=None) -> int:
         for rec in in_fresh_process("stiffness_solvers", u, 1 if u > 10**5 else rep,
                                     label=f"stiffness solvers, 2-D continuum, about {u:.0e} unknowns", unknowns=u):
             log(rec)
-        # PARDISO where pypardiso loads, up to 1e5 unknowns: at 1e6 its DDCM run went past 24 GB
-        # (killed), where SuperLU's peaked at 14.4 GB.
-        for solver in ("superlu", "pardiso") if u <= 10**5 else ("superlu",):
+        # PARDISO where pypardiso loads, and MUMPS, up to 1e5 unknowns: at 1e6 PARDISO's DDCM run
+        # went past 24 GB (killed), where SuperLU's peaked at 14.4 GB.
+        for solver in ("superlu", "pardiso", "mumps") if u <= 10**5 else ("superlu",):
             if solver in linalg.available_solvers():
                 for rec in in_fresh_process("continuum_record", u, 1, solver, unknowns=u,
                                             label=f"DDCM iteration, 2-D continuum, about {u:.0e} unknowns, {solver}"):
@@ -1085,8 +1085,10 @@ def main(argv=None) -> int:
     # more than 10 minutes and 7 GB at 1e5: up to 1e4. --quick: 1e5 by AMG alone, without contact.
     have_amg = importlib.util.find_spec("pyamg") is not None
     for dofs in ((10**4, 10**5) if quick else (10**4, 10**5, 5 * 10**5)):
-        solvers = [s for s in ("superlu", "pardiso") if s in linalg.available_solvers()
-                   and dofs <= (10**4 if s == "superlu" or quick else 10**5)] + (["amg"] if have_amg else [])
+        # MUMPS (METIS) up to 1e5 in both runs: 10 s and 1.3 GB of factor at 9.3e4 dofs
+        solvers = [s for s in ("superlu", "pardiso", "mumps") if s in linalg.available_solvers()
+                   and dofs <= (10**4 if s == "superlu" or (quick and s == "pardiso") else 10**5)] \
+            + (["amg"] if have_amg else [])
         for solver in solvers:
             for rec in in_fresh_process("stiffness_solver_3d", dofs, solver, 1 if dofs > 10**4 else rep,
                                         label=f"K_C set-up and solve pair, 3-D block, about {dofs:.0e} dofs, {solver}",
