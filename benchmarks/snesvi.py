@@ -22,8 +22,9 @@ ours with the Delassus matrix (what the condensed solve needs; issue 28's target
 MUMPS's factorisation). Every process runs with one thread (:data:`THREADS`).
 ``benchmarks/run.py`` takes one size at a time as a record (:func:`peer_record`).
 
-``--full`` needs about 11 GB a process (PARDISO; SuperLU did not fit under a 16 GB address-space
-cap at 1e6): run it under the machine's memory lock. Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
+``--full`` needs about 3.3 GB a process at 1e6 with MUMPS (the default from 5e3 unknowns) or
+PARDISO (SuperLU did not fit under a 16 GB address-space cap): run it under the machine's memory
+lock. Without the peer's Python (``--peer-python``, default ``$DDCM_PETSC_PYTHON`` or
 ``/work/venv-petsc/bin/python``) it prints one line and exits 0. Writes ``DIR/snesvi.json`` and
 ``DIR/snesvi.md``.
 """

@@ -325,3 +325,46 @@ def test_long_lists_of_steps_are_summarised_with_distinct_values():
     few = Comparison(model=short, problems=build_problems(short), formulations=cmp.formulations,
                      results={("ddcm", FB): PathResult("ddcm", FB, steps=kept)})
     assert "local minimum at h=0.990005, 0.990006, 0.990007" in few.table()
+
+
+def test_remembered_neighbourhoods_are_the_computed_ones(monkeypatch):
+    """Many points' neighbourhoods are remembered datum by datum: a second call, a call with some
+    new data and a call past the memory's bound (emptied and computed afresh) give what
+    :func:`neighbourhood` computes, point by point."""
+    from ddcm_casadi.data import extrapolation
+
+    D = isotropic_elasticity(E, 0.3, 2)[0]
+    data = MaterialDataset.hookean_grid(D, -0.01, 0.01, 9, c=D)
+    cov = DataCoverage(data, 1)
+    rng = np.random.default_rng(7)
+    for bound in (10**6, 150):
+        monkeypatch.setattr(extrapolation, "_REMEMBERED_DATA", bound)
+        for size in (100, 300, 300):
+            index = rng.integers(0, len(data), size)
+            h, tangent = cov._neighbourhood(0, data, index)
+            h_direct, t_direct = neighbourhood(data, index)
+            assert np.array_equal(h, h_direct) and np.array_equal(tangent, t_direct)
+        assert cov._data_neighbourhoods[0][0].size <= max(bound, 300)
+
+
+def test_the_check_takes_the_runs_own_search():
+    """Given the datum nearest each state (what the run's last search found), the check agrees
+    with its own search; a plain DDCM run hands the step's checks that search only for the
+    states it searched."""
+    data = MaterialDataset.hookean(E, -0.005, 0.005, 200, c=E)
+    cov = DataCoverage(data, 3)
+    e = np.array([-0.004, 0.0049, 0.0071])
+    s = E * e
+    nearest = data.nearest(e, s)
+    for own, given in zip(cov.check(e, s), cov.check(e, s, nearest)):
+        assert np.array_equal(own, given)
+    from ddcm_casadi.drivers.nearest_datum import NearestDatum
+
+    model, _ = _beyond_bar()
+    scheme = NearestDatum(model, DDCMOptions())
+    m = model.n_points
+    scheme.begin(scheme.states(np.zeros(m, dtype=np.intp)))
+    strain, stress = np.full(m, -0.001), np.full(m, -0.001 * E)
+    scheme.update(strain, stress)
+    assert np.array_equal(scheme.nearest_index(strain.copy(), stress.copy()), model.dataset.nearest(strain, stress))
+    assert scheme.nearest_index(strain + 1e-6, stress) is None

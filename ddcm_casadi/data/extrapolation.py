@@ -84,6 +84,9 @@ _FEW = 64
 #: at 1e5 two-dimensional points) are then bounded, not proportional to the body.
 CHUNK = 16384
 _REMEMBERED = 4096
+#: Data of a set whose neighbourhoods :meth:`DataCoverage._neighbourhood` keeps, datum by datum
+#: (a spacing and a ``k x 2k`` tangent space each: 150 bytes in 2-D, 15 MB at this bound).
+_REMEMBERED_DATA = 100_000
 
 
 class DataCoverage:
@@ -109,11 +112,12 @@ class DataCoverage:
         self.search = search
         self._boxes = [d.box for d in dataset.datasets]  # in scaled coordinates
         self._neighbourhoods: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        self._data_neighbourhoods: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     def _per_point(self, a) -> np.ndarray:
         return np.asarray(a, dtype=float).reshape((-1,) if self.k == 1 else (-1, self.k))
 
-    def check(self, strain, stress) -> tuple[np.ndarray, np.ndarray]:
+    def check(self, strain, stress, nearest=None) -> tuple[np.ndarray, np.ndarray]:
         """Which material points are beyond the data, and how far each is from it.
 
         Parameters
@@ -121,6 +125,9 @@ class DataCoverage:
         strain, stress : array_like
             The states of every material point (flat and point-major, ``m k`` values, as
             :meth:`~ddcm_casadi.problems.build.ProblemPair.fields` gives them).
+        nearest : (m,) int, optional
+            The datum nearest each state (global indices), where the caller has searched them
+            already; else they are searched here.
 
         Returns
         -------
@@ -133,9 +140,11 @@ class DataCoverage:
         strain, stress = self._per_point(strain), self._per_point(stress)
         beyond = np.zeros(self.n_points, dtype=bool)
         spacings = np.full(self.n_points, np.nan)
+        offsets = np.asarray(self.dataset.offsets, dtype=np.intp)
         for s, d in enumerate(self.dataset.datasets):
             for pts in self._finite_points(s, strain, stress):
-                beyond[pts], spacings[pts] = self._check_set(s, d, strain[pts], stress[pts])
+                j = None if nearest is None else np.asarray(nearest, dtype=np.intp)[pts] - offsets[s]
+                beyond[pts], spacings[pts] = self._check_set(s, d, strain[pts], stress[pts], j)
         return beyond, spacings
 
     def _finite_points(self, s: int, strain: np.ndarray, stress: np.ndarray):
@@ -147,9 +156,11 @@ class DataCoverage:
             if pts.size:
                 yield pts
 
-    def _check_set(self, s: int, d, strain: np.ndarray, stress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _check_set(self, s: int, d, strain: np.ndarray, stress: np.ndarray,
+                   j: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self._boxes[s]
-        j = d.nearest(strain, stress, search=self.search)
+        if j is None:
+            j = d.nearest(strain, stress, search=self.search)
         X = d.metric.coordinates(strain, stress)
         h, tangent = self._neighbourhood(s, d, j)
         along = np.linalg.norm(np.einsum("mij,mj->mi", tangent, X - d.metric.coordinates(d.strain[j], d.stress[j])),
@@ -211,11 +222,14 @@ class DataCoverage:
         return share, spread, spacings
 
     def _neighbourhood(self, s: int, d, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`neighbourhood` of the data ``index`` of set ``s``, remembered for few data."""
+        """:func:`neighbourhood` of the data ``index`` of set ``s``, remembered: for few data by
+        the set of them, for many datum by datum (up to :data:`_REMEMBERED_DATA` data)."""
         if index.size > _FEW:
-            # many points share their nearest datum (on a continuum, most do): each datum once
+            # many points share their nearest datum (on a continuum, most do): each datum once,
+            # and once a run (a step's check and its coarseness ask for the same data, the next
+            # step for most of them again: 0.13 s of a 1e5-point path's 0.29 s of checks)
             unique, inverse = np.unique(index, return_inverse=True)
-            h, tangent = neighbourhood(d, unique, self.search)
+            h, tangent = self._remembered(s, d, unique)
             return h[inverse], tangent[inverse]
         key = (s, index.tobytes())
         hit = self._neighbourhoods.get(key)
@@ -224,6 +238,34 @@ class DataCoverage:
             if len(self._neighbourhoods) < _REMEMBERED:
                 self._neighbourhoods[key] = hit
         return hit
+
+
+    def _remembered(self, s: int, d, unique: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`neighbourhood` of the sorted distinct data ``unique`` of set ``s``: those met
+        before from memory, the others computed and added to it (all of ``unique`` afresh where
+        the memory would pass :data:`_REMEMBERED_DATA` data)."""
+        remembered = self._data_neighbourhoods.get(s)
+        if remembered is not None:
+            known, h, tangent = remembered
+            at = np.minimum(np.searchsorted(known, unique), known.size - 1)
+            new = unique[known[at] != unique]
+            if not new.size:
+                return h[at], tangent[at]
+            if known.size + new.size > _REMEMBERED_DATA:
+                remembered, new = None, unique
+        else:
+            new = unique
+        h_new, t_new = neighbourhood(d, new, self.search)
+        if remembered is None:
+            known, h, tangent = new, h_new, t_new
+        else:
+            known, h, tangent = remembered
+            order = np.argsort(np.concatenate([known, new]), kind="stable")
+            known = np.concatenate([known, new])[order]
+            h, tangent = np.concatenate([h, h_new])[order], np.concatenate([tangent, t_new])[order]
+        self._data_neighbourhoods[s] = (known, h, tangent)
+        at = np.searchsorted(known, unique)
+        return h[at], tangent[at]
 
 
 def neighbourhood(d, index: np.ndarray, search: str = "kdtree") -> tuple[np.ndarray, np.ndarray]:

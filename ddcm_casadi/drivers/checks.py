@@ -160,7 +160,8 @@ def equilibrium_error(step: StepResult, model, force_floor: float = 0.0, load: n
 
 
 def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | None = None,
-                coverage=None, load: np.ndarray | None = None) -> None:
+                coverage=None, load: np.ndarray | None = None,
+                nearest: np.ndarray | None = None) -> None:
     """What every driver does to a step before reporting it, in place: :func:`clip_roundoff`,
     :func:`physical_check` (a failure makes a converged step not converged and says why in its
     message; so does a true equilibrium error, :func:`equilibrium_error`, above :data:`PHYSICAL_TOL`,
@@ -168,7 +169,9 @@ def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | 
     an inverted element at finite strain)
     and, with a :class:`~ddcm_casadi.data.extrapolation.DataCoverage`, the count of states
     beyond the data (``extrapolated``, ``data_spacings``: a flag, not a failure). ``load``: the
-    step's ``f`` when it is not the model's (a sub-step's, :mod:`~ddcm_casadi.drivers.substeps`)."""
+    step's ``f`` when it is not the model's (a sub-step's, :mod:`~ddcm_casadi.drivers.substeps`).
+    ``nearest``: the datum nearest each of the step's states where the run already searched them
+    (:meth:`~ddcm_casadi.drivers.scheme.MaterialScheme.nearest_index`)."""
     clip_roundoff(step, problem)
     failure = physical_check(step, problem, model.length_scale, penalty_stiffness=penalty_stiffness)
     error = (equilibrium_error(step, model, EQUILIBRIUM_FLOOR * _force_scale(problem, model), load)
@@ -185,7 +188,7 @@ def finish_step(step: StepResult, problem, model, *, penalty_stiffness: float | 
         step.converged = False
         step.message = f"{step.message}, but {failure}" if step.message else failure
     if coverage is not None and step.strain is not None:
-        beyond, spacings = coverage.check(step.strain, step.stress)
+        beyond, spacings = coverage.check(step.strain, step.stress, nearest)
         step.extrapolated = int(np.sum(beyond))
         finite = spacings[np.isfinite(spacings)]
         step.data_spacings = float(np.max(finite)) if finite.size else float("nan")

@@ -404,9 +404,10 @@ class DDCMSolver:
         stiffness and data range, then how coarse the data are for the step's states
         (:meth:`~ddcm_casadi.data.extrapolation.DataCoverage.coarseness`, a flag). ``load``: the
         step's ``f`` when it is a sub-step's (:mod:`~ddcm_casadi.drivers.substeps`)."""
+        nearest = None if step.strain is None else self.scheme.nearest_index(step.strain, step.stress)
         finish_step(step, self.problems.projection, self.problems.model,
                     penalty_stiffness=getattr(self.built, "penalty_stiffness", None), coverage=self.coverage,
-                    load=load)
+                    load=load, nearest=nearest)
         if step.data_index is not None and step.strain is not None:  # how coarse the data are here
             step.datum_share, step.datum_spread, step.state_spacings = self.coverage.coarseness(
                 step.strain, step.stress, step.data_index)

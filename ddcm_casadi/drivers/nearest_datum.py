@@ -28,6 +28,7 @@ class NearestDatum(MaterialScheme):
         self.stats: dict = {}
         self._index: np.ndarray | None = None
         self._seen: set[bytes] = set()
+        self._searched: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def begin(self, start: MaterialStates) -> None:
         self._index = start.index
@@ -36,6 +37,7 @@ class NearestDatum(MaterialScheme):
     def update(self, strain, stress) -> Update:
         new = self.model.dataset.nearest(strain, stress, search=self.options.search, previous=self._index,
                                          stats=self.stats)
+        self._searched = (strain, stress, new)
         if np.array_equal(new, self._index):
             return Update(self.states(self._index), done=True, converged=True, message="fixed point")
         key = new.tobytes()
@@ -44,6 +46,16 @@ class NearestDatum(MaterialScheme):
             return Update(self.states(new), done=True, message="data assignment cycles")
         self._seen.add(key)
         return Update(self.states(new))
+
+    def nearest_index(self, strain, stress) -> np.ndarray | None:
+        # the last update's search, if it was of these states (the step's last projection: at a
+        # fixed point the step's checks would search them again, 0.15 s of 1.6 s at 1e5 points)
+        if self._searched is None:
+            return None
+        searched_strain, searched_stress, index = self._searched
+        if np.array_equal(searched_strain, strain) and np.array_equal(searched_stress, stress):
+            return index
+        return None
 
     def distance2(self, strain, stress, star: MaterialStates) -> np.ndarray:
         return self.model.dataset.distance2(strain, stress, star.index)

@@ -84,3 +84,8 @@ class MaterialScheme(ABC):
     def finish(self, star: MaterialStates) -> MaterialStates:
         """The material states to report, with ``index`` the datum nearest each."""
         return star
+
+    def nearest_index(self, strain: np.ndarray, stress: np.ndarray) -> np.ndarray | None:
+        """The datum nearest each of exactly these states (global indices) where the scheme's
+        last search found them, else ``None``: the step's checks then search again."""
+        return None
