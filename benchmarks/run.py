@@ -594,7 +594,7 @@ def linear_solvers(unknowns: int, repeats: int, colamd_limit: int) -> list[dict]
     floor = times[previous]
     name = "linear solver, 2-D continuum projection KKT matrix: {}".format
     return ([dict(name=name(label), unknowns=n, data_points=0, seconds=t, floor_seconds=floor, ratio=t / floor,
-                  nnz=int(A.nnz), note="floor: factorisation and solve with the default (superlu, ordered by the pattern)")
+                  nnz=int(A.nnz), note="floor: factorisation and solve with the default (auto: MUMPS from 5e3 unknowns, else SuperLU ordered by the pattern)")
              for label, t in times.items()]
             + [dict(name=name(label), unknowns=n, data_points=0, seconds=float("nan"), floor_seconds=floor,
                     ratio=float("nan"), nnz=int(A.nnz), error=f"not run: {reason}")

@@ -93,6 +93,12 @@ def _structure(header: str) -> tuple[type[ctypes.Structure], str]:
     return type("DMUMPS_STRUC_C", (ctypes.Structure,), {"_fields_": fields}), version
 
 
+#: Bytes allocated past ``DMUMPS_STRUC_C`` (:class:`MumpsFactor`).
+_SLACK = 1 << 16
+#: ``comm_fortran`` of the sequential library (its MPI stub's ``MPI_COMM_WORLD``).
+_COMM_WORLD = -987654
+
+
 def _load():
     root = _casadi_dir()
     header = root / "include" / "coin-or" / "mumps" / "dmumps_c.h"
@@ -105,6 +111,19 @@ def _load():
     except (OSError, AttributeError) as exc:
         raise ImportError(f"{path.name} does not load or has no dmumps_c: {exc}") from None
     entry.restype, entry.argtypes = None, [ctypes.POINTER(Struct)]
+    # one instance made and freed: the library must report its header's version (a structure
+    # laid out from another header would not read it back; the slack takes a larger one's writes)
+    buffer = ctypes.create_string_buffer(ctypes.sizeof(Struct) + _SLACK)
+    probe = Struct.from_buffer(buffer)
+    probe.sym, probe.par, probe.job, probe.comm_fortran = 0, 1, -1, _COMM_WORLD
+    entry(ctypes.byref(probe))
+    reported = bytes(probe.version_number).split(b"\0")[0].decode(errors="replace").strip()
+    if reported != header_version:
+        raise ImportError(f"{path.name} reports MUMPS {reported!r}, its header {header_version!r}")
+    probe.icntl[0] = probe.icntl[1] = probe.icntl[2] = -1  # silent
+    probe.icntl[3] = 0
+    probe.job = -2
+    entry(ctypes.byref(probe))
     return Struct, entry, header_version, path
 
 
@@ -118,8 +137,6 @@ def library_path() -> str:
     return str(_PATH)
 
 
-#: ``comm_fortran`` of the sequential library (its MPI stub's ``MPI_COMM_WORLD``).
-_COMM_WORLD = -987654
 #: ``ICNTL(7)`` values, the fill-reducing orderings: approximate minimum degree and METIS's
 #: nested dissection.
 AMD, METIS = 0, 5
@@ -227,13 +244,14 @@ class MumpsFactor:
         irn, jcn = (rows + 1).astype(_INDEX), (cols + 1).astype(_INDEX)
         a = np.ascontiguousarray(values, dtype=float)
         del rows, cols, values
-        self._s = s = _Struct()
+        # slack past the structure read from the header: a library laid out otherwise writes its
+        # own first call into it instead of past it, and the version check below refuses it
+        self._buffer = ctypes.create_string_buffer(ctypes.sizeof(_Struct) + _SLACK)
+        self._s = s = _Struct.from_buffer(self._buffer)
         self._alive = False
         s.sym, s.par, s.job, s.comm_fortran = symmetric, 1, -1, _COMM_WORLD
         self._call(-1)
         self._alive = True
-        if bytes(s.version_number).split(b"\0")[0].decode() != _HEADER_VERSION:
-            raise ImportError(f"MUMPS {bytes(s.version_number)!r} does not match its header's {_HEADER_VERSION}")
         ordering = ordering_for(A) if ordering is None else ordering
         for one_based, value in ((1, -1), (2, -1), (3, -1), (4, 0),  # silent
                                  (7, ordering), (14, WORKSPACE_PERCENT), (24, 1)):  # ordering, workspace, null pivots
