@@ -191,7 +191,7 @@ class MumpsFactor:
     Parameters
     ----------
     A : scipy.sparse matrix
-        Square. Symmetric (``symmetric`` true): only its upper triangle is read.
+        Square. Symmetric (``symmetric`` 1 or 2): only its lower triangle is read.
     symmetric : {0, 1, 2}
         MUMPS's ``SYM``: 0 a general matrix (LU), 1 symmetric positive definite (``LDL^T``
         without pivoting), 2 general symmetric (``LDL^T`` with 1x1 and 2x2 pivots).
@@ -234,18 +234,21 @@ class MumpsFactor:
         if C is not None and symmetric == 0:
             raise ValueError("the Delassus matrix needs a symmetric A (symmetric = 1 or 2)")
         self.n, self.nc = n, 0 if C is None else C.shape[0]
-        M = sp.coo_matrix(A if C is None else sp.bmat([[A, sp.csr_matrix(C).T], [C, None]]))
+        # the entries by index arithmetic on A's CSC arrays (a symmetric A: its lower triangle),
+        # then C's below them: no block matrix assembled (0.03 s of 0.45 s at 95 266 dofs)
+        A = sp.csc_matrix(A)
+        rows, cols, values = A.indices, np.repeat(np.arange(n, dtype=A.indices.dtype), np.diff(A.indptr)), A.data
         if symmetric:
-            keep = M.row <= M.col
-            rows, cols, values = M.row[keep], M.col[keep], M.data[keep]
-        else:
-            rows, cols, values = M.row, M.col, M.data
-        del M
+            keep = rows >= cols
+            rows, cols, values = rows[keep], cols[keep], values[keep]
+        if C is not None:
+            Cc = sp.coo_matrix(C)
+            rows, cols = np.concatenate([rows, n + Cc.row]), np.concatenate([cols, Cc.col])
+            values = np.concatenate([values, Cc.data])
         irn, jcn = (rows + 1).astype(_INDEX), (cols + 1).astype(_INDEX)
         a = np.ascontiguousarray(values, dtype=float)
         del rows, cols, values
-        # slack past the structure read from the header: a library laid out otherwise writes its
-        # own first call into it instead of past it, and the version check below refuses it
+        # slack past the structure read from the header (see _load)
         self._buffer = ctypes.create_string_buffer(ctypes.sizeof(_Struct) + _SLACK)
         self._s = s = _Struct.from_buffer(self._buffer)
         self._alive = False
