@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ddcm_casadi.formulations.base import BuiltFormulation, LocalSolution
+from ddcm_casadi.heap import release_heap
 from ddcm_casadi.linalg import definite_solver_name, solver_name
 from ddcm_casadi.parallel import limited_blas
 from ddcm_casadi.problems.build import ProblemPair
@@ -143,6 +144,7 @@ def _built(formulation, problems: ProblemPair, problem: ComplementarityProblem, 
     inner = formulation.build(reduction.condensed) if reduction.nc else None
     built = ReducedProjection(problem, reduction, inner, full=lambda: formulation.build(problem))
     built.projection_path = built.path
+    release_heap()  # the build's temporaries, before the solves' pages (the Hertz run above: 364 -> 355 MB)
     return built
 
 
