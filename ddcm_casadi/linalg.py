@@ -590,6 +590,12 @@ def _runs(name: str) -> bool:
     return name in _SOLVERS and _check_loads(name) is None
 
 
+def _resolved(n: int) -> str:
+    """The solver a symmetric matrix of ``n`` unknowns is factorised with: the selected one, or
+    ``"auto"``'s choice (:func:`chosen_solver`)."""
+    return chosen_solver(n) if _ACTIVE[0] == "auto" else _ACTIVE[0]
+
+
 register_solver("auto", _auto)
 _ACTIVE[0] = "auto"
 
@@ -905,7 +911,7 @@ def factorize_definite(A: sp.spmatrix, *, near_null: np.ndarray | None = None) -
     if _DEFINITE[0] == "amg":
         return AMGFactor(A, near_null)
     A = sp.csc_matrix(A)
-    if _ACTIVE[0] == "mumps" or (_ACTIVE[0] == "auto" and chosen_solver(A.shape[0]) == "mumps"):
+    if _resolved(A.shape[0]) == "mumps":
         return _made(lambda: _mumps_definite(A), A.shape[0])  # no pivoting: the ordering's fill alone
     return factorize(A)
 
@@ -1015,13 +1021,10 @@ def delassus_solver(n: int) -> str:
     with the factor, PARDISO's 0.92-1.03 s (``docs/performance.md``, 2026-11-26)."""
     if _DEFINITE[0] != "direct":
         return _DEFINITE[0]
-    if _ACTIVE[0] in SCHUR_SOLVERS and _runs(_ACTIVE[0]):
-        return _ACTIVE[0]
-    if _ACTIVE[0] != "auto":
-        return _ACTIVE[0]
-    if n >= MUMPS_MIN_SIZE and _runs("mumps"):
-        return "mumps"
-    return "pardiso" if n >= SCHUR_MIN_SIZE and _runs("pardiso") else "superlu"
+    name = _resolved(n)
+    if name == "superlu" and _ACTIVE[0] == "auto" and n >= SCHUR_MIN_SIZE and _runs("pardiso"):
+        return "pardiso"  # its Schur complement from a smaller size than its factors
+    return name
 
 
 def factorize_with_delassus(A: sp.spmatrix, C: sp.spmatrix, *, near_null: np.ndarray | None = None
@@ -1029,8 +1032,8 @@ def factorize_with_delassus(A: sp.spmatrix, C: sp.spmatrix, *, near_null: np.nda
     r"""A kept solver of the symmetric positive definite ``A`` and the Delassus matrix
     ``D = C A^-1 C^T`` (dense, ``nc x nc``, symmetrised) of the few rows ``C``.
 
-    With MUMPS or PARDISO (selected, or ``"auto"`` from :data:`SCHUR_MIN_SIZE` unknowns where one
-    runs, :func:`delassus_solver`) and the direct definite solver: one partial factorisation of
+    With MUMPS or PARDISO (selected, or ``"auto"``'s choice by size, :func:`delassus_solver`) and
+    the direct definite solver: one partial factorisation of
     ``[[A, C^T], [C, 0]]`` gives both (:class:`~ddcm_casadi.mumps.MumpsFactor`,
     :class:`_PardisoSchur`). Otherwise :func:`factorize_definite` and ``nc`` back-solves, by
     :data:`SOLVE_BLOCK`. Raises :class:`SingularMatrix`.
@@ -1046,7 +1049,7 @@ def factorize_with_delassus(A: sp.spmatrix, C: sp.spmatrix, *, near_null: np.nda
                 raise SingularMatrix(f"PARDISO (Schur complement): {factor.perturbed} perturbed pivots "
                                      "and no accurate solve (a singular matrix)")
             return factor
-        factor = _made(make, INTERRUPTIBLE_MIN_SIZE)
+        factor = _made(make, A.shape[0])
         return factor, factor.schur
     factor = factorize_definite(A, near_null=near_null)
     D = np.empty((C.shape[0], C.shape[0]))

@@ -95,6 +95,8 @@ def _structure(header: str) -> tuple[type[ctypes.Structure], str]:
 
 #: Bytes allocated past ``DMUMPS_STRUC_C`` (:class:`MumpsFactor`).
 _SLACK = 1 << 16
+#: ``ICNTL(1..4)``: no error, diagnostic or global output, no statistics.
+_SILENT = ((1, -1), (2, -1), (3, -1), (4, 0))
 #: ``comm_fortran`` of the sequential library (its MPI stub's ``MPI_COMM_WORLD``).
 _COMM_WORLD = -987654
 
@@ -120,8 +122,8 @@ def _load():
     reported = bytes(probe.version_number).split(b"\0")[0].decode(errors="replace").strip()
     if reported != header_version:
         raise ImportError(f"{path.name} reports MUMPS {reported!r}, its header {header_version!r}")
-    probe.icntl[0] = probe.icntl[1] = probe.icntl[2] = -1  # silent
-    probe.icntl[3] = 0
+    for one_based, value in _SILENT:
+        probe.icntl[one_based - 1] = value
     probe.job = -2
     entry(ctypes.byref(probe))
     return Struct, entry, header_version, path
@@ -198,7 +200,7 @@ class MumpsFactor:
     C : scipy.sparse matrix, optional
         ``nc x n`` rows: the factorisation is of ``[[A, C^T], [C, 0]]`` with the last ``nc``
         variables as Schur variables, eliminated last, and :attr:`schur` is ``C A^-1 C^T``
-        (symmetrised). Solves are with ``A`` alone (``ICNTL(26) = 0``: MUMPS solves the
+        (from the lower triangle MUMPS returns). Solves are with ``A`` alone (``ICNTL(26) = 0``: MUMPS solves the
         interior block and sets the Schur variables to zero). Needs ``symmetric`` 1 or 2.
     ordering : int, optional
         ``ICNTL(7)``; default :func:`ordering_for` ``A``.
@@ -252,12 +254,11 @@ class MumpsFactor:
         self._buffer = ctypes.create_string_buffer(ctypes.sizeof(_Struct) + _SLACK)
         self._s = s = _Struct.from_buffer(self._buffer)
         self._alive = False
-        s.sym, s.par, s.job, s.comm_fortran = symmetric, 1, -1, _COMM_WORLD
+        s.sym, s.par, s.comm_fortran = symmetric, 1, _COMM_WORLD
         self._call(-1)
         self._alive = True
         ordering = ordering_for(A) if ordering is None else ordering
-        for one_based, value in ((1, -1), (2, -1), (3, -1), (4, 0),  # silent
-                                 (7, ordering), (14, WORKSPACE_PERCENT), (24, 1)):  # ordering, workspace, null pivots
+        for one_based, value in (*_SILENT, (7, ordering), (14, WORKSPACE_PERCENT), (24, 1)):  # 24: null pivots
             s.icntl[one_based - 1] = value
         for one_based, value in (icntl or {}).items():
             s.icntl[one_based - 1] = value
@@ -270,8 +271,7 @@ class MumpsFactor:
             s.size_schur, s.listvar_schur, s.schur = self.nc, _pointer(listvar, _INT), _pointer(schur, ctypes.c_double)
             s.icntl[18] = 1  # ICNTL(19) = 1: the Schur complement, centralised
         for attempt in range(WORKSPACE_RETRIES + 1):
-            s.job = 4  # analysis and factorisation
-            code = self._call(4, raise_error=False)
+            code = self._call(4, raise_error=False)  # analysis and factorisation
             if code not in _WORKSPACE_ERRORS or attempt == WORKSPACE_RETRIES:
                 break
             s.icntl[13] = max(2 * s.icntl[13], WORKSPACE_PERCENT)

@@ -140,3 +140,27 @@ def test_factors_are_freed_with_their_objects():
     for _ in range(30):
         mumps.MumpsFactor(A, 1)
     assert resident_megabytes() - start < 3 * size
+
+
+def test_a_working_space_too_small_is_retried_larger(monkeypatch):
+    """``INFOG(1) = -9`` (MUMPS's working space too small) makes the factorisation run again with
+    ``ICNTL(14)`` at least :data:`~ddcm_casadi.mumps.WORKSPACE_PERCENT` (doubled each time); the
+    factor then solves as any other. Simulated: the first factorisation call reports -9 without
+    running."""
+    calls = []
+    real = mumps._dmumps_c
+
+    def first_too_small(ref):
+        s = ref._obj
+        calls.append((s.job, s.icntl[13]))
+        if s.job == 4 and sum(job == 4 for job, _ in calls) == 1:
+            s.infog[0] = -9
+            return
+        real(ref)
+
+    monkeypatch.setattr(mumps, "_dmumps_c", first_too_small)
+    A = laplacian(10)
+    lu = mumps.MumpsFactor(A, 1, icntl={14: 0})
+    assert [icntl for job, icntl in calls if job == 4] == [0, mumps.WORKSPACE_PERCENT]
+    b = np.cos(np.arange(A.shape[0]))
+    assert linalg.backward_error(A, lu.solve(b), b) <= 3 * A.shape[0] * EPS

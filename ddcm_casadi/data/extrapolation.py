@@ -141,9 +141,10 @@ class DataCoverage:
         beyond = np.zeros(self.n_points, dtype=bool)
         spacings = np.full(self.n_points, np.nan)
         offsets = np.asarray(self.dataset.offsets, dtype=np.intp)
+        nearest = None if nearest is None else np.asarray(nearest, dtype=np.intp)
         for s, d in enumerate(self.dataset.datasets):
             for pts in self._finite_points(s, strain, stress):
-                j = None if nearest is None else np.asarray(nearest, dtype=np.intp)[pts] - offsets[s]
+                j = None if nearest is None else nearest[pts] - offsets[s]
                 beyond[pts], spacings[pts] = self._check_set(s, d, strain[pts], stress[pts], j)
         return beyond, spacings
 
@@ -238,7 +239,6 @@ class DataCoverage:
             if len(self._neighbourhoods) < _REMEMBERED:
                 self._neighbourhoods[key] = hit
         return hit
-
 
     def _remembered(self, s: int, d, unique: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:func:`neighbourhood` of the sorted distinct data ``unique`` of set ``s``: those met

@@ -116,7 +116,7 @@ class StiffnessFactor:
         release_heap()  # the model's and K's assembly temporaries, before the factor's pages
         self.factor, self.D = factorize_with_delassus(K, G, near_null=near_null)
         # and after it: the matrix's copies in the solver's format (the Hertz body's classical run
-        # of 95 485 unknowns: 74 MB given back, its peak 396 -> 364 MB; docs/performance.md)
+        # of 95 485 unknowns: 74 MiB given back, its peak 396 -> 364 MiB; docs/performance.md)
         release_heap()
         self.seconds = time.perf_counter() - start
         self.G = sp.csr_matrix(G)
@@ -171,8 +171,8 @@ class StiffnessFactor:
 
         ``c`` is the ratio of the diagonals (all equal to ``16 eps``: a few roundings of each
         entry, the nondimensional problem's ``K s_d / s_f``); a solve with ``K_s`` must then
-        have a backward error within :data:`~ddcm_casadi.linalg.BACKWARD_ERROR` (one solve: the
-        check :func:`~ddcm_casadi.linalg.factorize_with_delassus` makes of its own factor)."""
+        have a backward error within :data:`~ddcm_casadi.linalg.BACKWARD_ERROR` (one solve:
+        ``K_s`` is ``c K`` off the diagonal too)."""
         G_s = sp.csr_matrix(G_s)
         if self.released or self.solvers != (definite_solver_name(), solver_name()) \
                 or K_s.shape[0] != self.diagonal.size or G_s.shape != self.G.shape or (G_s != self.G).nnz:
